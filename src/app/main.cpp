@@ -1,0 +1,32 @@
+// loopgate: illumination-robust, pose-gated visual loop-closure detection.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <exception>
+#include <iostream>
+
+#include "app/commands.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{"loopgate: pose-gated, illumination-robust visual loop-closure detection (DIRD)"};
+  app.set_version_flag("--version", std::string("loopgate ") + LOOPGATE_VERSION);
+  app.require_subcommand(1);
+  std::string log_level = "info";
+  app.add_option("--log-level", log_level, "trace|debug|info|warn|error|off")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "off"}))
+      ->each([](const std::string& level) { spdlog::set_level(spdlog::level::from_str(level)); });
+
+  int exit_code = loopgate::app::kExitOk;
+  // subcommands are registered below (one line each)
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const std::exception& e) {
+    spdlog::error("{}", e.what());
+    return loopgate::app::kExitFailure;
+  }
+  return exit_code;
+}

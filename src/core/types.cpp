@@ -1,0 +1,27 @@
+#include "core/types.hpp"
+
+#include <cmath>
+
+namespace loopgate {
+
+Timestamp s_to_ns(double t_s) { return static_cast<Timestamp>(std::llround(t_s * kNsPerS)); }
+
+const char* to_string(OdometryStatus status) {
+  switch (status) {
+    case OdometryStatus::kInitialising: return "initialising";
+    case OdometryStatus::kTracking: return "tracking";
+    case OdometryStatus::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+const char* to_string(DistortionModel model) {
+  switch (model) {
+    case DistortionModel::kNone: return "none";
+    case DistortionModel::kRadTan: return "radial-tangential";
+    case DistortionModel::kEquidistant: return "equidistant";
+  }
+  return "unknown";
+}
+
+}  // namespace loopgate

@@ -1,0 +1,79 @@
+// One random-access interface over every dataset layout loopgate reads (EuRoC ASL, KITTI odometry,
+// a plain image folder). Metadata (timestamps, IMU, ground truth, calibration) is loaded when the
+// dataset is opened; images are decoded on demand by index, so any past frame can be re-read.
+#pragma once
+
+#include <cstddef>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <opencv2/core/mat.hpp>
+#include <string>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace loopgate {
+
+// A problem found in the input that did not stop the dataset from opening (lenient mode):
+// which file, which line (0 if none), and what was wrong.
+struct DataIssue {
+  std::filesystem::path file;
+  std::size_t line = 0;
+  std::string message;
+  std::string to_string() const;  // "FILE:LINE: MESSAGE"
+};
+
+struct OpenOptions {
+  // strict: the first bad row throws DataError. lenient: bad rows are skipped and recorded in
+  // Dataset::issues(); IMU samples stay in file order (the sync stage reports anomalies per frame).
+  bool strict = true;
+  // Which camera of a stereo layout: 0 (EuRoC cam0 / KITTI image_0) or 1.
+  int camera_index = 0;
+  // Image folder only: frame period when no timestamps file is present.
+  double folder_rate_hz = 1.0;
+};
+
+class Dataset {
+ public:
+  virtual ~Dataset() = default;
+
+  virtual std::string layout() const = 0;  // "euroc", "kitti" or "folder"
+  virtual const std::filesystem::path& root() const = 0;
+
+  virtual std::size_t frame_count() const = 0;
+  virtual Timestamp frame_t_ns(std::size_t frame) const = 0;
+
+  // False when the layout lists frames but the image files are absent (e.g. real MH_05 here).
+  virtual bool has_images() const = 0;
+  virtual std::filesystem::path image_path(std::size_t frame) const = 0;
+  // Decodes frame `frame` as 8-bit grey (colour is converted). Throws DataError naming the file and
+  // frame when it is missing, unreadable, or not of the size of the first frame.
+  virtual cv::Mat load_image(std::size_t frame) const = 0;
+
+  virtual bool has_imu() const = 0;
+  // All samples in file order (strictly increasing time when opened in strict mode).
+  virtual const std::vector<ImuSample>& imu_samples() const = 0;
+
+  virtual bool has_ground_truth() const = 0;
+  // Ground-truth body pose at frame `frame`, interpolated (linear + slerp) to the frame time;
+  // nullopt outside the ground-truth time span.
+  virtual std::optional<Eigen::Isometry3d> ground_truth_T_w_b(std::size_t frame) const = 0;
+  virtual const std::vector<GroundTruthState>& ground_truth() const = 0;
+
+  virtual std::optional<CameraCalibration> camera() const = 0;
+  virtual std::optional<ImuCalibration> imu_calibration() const = 0;
+
+  // Problems recorded in lenient mode (empty in strict mode).
+  virtual const std::vector<DataIssue>& issues() const = 0;
+};
+
+// Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ or times.txt),
+// else an image folder. Throws DataError naming the path when nothing usable is there.
+std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const OpenOptions& options = {});
+
+std::unique_ptr<Dataset> open_euroc(const std::filesystem::path& dir, const OpenOptions& options = {});
+std::unique_ptr<Dataset> open_kitti(const std::filesystem::path& dir, const OpenOptions& options = {});
+std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, const OpenOptions& options = {});
+
+}  // namespace loopgate

@@ -1,0 +1,39 @@
+// Trajectory and calibration files: TUM, KITTI poses/times/calib, EuRoC ground truth and sensor.yaml.
+// Every reader throws DataError naming the file and line on malformed input.
+#pragma once
+
+#include <filesystem>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace loopgate {
+
+// TUM: "t_s tx ty tz qx qy qz qw" per line, '#' comments. Timestamps must strictly increase.
+std::vector<StampedPose> read_tum(const std::filesystem::path& file);
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
+
+// KITTI odometry: poses (12 numbers per line, row-major 3x4 T_w_cam0) and times.txt (seconds).
+// The two files must have the same number of rows (poses may have fewer rows only if `allow_fewer`).
+std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
+                                          const std::filesystem::path& times_file);
+std::vector<Timestamp> read_kitti_times(const std::filesystem::path& times_file);
+
+// EuRoC state_groundtruth_estimate0/data.csv (or a 8+-column csv with t_ns, p, q_wxyz).
+std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file);
+// EuRoC imu0/data.csv: t_ns, w_xyz (rad/s), a_xyz (m/s^2).
+std::vector<ImuSample> read_euroc_imu(const std::filesystem::path& csv_file);
+// EuRoC sensor.yaml files (the "%YAML:1.0" header line is accepted).
+CameraCalibration read_euroc_camera_yaml(const std::filesystem::path& yaml_file);
+ImuCalibration read_euroc_imu_yaml(const std::filesystem::path& yaml_file);
+
+// Writers for the simulator's EuRoC-layout output (same formats the readers accept).
+void write_euroc_imu(const std::filesystem::path& csv_file, const std::vector<ImuSample>& samples);
+void write_euroc_groundtruth(const std::filesystem::path& csv_file, const std::vector<GroundTruthState>& states);
+void write_euroc_camera_yaml(const std::filesystem::path& yaml_file, const CameraCalibration& camera);
+void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalibration& imu);
+
+// Pose interpolation between two stamped poses (linear position, slerp rotation) at t_ns.
+Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, Timestamp t_ns);
+
+}  // namespace loopgate

@@ -1,0 +1,59 @@
+#include "test_support.hpp"
+
+#include <array>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+#include <random>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+namespace loopgate::testing {
+
+namespace {
+std::mutex g_dirs_mutex;
+std::vector<std::filesystem::path> g_dirs;
+void remove_temp_dirs() {
+  if (std::getenv("LOOPGATE_KEEP_TEST_DIRS")) return;
+  std::error_code ec;
+  for (const auto& dir : g_dirs) std::filesystem::remove_all(dir, ec);
+}
+}  // namespace
+
+std::filesystem::path shared_data_dir() {
+  const std::filesystem::path dir = LOOPGATE_SHARED_DATA_DIR;
+  std::error_code ec;
+  return std::filesystem::is_directory(dir, ec) ? std::filesystem::canonical(dir) : std::filesystem::path{};
+}
+
+std::filesystem::path make_temp_dir(const std::string& tag) {
+  std::lock_guard lock(g_dirs_mutex);
+  static bool registered = false;
+  if (!registered) {
+    std::atexit(remove_temp_dirs);
+    registered = true;
+  }
+  std::random_device rd;
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("loopgate-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(rd()));
+  std::filesystem::create_directories(dir);
+  g_dirs.push_back(dir);
+  return dir;
+}
+
+std::filesystem::path loopgate_binary() { return LOOPGATE_BINARY; }
+
+int run_command(const std::string& command, std::string* output) {
+  const std::string full = command + " 2>&1";
+  FILE* pipe = ::popen(full.c_str(), "r");
+  if (!pipe) return -1;
+  std::array<char, 4096> buffer{};
+  std::string captured;
+  while (std::fgets(buffer.data(), static_cast<int>(buffer.size()), pipe)) captured += buffer.data();
+  const int status = ::pclose(pipe);
+  if (output) *output = captured;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+}  // namespace loopgate::testing
