@@ -1,0 +1,67 @@
+// Ground-truth loops (../shared/docs/evaluation.md): from positions (radius, gap, plane) or from a
+// pairs file, and the true-match test used to score detections.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstddef>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace loopgate {
+
+struct GroundTruthConfig {
+  double radius_m = 2.0;         // r_true: query i is positive if some j <= i - gap lies within it
+  int gap_frames = 20;           // minimum frame gap of a true loop
+  std::string plane = "xz";      // distances in: "xz" (KITTI camera frame), "xy", or "xyz" (3-D, EuRoC)
+  double accept_radius_m = 0.0;  // r_accept for scoring a detection; <= 0 means r_true
+
+  template <class V>
+  void visit(V&& v) {
+    v("radius_m", radius_m);
+    v("gap_frames", gap_frames);
+    v("plane", plane);
+    v("accept_radius_m", accept_radius_m);
+  }
+  void validate() const;  // throws ConfigError naming the key
+  double effective_accept_radius_m() const { return accept_radius_m > 0.0 ? accept_radius_m : radius_m; }
+};
+
+// Which queries are positives and which (query, reference) pairs are true matches.
+class LoopGroundTruth {
+ public:
+  LoopGroundTruth() = default;
+
+  // From one position per frame (world frame, metres). A uniform grid of cell r_true finds the
+  // neighbours (about O(n) for trajectories, not O(n^2)). A non-finite position (NaN) marks a frame
+  // without ground truth: it is never positive and never part of a true match.
+  static LoopGroundTruth from_positions(const std::vector<Eigen::Vector3d>& p_w,
+                                        const GroundTruthConfig& config);
+  // From explicit (query, reference) pairs, 0-based (e.g. botw_pairs.csv). A detection is a true
+  // match iff its pair is listed; a query is positive iff it has a listed pair. Pairs outside
+  // [0, frame_count) throw std::out_of_range.
+  static LoopGroundTruth from_pairs(std::size_t frame_count,
+                                    const std::vector<std::pair<std::size_t, std::size_t>>& query_reference);
+
+  std::size_t frame_count() const { return references_.size(); }
+  bool is_positive(std::size_t query) const {
+    return query < references_.size() && !references_[query].empty();
+  }
+  std::size_t positive_count() const;
+  // Earlier frames that make `query` a positive (sorted): j <= query - gap within r_true, or the listed
+  // pairs.
+  const std::vector<std::size_t>& true_references(std::size_t query) const { return references_.at(query); }
+  // Positions: GT positions of query and reference within r_accept (in the configured plane), whatever
+  // their order or gap. Pairs: the pair is listed.
+  bool is_true_match(std::size_t query, std::size_t reference) const;
+  bool uses_positions() const { return !positions_.empty(); }
+  // All true loop pairs (query, reference), query ascending.
+  std::vector<std::pair<std::size_t, std::size_t>> pairs() const;
+
+ private:
+  std::vector<std::vector<std::size_t>> references_;
+  std::vector<Eigen::Vector3d> positions_;  // projected (unused axis zeroed); empty for pairs
+  double accept_radius_m_ = 0.0;
+};
+
+}  // namespace loopgate

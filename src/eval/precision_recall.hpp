@@ -1,0 +1,70 @@
+// Scoring loop detections against a ground truth: PR curve, average precision, recall at a
+// precision (../shared/docs/evaluation.md).
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+#include "eval/ground_truth.hpp"
+
+namespace loopgate {
+
+// A loop detection: query (current) frame matched to reference (earlier) frame with a score.
+struct Detection {
+  std::size_t query = 0;
+  std::size_t reference = 0;
+  double score = 0.0;
+};
+
+struct PrConfig {
+  // "lower_is_better" (SeqSLAM ratio, descriptor distance) or "higher_is_better" (similarity).
+  std::string score_order = "lower_is_better";
+
+  template <class V>
+  void visit(V&& v) {
+    v("score_order", score_order);
+  }
+  void validate() const;  // throws ConfigError naming the key and the allowed values
+  bool lower_is_better() const { return score_order == "lower_is_better"; }
+};
+
+// One operating point: every query whose best detection scores at least as well as `threshold`
+// is accepted.
+struct PrPoint {
+  double threshold = 0.0;
+  std::size_t detections = 0;      // accepted queries
+  std::size_t true_positives = 0;  // accepted queries whose detection is a true match
+  std::size_t recalled = 0;        // accepted positive queries whose detection is a true match
+  double precision = 1.0;          // true_positives / detections
+  double recall = 0.0;             // recalled / positive queries
+};
+
+struct PrResult {
+  std::vector<PrPoint> curve;  // one point per distinct best-detection score, most confident first
+  std::size_t positives = 0;   // positive query frames of the ground truth
+  std::size_t queries_with_detection = 0;
+  double average_precision = 0.0;
+  double recall_at_100 = 0.0;  // highest recall with precision = 1
+  double recall_at_99 = 0.0;
+  double recall_at_95 = 0.0;
+};
+
+// Keeps each query's best-scoring detection (the first one on ties), in query order.
+std::vector<Detection> best_detection_per_query(const std::vector<Detection>& detections,
+                                                bool lower_is_better);
+
+// Sweeps the score threshold over the best detection per query. A detection is a true positive
+// when ground_truth.is_true_match(query, reference). Precision = TP / accepted; recall = accepted
+// positive queries with a TP / positive queries (a TP of a non-positive query, e.g. a match to a
+// later frame, counts for precision but not for recall, so recall stays <= 1).
+PrResult evaluate_precision_recall(const std::vector<Detection>& detections,
+                                   const LoopGroundTruth& ground_truth, const PrConfig& config = {});
+
+// Area under the step PR curve: sum over points of (recall_k - recall_{k-1}) * precision_k, with
+// recall_0 = 0 (the interpolation-free definition of scikit-learn's average_precision_score).
+double average_precision(const std::vector<PrPoint>& curve);
+// Highest recall among points with precision >= min_precision; 0 when there is none.
+double recall_at_precision(const std::vector<PrPoint>& curve, double min_precision);
+
+}  // namespace loopgate

@@ -1,0 +1,66 @@
+// Trajectory accuracy: absolute trajectory error (ATE) after alignment, and drift per 100 m.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace loopgate {
+
+struct AteConfig {
+  // "se3": rotation + translation minimising the squared error (Umeyama, no scale);
+  // "posyaw": translation + rotation about the gravity axis only (VIO: roll/pitch are observable);
+  // "none": compare as given.
+  std::string alignment = "se3";
+  std::string up_axis = "z";  // gravity axis for "posyaw": "x", "y" (KITTI camera frame) or "z" (EuRoC)
+  std::int64_t max_dt_ns = 10'000'000;  // timestamp association tolerance (associate_by_time)
+
+  template <class V>
+  void visit(V&& v) {
+    v("alignment", alignment);
+    v("up_axis", up_axis);
+    v("max_dt_ns", max_dt_ns);
+  }
+  void validate() const;  // throws ConfigError naming the key and allowed values
+  Eigen::Vector3d up() const;
+};
+
+struct AteResult {
+  std::size_t count = 0;
+  double rmse_m = 0.0;
+  double mean_m = 0.0;
+  double max_m = 0.0;
+  double path_length_m = 0.0;   // of the ground truth
+  double final_error_m = 0.0;   // after alignment
+  double drift_per_100m = 0.0;  // final_error_m / path_length_m * 100 (metres per 100 m, i.e. %)
+  Eigen::Isometry3d T_gt_est = Eigen::Isometry3d::Identity();  // applied to the estimate
+};
+
+// T minimising sum |p_gt - T p_est|^2 over rotations and translations (Umeyama 1991, no scale).
+// Needs >= 3 non-collinear pairs for a unique rotation; throws std::invalid_argument on size mismatch
+// or fewer than 2 pairs (1 pair gives the translation only).
+Eigen::Isometry3d align_se3(const std::vector<Eigen::Vector3d>& p_est,
+                            const std::vector<Eigen::Vector3d>& p_gt);
+// Same with the rotation restricted to a yaw about `up` (unit vector), closed form.
+Eigen::Isometry3d align_position_yaw(const std::vector<Eigen::Vector3d>& p_est,
+                                     const std::vector<Eigen::Vector3d>& p_gt,
+                                     const Eigen::Vector3d& up = Eigen::Vector3d::UnitZ());
+
+// ATE of positions paired by index (p_est[k] with p_gt[k]), aligned per config. Drift per 100 m is
+// the end-point error after that alignment divided by the ground-truth path length.
+AteResult compute_ate(const std::vector<Eigen::Vector3d>& p_est, const std::vector<Eigen::Vector3d>& p_gt,
+                      const AteConfig& config = {});
+
+// Pairs (estimate index, ground-truth index) with the nearest ground-truth time within max_dt_ns.
+// Both inputs must be sorted by time.
+std::vector<std::pair<std::size_t, std::size_t>> associate_by_time(
+    const std::vector<StampedPose>& estimate, const std::vector<StampedPose>& ground_truth,
+    std::int64_t max_dt_ns);
+
+}  // namespace loopgate

@@ -1,0 +1,57 @@
+#include "stages/seqslam/seqslam_config.hpp"
+
+#include <cmath>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+namespace {
+// Tolerance when turning vmin * ds and vmax * ds into integer moves (0.8 * 10 is not exactly 8).
+constexpr double kMoveTolerance = 1e-9;
+
+void require(bool ok, const std::string& key, const std::string& what) {
+  if (!ok) throw ConfigError("seqslam." + key + ": " + what);
+}
+}  // namespace
+
+void SeqSlamConfig::validate() const {
+  require(image_width_px > 0, "image_width_px", "must be > 0");
+  require(image_height_px > 0, "image_height_px", "must be > 0");
+  require(resize_method == "lanczos3" || resize_method == "area", "resize_method",
+          "'" + resize_method + "' is not one of: lanczos3, area");
+  require(patch_size_px >= 0, "patch_size_px", "must be >= 0 (0 disables patch normalisation)");
+  require(patch_mean_grey >= 0.0 && patch_mean_grey <= 255.0, "patch_mean_grey", "must be in 0..255");
+  require(contrast_window_rows >= 0 && contrast_window_rows % 2 == 0, "contrast_window_rows",
+          "must be even and >= 0");
+  require(sequence_length_frames >= 2 && sequence_length_frames % 2 == 0, "sequence_length_frames",
+          "must be even and >= 2");
+  require(velocity_min > 0.0, "velocity_min", "must be > 0");
+  require(velocity_max >= velocity_min, "velocity_max", "must be >= velocity_min");
+  require(!moves().empty(), "velocity_min",
+          "no integer move in [velocity_min, velocity_max] * sequence_length_frames");
+  require(second_best_window_rows >= 0 && second_best_window_rows % 2 == 0, "second_best_window_rows",
+          "must be even and >= 0");
+  require(ratio_threshold > 0.0, "ratio_threshold", "must be > 0");
+  require(exclusion == "none" || exclusion == "band" || exclusion == "past", "exclusion",
+          "'" + exclusion + "' is not one of: none, band, past");
+  require(exclusion_margin_frames >= 0, "exclusion_margin_frames", "must be >= 0");
+}
+
+std::vector<int> SeqSlamConfig::moves() const {
+  std::vector<int> result;
+  const double ds = sequence_length_frames;
+  const int first = static_cast<int>(std::ceil(velocity_min * ds - kMoveTolerance));
+  const int last = static_cast<int>(std::floor(velocity_max * ds + kMoveTolerance));
+  for (int move = first; move <= last; ++move) result.push_back(move);
+  return result;
+}
+
+SeqSlamExclusion SeqSlamExclusion::from_config(const SeqSlamConfig& config) {
+  const auto margin = static_cast<std::size_t>(config.exclusion_margin_frames);
+  if (config.exclusion == "band") return {Kind::kBand, margin};
+  if (config.exclusion == "past") return {Kind::kPast, margin};
+  return {Kind::kNone, 0};
+}
+
+}  // namespace loopgate

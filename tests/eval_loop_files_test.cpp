@@ -1,0 +1,80 @@
+// Readers of pairs files and of the paper's authors' outputs (1-based, nan).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+#include "core/error.hpp"
+#include "eval/loop_files.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+std::filesystem::path write_file(const std::string& name, const std::string& text) {
+  const auto path = testing::make_temp_dir("eval-files") / name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+TEST(EvalLoopFiles, PairsAndOneBasedFiles) {
+  const auto pairs = read_loop_pairs(write_file("p.csv", "# header\n589,18\n\n590, 19\r\n"));
+  const std::vector<std::pair<std::size_t, std::size_t>> expected{{589, 18}, {590, 19}};
+  EXPECT_EQ(pairs, expected);
+  const auto loops = read_vio_dird_true_loops(write_file("t.csv", "# trueloop\n123,1570\n"));
+  ASSERT_EQ(loops.size(), 1u);
+  EXPECT_EQ(loops[0], (std::pair<std::size_t, std::size_t>{1569, 122}));
+  const auto matches = read_vio_dird_seqslam_matches(write_file("m.csv", "nan,nan\n713,0.98894\n"));
+  ASSERT_EQ(matches.size(), 2u);
+  EXPECT_FALSE(matches[0].has_match);
+  EXPECT_TRUE(matches[1].has_match);
+  EXPECT_EQ(matches[1].reference, 712u);
+  EXPECT_DOUBLE_EQ(matches[1].ratio, 0.98894);
+  const auto det = read_vio_dird_detections(write_file("d.csv", "1,21,0.99979\n"));
+  ASSERT_EQ(det.size(), 1u);
+  EXPECT_EQ(det[0].query, 20u);
+  EXPECT_EQ(det[0].reference, 0u);
+  const auto shifted = read_vio_dird_true_loops(write_file("o.csv", "3,23\n"), 400);
+  EXPECT_EQ(shifted[0], (std::pair<std::size_t, std::size_t>{422, 402}));
+  const auto pos = read_vio_dird_positions(write_file("x.csv", "0,0,0\n1.5,-2,3\n"));
+  ASSERT_EQ(pos.size(), 2u);
+  EXPECT_EQ(pos[1], Eigen::Vector3d(1.5, -2, 3));
+}
+
+TEST(EvalLoopFiles, MalformedRowsNameFileAndLine) {
+  const auto bad = write_file("bad.csv", "# c\n1,2\n3;4\n");
+  try {
+    read_loop_pairs(bad);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_EQ(e.line(), 3u);
+    EXPECT_EQ(e.file(), bad);
+  }
+  EXPECT_THROW(read_loop_pairs(write_file("c.csv", "1,2,3\n")), DataError);         // 3 columns
+  EXPECT_THROW(read_vio_dird_true_loops(write_file("z.csv", "0,5\n")), DataError);  // 0 in a 1-based file
+  EXPECT_THROW(read_loop_pairs(write_file("f.csv", "1.5,2\n")), DataError);         // not an index
+  EXPECT_THROW(read_vio_dird_seqslam_matches(write_file("r.csv", "5,nan\n")), DataError);
+  EXPECT_THROW(read_loop_pairs("/nonexistent/pairs.csv"), DataError);
+}
+
+TEST(EvalLoopFiles, RealFiles) {
+  LOOPGATE_REQUIRE_SHARED_DATA("reference/vio-dird/seqslam_kitti00_matches.csv");
+  LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/loops-gt/botw_pairs.csv");
+  const auto data = testing::shared_data_dir();
+  const auto matches = read_vio_dird_seqslam_matches(data / "reference/vio-dird/seqslam_kitti00_matches.csv");
+  ASSERT_EQ(matches.size(), 4540u);
+  EXPECT_FALSE(matches[4].has_match);
+  EXPECT_TRUE(matches[5].has_match);
+  EXPECT_EQ(matches[5].reference, 712u);
+  EXPECT_FALSE(matches[4535].has_match);
+  const auto pairs = read_loop_pairs(data / "kitti/00/loops-gt/botw_pairs.csv");
+  EXPECT_EQ(pairs.size(), 34648u);
+  for (const auto& [q, r] : pairs) EXPECT_GT(q, r);
+  const auto det = read_vio_dird_detections(data / "reference/vio-dird/dird_mh05_loops_margin20.csv");
+  EXPECT_EQ(det.size(), 996u);
+  const auto pos = read_vio_dird_positions(data / "reference/vio-dird/msckf_mh05_positions.csv");
+  EXPECT_EQ(pos.size(), 2252u);
+}
+
+}  // namespace
+}  // namespace loopgate
