@@ -6,8 +6,9 @@
 #include <cstddef>
 #include <filesystem>
 #include <memory>
-#include <optional>
 #include <opencv2/core/mat.hpp>
+#include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -66,6 +67,17 @@ class Dataset {
 
   // Problems recorded in lenient mode (empty in strict mode).
   virtual const std::vector<DataIssue>& issues() const = 0;
+
+  // ---- additions (io owner); defaults keep other implementations of this interface compiling ----
+
+  // Index of frame `frame` in the original sequence: the KITTI image number (a subset folder such as
+  // kitti/00/frames holds images 0, 1000, 2000 -> frames 0, 1, 2), else `frame` itself.
+  virtual std::size_t source_index(std::size_t frame) const { return frame; }
+  // IMU samples with t_begin_ns <= t_ns < t_end_ns as a view into imu_samples(). With time-sorted
+  // samples (always so in strict mode) this is exact; when a lenient file had out-of-order samples it is
+  // the file-order run from the first sample at or after t_begin_ns up to (excluding) the first later
+  // one at or after t_end_ns, i.e. what a streaming consumer would see.
+  virtual std::span<const ImuSample> imu_between(Timestamp t_begin_ns, Timestamp t_end_ns) const;
 };
 
 // Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ or times.txt),

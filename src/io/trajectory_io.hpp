@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 #include <vector>
 
 #include "core/types.hpp"
@@ -29,9 +30,32 @@ ImuCalibration read_euroc_imu_yaml(const std::filesystem::path& yaml_file);
 
 // Writers for the simulator's EuRoC-layout output (same formats the readers accept).
 void write_euroc_imu(const std::filesystem::path& csv_file, const std::vector<ImuSample>& samples);
-void write_euroc_groundtruth(const std::filesystem::path& csv_file, const std::vector<GroundTruthState>& states);
+void write_euroc_groundtruth(const std::filesystem::path& csv_file,
+                             const std::vector<GroundTruthState>& states);
 void write_euroc_camera_yaml(const std::filesystem::path& yaml_file, const CameraCalibration& camera);
 void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalibration& imu);
+
+// ---- additions (io owner) ----
+
+// KITTI poses with times; with allow_fewer the poses file may have fewer rows than times.txt
+// (ground truth that stops early); more rows is always an error.
+std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
+                                          const std::filesystem::path& times_file, bool allow_fewer);
+// KITTI odometry calib.txt: camera `camera_index` (0..3) from its projection matrix P<i>: fx fy cx cy,
+// no distortion (rectified), T_b_c with body = camera 0 (translation -K^-1 P[:,3]). Size left 0.
+CameraCalibration read_kitti_calib(const std::filesystem::path& calib_file, int camera_index);
+void write_kitti_poses(const std::filesystem::path& poses_file,
+                       const std::vector<Eigen::Isometry3d>& T_w_cam0);
+void write_kitti_times(const std::filesystem::path& times_file, const std::vector<Timestamp>& t_ns);
+
+// EuRoC cam<i>/data.csv: "t_ns,filename" per image (filename relative to cam<i>/data/).
+struct EurocImageEntry {
+  Timestamp t_ns = 0;
+  std::string filename;
+};
+std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file);
+void write_euroc_camera_csv(const std::filesystem::path& csv_file,
+                            const std::vector<EurocImageEntry>& images);
 
 // Pose interpolation between two stamped poses (linear position, slerp rotation) at t_ns.
 Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, Timestamp t_ns);

@@ -1,0 +1,206 @@
+#include "io/csv_text.hpp"
+
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <system_error>
+
+namespace loopgate::io_detail {
+
+namespace {
+
+constexpr int kNsDigits = 9;  // decimals of a second in a nanosecond timestamp
+constexpr std::int64_t kNsPerSecond = 1'000'000'000;
+
+std::string quoted(std::string_view field) {
+  return "'" + std::string(field) + "'";
+}
+
+std::string column_label(std::size_t column, std::string_view name) {
+  return "column " + std::to_string(column + 1) + " (" + std::string(name) + ")";
+}
+
+// Parses a whole field as a double; false when malformed (not finite values are parsed).
+bool parse_double(std::string_view text, double& value) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  if (text.empty()) return false;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  return ec == std::errc{} && ptr == text.data() + text.size();
+}
+
+bool parse_int64(std::string_view text, std::int64_t& value) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  if (text.empty()) return false;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  return ec == std::errc{} && ptr == text.data() + text.size();
+}
+
+bool all_digits(std::string_view text) {
+  for (const char c : text) {
+    if (c < '0' || c > '9') return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+void IssueLog::report(const std::filesystem::path& file, std::size_t line, const std::string& message) {
+  if (strict_) throw DataError(file, line, message);
+  if (sink_) sink_->push_back(DataIssue{file, line, message});
+}
+
+double Row::number(std::size_t column, std::string_view name) const {
+  const std::string_view field = fields.at(column);
+  double value = 0;
+  if (!parse_double(field, value)) {
+    throw RowError{column_label(column, name) + ": expected a number, got " + quoted(field)};
+  }
+  if (!std::isfinite(value)) {
+    throw RowError{column_label(column, name) + ": expected a finite number, got " + quoted(field)};
+  }
+  return value;
+}
+
+Timestamp Row::integer_ns(std::size_t column, std::string_view name) const {
+  const std::string_view field = fields.at(column);
+  std::int64_t value = 0;
+  if (!parse_int64(field, value)) {
+    throw RowError{column_label(column, name) + ": expected an integer timestamp in ns, got " +
+                   quoted(field)};
+  }
+  return value;
+}
+
+Timestamp Row::seconds_ns(std::size_t column, std::string_view name) const {
+  const std::string_view field = fields.at(column);
+  Timestamp t_ns = 0;
+  if (!parse_seconds_ns(field, t_ns)) {
+    throw RowError{column_label(column, name) + ": expected a finite time in seconds, got " + quoted(field)};
+  }
+  return t_ns;
+}
+
+void Row::expect_columns(std::size_t expected, std::string_view what) const {
+  if (fields.size() != expected) {
+    throw RowError{"expected " + std::to_string(expected) + " columns (" + std::string(what) + "), got " +
+                   std::to_string(fields.size())};
+  }
+}
+
+TextFile::TextFile(const std::filesystem::path& file) : path_(file) {
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) throw DataError(file, "file not found");
+  if (std::filesystem::is_directory(file, ec)) throw DataError(file, "expected a file, found a directory");
+  std::ifstream in(file, std::ios::binary);
+  if (!in) throw DataError(file, "cannot open file for reading");
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw DataError(file, "cannot read file");
+  in.seekg(0, std::ios::beg);
+  text_.resize(static_cast<std::size_t>(size));
+  if (size > 0 && !in.read(text_.data(), size)) throw DataError(file, "cannot read file");
+}
+
+void split_fields(std::string_view line, Delimiter delimiter, std::vector<std::string_view>& fields) {
+  fields.clear();
+  constexpr std::string_view kBlanks = " \t\r";
+  if (delimiter == Delimiter::kWhitespace) {
+    std::size_t pos = line.find_first_not_of(kBlanks);
+    while (pos != std::string_view::npos) {
+      const std::size_t end = line.find_first_of(kBlanks, pos);
+      fields.push_back(line.substr(pos, end == std::string_view::npos ? std::string_view::npos : end - pos));
+      if (end == std::string_view::npos) break;
+      pos = line.find_first_not_of(kBlanks, end);
+    }
+    return;
+  }
+  std::size_t pos = 0;
+  while (true) {
+    const std::size_t end = line.find(',', pos);
+    std::string_view field =
+        line.substr(pos, end == std::string_view::npos ? std::string_view::npos : end - pos);
+    const std::size_t first = field.find_first_not_of(kBlanks);
+    if (first == std::string_view::npos) {
+      field = field.substr(0, 0);
+    } else {
+      field = field.substr(first, field.find_last_not_of(kBlanks) - first + 1);
+    }
+    fields.push_back(field);
+    if (end == std::string_view::npos) break;
+    pos = end + 1;
+  }
+}
+
+bool parse_seconds_ns(std::string_view text, Timestamp& t_ns) {
+  if (text.find_first_of("eEnN") != std::string_view::npos) {  // exponent notation (or nan/inf)
+    double t_s = 0;
+    if (!parse_double(text, t_s) || !std::isfinite(t_s)) return false;
+    constexpr double kMaxSeconds = static_cast<double>(std::numeric_limits<Timestamp>::max()) / kNsPerS;
+    if (std::abs(t_s) >= kMaxSeconds) return false;
+    t_ns = s_to_ns(t_s);
+    return true;
+  }
+  bool negative = false;
+  if (!text.empty() && (text.front() == '-' || text.front() == '+')) {
+    negative = text.front() == '-';
+    text.remove_prefix(1);
+  }
+  const std::size_t dot = text.find('.');
+  const std::string_view whole = text.substr(0, dot);
+  const std::string_view fraction = dot == std::string_view::npos ? std::string_view{} : text.substr(dot + 1);
+  if ((whole.empty() && fraction.empty()) || !all_digits(whole) || !all_digits(fraction)) return false;
+  std::int64_t seconds = 0;
+  if (!whole.empty() && !parse_int64(whole, seconds)) return false;
+  if (seconds > std::numeric_limits<Timestamp>::max() / kNsPerSecond - 1) return false;
+  std::int64_t ns = 0;
+  for (int i = 0; i < kNsDigits; ++i) {
+    ns = ns * 10 +
+         (static_cast<std::size_t>(i) < fraction.size() ? fraction[static_cast<std::size_t>(i)] - '0' : 0);
+  }
+  if (fraction.size() > static_cast<std::size_t>(kNsDigits) && fraction[kNsDigits] >= '5') ++ns;  // round
+  const std::int64_t total = seconds * kNsPerSecond + ns;
+  t_ns = negative ? -total : total;
+  return true;
+}
+
+void append_double(std::string& out, double value) {
+  std::array<char, 32> buffer{};
+  const auto [ptr, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  out.append(buffer.data(), ec == std::errc{} ? ptr : buffer.data());
+}
+
+void append_int(std::string& out, std::int64_t value) {
+  std::array<char, 24> buffer{};
+  const auto [ptr, ec] = std::to_chars(buffer.data(), buffer.data() + buffer.size(), value);
+  out.append(buffer.data(), ec == std::errc{} ? ptr : buffer.data());
+}
+
+void append_seconds(std::string& out, Timestamp t_ns) {
+  if (t_ns < 0) {
+    out.push_back('-');
+    // -INT64_MIN overflows; such a timestamp (292 years before 1970) is not a sensor time.
+    t_ns = t_ns == std::numeric_limits<Timestamp>::min() ? std::numeric_limits<Timestamp>::max() : -t_ns;
+  }
+  append_int(out, t_ns / kNsPerSecond);
+  out.push_back('.');
+  std::string fraction = std::to_string(t_ns % kNsPerSecond);
+  out.append(static_cast<std::size_t>(kNsDigits) - fraction.size(), '0');
+  out += fraction;
+}
+
+void write_text_file(const std::filesystem::path& file, const std::string& text) {
+  std::error_code ec;
+  if (file.has_parent_path()) {
+    std::filesystem::create_directories(file.parent_path(), ec);
+    if (ec) throw DataError(file.parent_path(), "cannot create directory: " + ec.message());
+  }
+  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  if (!out) throw DataError(file, "cannot open file for writing");
+  out.write(text.data(), static_cast<std::streamsize>(text.size()));
+  out.close();
+  if (!out) throw DataError(file, "write failed");
+}
+
+}  // namespace loopgate::io_detail

@@ -1,0 +1,229 @@
+#include "io/dataset.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <cctype>
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "core/error.hpp"
+#include "io/loaded_dataset.hpp"
+#include "io/trajectory_io.hpp"
+
+namespace loopgate {
+
+std::string DataIssue::to_string() const {
+  std::string text = file.string();
+  if (line > 0) {
+    text += ':';
+    text += std::to_string(line);
+  }
+  text += ": ";
+  text += message;
+  return text;
+}
+
+std::span<const ImuSample> Dataset::imu_between(Timestamp t_begin_ns, Timestamp t_end_ns) const {
+  const std::vector<ImuSample>& samples = imu_samples();
+  std::size_t begin = 0;
+  while (begin < samples.size() && samples[begin].t_ns < t_begin_ns) ++begin;
+  std::size_t end = begin;
+  while (end < samples.size() && samples[end].t_ns < t_end_ns) ++end;
+  return std::span<const ImuSample>(samples).subspan(begin, end - begin);
+}
+
+namespace io_detail {
+
+namespace {
+
+// Frames probed for the reference image size when the calibration does not give it: enough to step
+// over a few damaged leading images without decoding a whole sequence.
+constexpr std::size_t kSizeProbeFrames = 16;
+
+bool natural_less(const std::string& a, const std::string& b) {
+  std::size_t i = 0;
+  std::size_t j = 0;
+  while (i < a.size() && j < b.size()) {
+    const bool da = std::isdigit(static_cast<unsigned char>(a[i])) != 0;
+    const bool db = std::isdigit(static_cast<unsigned char>(b[j])) != 0;
+    if (da && db) {
+      std::size_t ie = i;
+      while (ie < a.size() && std::isdigit(static_cast<unsigned char>(a[ie]))) ++ie;
+      std::size_t je = j;
+      while (je < b.size() && std::isdigit(static_cast<unsigned char>(b[je]))) ++je;
+      // Compare by value: strip leading zeros, then longer is larger, then lexicographic.
+      std::size_t is = i;
+      while (is + 1 < ie && a[is] == '0') ++is;
+      std::size_t js = j;
+      while (js + 1 < je && b[js] == '0') ++js;
+      if (ie - is != je - js) return ie - is < je - js;
+      const int c = a.compare(is, ie - is, b, js, je - js);
+      if (c != 0) return c < 0;
+      if (ie - i != je - j) return ie - i < je - j;  // same value: fewer leading zeros first
+      i = ie;
+      j = je;
+    } else {
+      if (a[i] != b[j]) return a[i] < b[j];
+      ++i;
+      ++j;
+    }
+  }
+  return a.size() - i < b.size() - j;
+}
+
+}  // namespace
+
+bool is_image_file(const std::filesystem::path& file) {
+  std::string ext = file.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".pgm" || ext == ".ppm" ||
+         ext == ".bmp" || ext == ".tif" || ext == ".tiff";
+}
+
+std::vector<std::filesystem::path> list_image_files(const std::filesystem::path& dir) {
+  std::vector<std::filesystem::path> files;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+    if (is_image_file(it->path()) && it->is_regular_file(ec)) files.push_back(it->path());
+  }
+  if (ec) throw DataError(dir, "cannot list directory: " + ec.message());
+  std::sort(files.begin(), files.end(), [](const auto& a, const auto& b) {
+    return natural_less(a.filename().string(), b.filename().string());
+  });
+  return files;
+}
+
+void log_summary(const LoadedDataset& d) {
+  spdlog::info(
+      "{} dataset {}: {} frames{}, {} IMU samples, {} ground-truth poses, camera calibration {}{}",
+      d.layout_name, d.root_dir.string(), d.frames.size(), d.images_present ? "" : " (images absent)",
+      d.imu.size(), d.gt.size(), d.camera_calibration ? "yes" : "no",
+      d.problems.empty() ? std::string() : ", " + std::to_string(d.problems.size()) + " problems skipped");
+  if (!d.images_present && !d.frames.empty()) {
+    spdlog::info(
+        "{}: the image files are absent; timestamps, IMU, ground truth and calibration are available",
+        d.root_dir.string());
+  }
+}
+
+void LoadedDataset::finish() {
+  if (!calibration_size_source.empty() && camera_calibration && camera_calibration->width_px > 0) {
+    expected_width_px_ = camera_calibration->width_px;
+    expected_height_px_ = camera_calibration->height_px;
+    expected_size_source_ = calibration_size_source;
+  } else if (images_present) {
+    for (std::size_t i = 0; i < std::min(frames.size(), kSizeProbeFrames); ++i) {
+      try {
+        const cv::Mat image = decode(i);
+        expected_width_px_ = image.cols;
+        expected_height_px_ = image.rows;
+        expected_size_source_ =
+            "frame " + std::to_string(i) + " (" + frames[i].image.filename().string() + ")";
+        break;
+      } catch (const DataError& e) {
+        spdlog::warn("{}", e.what());
+      }
+    }
+    if (camera_calibration && camera_calibration->width_px == 0) {
+      camera_calibration->width_px = expected_width_px_;
+      camera_calibration->height_px = expected_height_px_;
+    }
+  }
+  imu_sorted_ = std::is_sorted(imu.begin(), imu.end(),
+                               [](const ImuSample& a, const ImuSample& b) { return a.t_ns < b.t_ns; });
+}
+
+cv::Mat LoadedDataset::decode(std::size_t frame) const {
+  const FrameEntry& entry = frames.at(frame);
+  const std::string where = "frame " + std::to_string(frame);
+  if (!images_present)
+    throw DataError(entry.image, where + ": image absent (this dataset has no image files)");
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(entry.image, ec))
+    throw DataError(entry.image, where + ": image file missing");
+  std::ifstream in(entry.image, std::ios::binary | std::ios::ate);
+  const std::streamoff size = in ? static_cast<std::streamoff>(in.tellg()) : -1;
+  if (size < 0) throw DataError(entry.image, where + ": cannot read image file");
+  std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
+  in.seekg(0);
+  if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size)) {
+    throw DataError(entry.image, where + ": cannot read image file");
+  }
+  cv::Mat image;
+  try {
+    if (!bytes.empty()) image = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw DataError(entry.image, where + ": cannot decode image (" + e.what() + ")");
+  }
+  if (image.empty()) {
+    throw DataError(entry.image, where + ": cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
+  }
+  if (image.depth() != CV_8U) {
+    throw DataError(entry.image, where + ": image has " + std::to_string(image.elemSize1() * 8) +
+                                     "-bit samples, expected 8-bit");
+  }
+  if (image.channels() == 1) return image;
+  cv::Mat grey;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else if (image.channels() == 4) {
+    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  } else {
+    throw DataError(entry.image, where + ": image has " + std::to_string(image.channels()) +
+                                     " channels, expected grey, RGB or RGBA");
+  }
+  return grey;
+}
+
+cv::Mat LoadedDataset::load_image(std::size_t frame) const {
+  cv::Mat image = decode(frame);
+  if (expected_width_px_ > 0 && (image.cols != expected_width_px_ || image.rows != expected_height_px_)) {
+    throw DataError(frames[frame].image,
+                    "frame " + std::to_string(frame) + ": image is " + std::to_string(image.cols) + "x" +
+                        std::to_string(image.rows) + ", expected " + std::to_string(expected_width_px_) +
+                        "x" + std::to_string(expected_height_px_) + " like " + expected_size_source_);
+  }
+  return image;
+}
+
+std::span<const ImuSample> LoadedDataset::imu_between(Timestamp t_begin_ns, Timestamp t_end_ns) const {
+  if (!imu_sorted_) return Dataset::imu_between(t_begin_ns, t_end_ns);
+  const auto by_time = [](const ImuSample& s, Timestamp t) { return s.t_ns < t; };
+  const auto begin = std::lower_bound(imu.begin(), imu.end(), t_begin_ns, by_time);
+  const auto end = t_end_ns <= t_begin_ns ? begin : std::lower_bound(begin, imu.end(), t_end_ns, by_time);
+  return std::span<const ImuSample>(begin, end);
+}
+
+std::optional<Eigen::Isometry3d> LoadedDataset::ground_truth_T_w_b(std::size_t frame) const {
+  const Timestamp t_ns = frames.at(frame).t_ns;
+  if (gt.empty() || t_ns < gt.front().t_ns || t_ns > gt.back().t_ns) return std::nullopt;
+  const auto after = std::upper_bound(gt.begin(), gt.end(), t_ns,
+                                      [](Timestamp t, const GroundTruthState& s) { return t < s.t_ns; });
+  const GroundTruthState& a = *(after - 1);  // a.t_ns <= t_ns (t_ns >= front)
+  if (a.t_ns == t_ns || after == gt.end()) return a.T_w_b;
+  return interpolate_pose(StampedPose{a.t_ns, a.T_w_b}, StampedPose{after->t_ns, after->T_w_b}, t_ns);
+}
+
+}  // namespace io_detail
+
+std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const OpenOptions& options) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) throw DataError(dir, "dataset directory not found");
+  if (!fs::is_directory(dir, ec)) throw DataError(dir, "expected a dataset directory, found a file");
+  if (fs::is_directory(dir / "mav0", ec) || fs::is_directory(dir / "cam0", ec) ||
+      fs::is_directory(dir / "imu0", ec)) {
+    return open_euroc(dir, options);
+  }
+  if (fs::is_directory(dir / "image_0", ec) || fs::is_directory(dir / "image_1", ec))
+    return open_kitti(dir, options);
+  if (!io_detail::list_image_files(dir).empty()) return open_image_folder(dir, options);
+  if (fs::is_regular_file(dir / "times.txt", ec)) return open_kitti(dir, options);
+  throw DataError(dir,
+                  "no dataset found: expected mav0/ or cam0/ (EuRoC), image_0/ or times.txt (KITTI), "
+                  "or image files (png, jpg, pgm)");
+}
+
+}  // namespace loopgate

@@ -1,0 +1,134 @@
+// EuRoC ASL layout reader: DIR/mav0/... or DIR pointing at mav0.
+//   cam<k>/data.csv (+ cam<k>/data/*.png, may be absent), cam<k>/sensor.yaml   required / optional
+//   imu0/data.csv, imu0/sensor.yaml                                             optional
+//   state_groundtruth_estimate0/data.csv (+ sensor.yaml T_BS)                   optional
+// Ground truth is the body (= IMU for EuRoC) pose: when the ground-truth sensor.yaml has a T_BS that is
+// not the identity, the estimated sensor pose T_w_s is turned into T_w_b = T_w_s * T_BS^-1.
+// Without state_groundtruth_estimate0/data.csv, a TUM file "groundtruth_tum.txt" beside mav0/ (as in
+// the shared V1_01_easy_micro excerpt) or inside it is used instead.
+#include <spdlog/spdlog.h>
+
+#include "core/error.hpp"
+#include "io/csv_formats.hpp"
+#include "io/dataset.hpp"
+#include "io/loaded_dataset.hpp"
+#include "io/trajectory_io.hpp"
+
+namespace loopgate {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Reads an optional calibration file: in lenient mode a malformed one is recorded and skipped.
+template <class Read>
+auto read_optional_yaml(const fs::path& file, io_detail::IssueLog& log, Read&& read)
+    -> std::optional<decltype(read(file))> {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) {
+    spdlog::debug("{}: absent", file.string());
+    return std::nullopt;
+  }
+  try {
+    return read(file);
+  } catch (const DataError& e) {
+    log.report(e.file(), e.line(), e.message() + " (calibration ignored)");
+    return std::nullopt;
+  }
+}
+
+bool is_identity(const Eigen::Isometry3d& T) {
+  return T.matrix().isApprox(Eigen::Matrix4d::Identity(), 0.0);
+}
+
+}  // namespace
+
+std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& options) {
+  if (options.camera_index != 0 && options.camera_index != 1) {
+    throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
+  }
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) throw DataError(dir, "EuRoC dataset directory not found");
+  const fs::path mav = fs::is_directory(dir / "mav0", ec) ? dir / "mav0" : dir;
+  const std::string cam_name = "cam" + std::to_string(options.camera_index);
+  const fs::path cam_dir = mav / cam_name;
+  if (!fs::is_directory(cam_dir, ec)) {
+    throw DataError(cam_dir,
+                    "camera directory not found, expected EuRoC layout mav0/" + cam_name + "/data.csv");
+  }
+
+  auto d = std::make_unique<io_detail::LoadedDataset>();
+  d->layout_name = "euroc";
+  d->root_dir = dir;
+  io_detail::IssueLog log(options.strict, &d->problems);
+
+  // Frames.
+  const std::vector<EurocImageEntry> entries = io_detail::read_euroc_camera_csv(cam_dir / "data.csv", log);
+  if (entries.empty()) {
+    throw DataError(cam_dir / "data.csv", "no usable frames, expected rows of 'timestamp [ns],filename'");
+  }
+  const fs::path data_dir = cam_dir / "data";
+  const bool data_dir_present = fs::is_directory(data_dir, ec);
+  std::size_t missing = 0;
+  d->frames.reserve(entries.size());
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    d->frames.push_back(io_detail::FrameEntry{entries[i].t_ns, data_dir / entries[i].filename, i});
+    if (data_dir_present && !fs::is_regular_file(d->frames.back().image, ec)) ++missing;
+  }
+  d->images_present = data_dir_present && missing < entries.size();
+  if (!d->images_present) {
+    spdlog::info("{}: no images ({} absent): frames have timestamps only", cam_dir.string(),
+                 data_dir_present ? "every listed file is" : "data/ is");
+  } else if (missing > 0) {
+    spdlog::warn("{}: {} of {} images listed in data.csv are missing (those frames fail to load)",
+                 data_dir.string(), missing, entries.size());
+  }
+
+  // Calibration.
+  d->camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
+                                             [](const fs::path& f) { return read_euroc_camera_yaml(f); });
+  if (d->camera_calibration) d->calibration_size_source = cam_name + "/sensor.yaml resolution";
+  d->imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
+                                    [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+
+  // IMU.
+  const fs::path imu_csv = mav / "imu0" / "data.csv";
+  if (fs::exists(imu_csv, ec)) {
+    d->imu = io_detail::read_euroc_imu(imu_csv, log);
+    d->imu_present = true;
+  }
+
+  // Ground truth.
+  const fs::path gt_dir = mav / "state_groundtruth_estimate0";
+  const fs::path gt_csv = gt_dir / "data.csv";
+  if (fs::exists(gt_csv, ec)) {
+    d->gt = io_detail::read_euroc_groundtruth(gt_csv, log);
+    // The ground-truth sensor.yaml carries only T_BS (no camera or IMU keys).
+    const auto T_BS = read_optional_yaml(gt_dir / "sensor.yaml", log,
+                                         [](const fs::path& f) { return io_detail::read_yaml_T_BS(f); });
+    if (T_BS && !is_identity(*T_BS)) {
+      const Eigen::Isometry3d T_s_b = T_BS->inverse();
+      for (GroundTruthState& s : d->gt) s.T_w_b = s.T_w_b * T_s_b;
+      spdlog::info("{}: ground truth moved from its sensor frame to the body frame (T_BS not identity)",
+                   gt_csv.string());
+    }
+  } else {
+    for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
+      if (!fs::is_regular_file(tum, ec)) continue;
+      for (const StampedPose& pose : io_detail::read_tum(tum, log)) {
+        GroundTruthState s;
+        s.t_ns = pose.t_ns;
+        s.T_w_b = pose.T_w_b;
+        d->gt.push_back(s);
+      }
+      spdlog::info("{}: ground truth from {}", dir.string(), tum.string());
+      break;
+    }
+  }
+
+  d->finish();
+  io_detail::log_summary(*d);
+  return d;
+}
+
+}  // namespace loopgate

@@ -1,0 +1,645 @@
+#include "io/trajectory_io.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <charconv>
+#include <cmath>
+#include <string>
+#include <string_view>
+
+#include "core/error.hpp"
+#include "io/csv_formats.hpp"
+#include "io/csv_text.hpp"
+
+namespace loopgate {
+
+namespace {
+
+using io_detail::Delimiter;
+using io_detail::IssueLog;
+using io_detail::Row;
+using io_detail::RowError;
+using io_detail::TextFile;
+
+// A stored quaternion whose norm is further than this from 1 is rejected as garbage (rather than
+// silently normalised); files carry 6+ decimals, so honest rounding is orders of magnitude smaller.
+constexpr double kQuaternionNormTolerance = 1e-2;
+// Largest |R^T R - I| entry accepted for a rotation read as a matrix (KITTI poses, T_BS).
+constexpr double kRotationOrthonormalTolerance = 1e-2;
+// Largest deviation of the bottom row of a 4x4 T_BS from [0 0 0 1].
+constexpr double kHomogeneousRowTolerance = 1e-9;
+
+constexpr int kKittiPoseColumns = 12;
+constexpr int kKittiCameras = 4;
+constexpr std::size_t kImuColumns = 7;
+constexpr std::size_t kTumColumns = 8;
+
+Eigen::Quaterniond checked_quaternion(double w, double x, double y, double z) {
+  Eigen::Quaterniond q(w, x, y, z);
+  const double norm = q.norm();
+  if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) {
+    throw RowError{"quaternion norm " + std::to_string(norm) + ", expected a unit quaternion"};
+  }
+  q.normalize();
+  return q;
+}
+
+bool is_rotation(const Eigen::Matrix3d& R) {
+  return ((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <=
+          kRotationOrthonormalTolerance) &&
+         R.determinant() > 0;
+}
+
+std::string time_order_message(Timestamp t_ns, Timestamp previous_t_ns, const char* what) {
+  return std::string(t_ns == previous_t_ns ? "duplicate " : "non-increasing ") + what + " " +
+         std::to_string(t_ns) + " ns after " + std::to_string(previous_t_ns) +
+         " ns, expected strictly increasing";
+}
+
+// ---------- YAML ----------
+
+YAML::Node load_yaml(const std::filesystem::path& file) {
+  const TextFile text(file);
+  // OpenCV/EuRoC files start with "%YAML:1.0", a directive yaml-cpp rejects. Blank such directive
+  // lines into comments so line numbers in error messages stay those of the file.
+  std::string cleaned;
+  cleaned.reserve(text.text().size());
+  std::size_t pos = 0;
+  const std::string& s = text.text();
+  while (pos < s.size()) {
+    std::size_t end = s.find('\n', pos);
+    if (end == std::string::npos) end = s.size();
+    std::string_view line(s.data() + pos, end - pos);
+    if (!line.empty() && line.front() == '%') {
+      cleaned += '#';
+      cleaned.append(line.substr(1));
+    } else {
+      cleaned.append(line);
+    }
+    cleaned += '\n';
+    pos = end + 1;
+  }
+  try {
+    YAML::Node root = YAML::Load(cleaned);
+    if (!root.IsMap()) throw DataError(file, "expected a YAML mapping of sensor keys");
+    return root;
+  } catch (const YAML::Exception& e) {
+    throw DataError(file, static_cast<std::size_t>(e.mark.line + 1), "malformed YAML: " + e.msg);
+  }
+}
+
+std::size_t yaml_line(const YAML::Node& node) {
+  return static_cast<std::size_t>(node.Mark().line + 1);
+}
+
+YAML::Node require_key(const std::filesystem::path& file, const YAML::Node& root, const char* key) {
+  const YAML::Node node = root[key];
+  if (!node) throw DataError(file, std::string("missing key '") + key + "'");
+  return node;
+}
+
+double yaml_number(const std::filesystem::path& file, const YAML::Node& node, const std::string& what) {
+  if (!node.IsScalar()) throw DataError(file, yaml_line(node), what + ": expected a number");
+  std::string_view text = node.Scalar();
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  double value = 0;
+  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (text.empty() || ec != std::errc{} || ptr != text.data() + text.size() || !std::isfinite(value)) {
+    throw DataError(file, yaml_line(node), what + ": expected a finite number, got '" + node.Scalar() + "'");
+  }
+  return value;
+}
+
+std::vector<double> yaml_numbers(const std::filesystem::path& file, const YAML::Node& node,
+                                 const std::string& what, std::size_t expected) {
+  if (!node.IsSequence() || node.size() != expected) {
+    throw DataError(file, yaml_line(node),
+                    what + ": expected a list of " + std::to_string(expected) + " numbers");
+  }
+  std::vector<double> values;
+  values.reserve(expected);
+  for (std::size_t i = 0; i < expected; ++i) {
+    values.push_back(yaml_number(file, node[i], what + "[" + std::to_string(i) + "]"));
+  }
+  return values;
+}
+
+Eigen::Isometry3d yaml_T_BS(const std::filesystem::path& file, const YAML::Node& root) {
+  const YAML::Node node = require_key(file, root, "T_BS");
+  if (!node.IsMap()) throw DataError(file, yaml_line(node), "T_BS: expected a mapping with rows, cols, data");
+  const YAML::Node rows = require_key(file, node, "rows");
+  const YAML::Node cols = require_key(file, node, "cols");
+  if (yaml_number(file, rows, "T_BS.rows") != 4 || yaml_number(file, cols, "T_BS.cols") != 4) {
+    throw DataError(file, yaml_line(node), "T_BS: expected a 4x4 matrix");
+  }
+  const YAML::Node data = require_key(file, node, "data");
+  const std::vector<double> values = yaml_numbers(file, data, "T_BS.data", 16);
+  Eigen::Matrix4d M;
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) M(r, c) = values[static_cast<std::size_t>(4 * r + c)];
+  }
+  if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > kHomogeneousRowTolerance) {
+    throw DataError(file, yaml_line(data), "T_BS: expected bottom row [0, 0, 0, 1]");
+  }
+  if (!is_rotation(M.topLeftCorner<3, 3>())) {
+    throw DataError(file, yaml_line(data), "T_BS: rotation block is not a rotation matrix");
+  }
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = M.topLeftCorner<3, 3>();
+  T.translation() = M.topRightCorner<3, 1>();
+  return T;
+}
+
+void append_list(std::string& out, const double* values, std::size_t n) {
+  out += '[';
+  for (std::size_t i = 0; i < n; ++i) {
+    if (i) out += ", ";
+    io_detail::append_double(out, values[i]);
+  }
+  out += ']';
+}
+
+void append_T_BS(std::string& out, const Eigen::Isometry3d& T) {
+  out += "T_BS:\n  cols: 4\n  rows: 4\n  data: [";
+  const Eigen::Matrix4d M = T.matrix();
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      if (r || c) out += (c == 0) ? ",\n         " : ", ";
+      io_detail::append_double(out, M(r, c));
+    }
+  }
+  out += "]\n";
+}
+
+void append_key_number(std::string& out, const char* key, double value) {
+  out += key;
+  out += ": ";
+  io_detail::append_double(out, value);
+  out += '\n';
+}
+
+// ---------- KITTI calib ----------
+
+Eigen::Matrix<double, 3, 4> kitti_row_matrix(const Row& row, std::size_t first_column, const char* name) {
+  Eigen::Matrix<double, 3, 4> M;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      M(r, c) = row.number(first_column + static_cast<std::size_t>(4 * r + c), name);
+    }
+  }
+  return M;
+}
+
+}  // namespace
+
+// ====================== lenient-capable readers ======================
+
+namespace io_detail {
+
+Eigen::Isometry3d read_yaml_T_BS(const std::filesystem::path& yaml_file) {
+  return yaml_T_BS(yaml_file, load_yaml(yaml_file));
+}
+
+std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& log) {
+  const TextFile text(file);
+  std::vector<StampedPose> poses;
+  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+    row.expect_columns(kTumColumns, "t_s tx ty tz qx qy qz qw");
+    StampedPose pose;
+    pose.t_ns = row.seconds_ns(0, "t_s");
+    const Eigen::Vector3d p(row.number(1, "tx"), row.number(2, "ty"), row.number(3, "tz"));
+    const Eigen::Quaterniond q = checked_quaternion(row.number(7, "qw"), row.number(4, "qx"),
+                                                    row.number(5, "qy"), row.number(6, "qz"));
+    if (!poses.empty() && pose.t_ns <= poses.back().t_ns) {
+      throw RowError{time_order_message(pose.t_ns, poses.back().t_ns, "timestamp")};
+    }
+    pose.T_w_b.linear() = q.toRotationMatrix();
+    pose.T_w_b.translation() = p;
+    poses.push_back(pose);
+  });
+  return poses;
+}
+
+std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+  const TextFile text(csv_file);
+  std::vector<GroundTruthState> states;
+  states.reserve(text.text().size() / 160);
+  std::size_t columns = 0;  // fixed by the first good row
+  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+    const std::size_t n = row.size();
+    if (columns == 0) {
+      if (n != 8 && n != 11 && n != 14 && n != 17) {
+        throw RowError{
+            "expected 8, 11, 14 or 17 columns (t_ns, p_xyz, q_wxyz[, v_xyz, b_w_xyz, b_a_xyz]), got " +
+            std::to_string(n)};
+      }
+    } else if (n != columns) {
+      throw RowError{"expected " + std::to_string(columns) + " columns like the first data row, got " +
+                     std::to_string(n)};
+    }
+    GroundTruthState s;
+    s.t_ns = row.integer_ns(0, "timestamp [ns]");
+    const Eigen::Vector3d p(row.number(1, "p_x"), row.number(2, "p_y"), row.number(3, "p_z"));
+    const Eigen::Quaterniond q = checked_quaternion(row.number(4, "q_w"), row.number(5, "q_x"),
+                                                    row.number(6, "q_y"), row.number(7, "q_z"));
+    if (n >= 11)
+      s.v_w_mps = Eigen::Vector3d(row.number(8, "v_x"), row.number(9, "v_y"), row.number(10, "v_z"));
+    if (n >= 14) {
+      s.gyro_bias_radps =
+          Eigen::Vector3d(row.number(11, "b_w_x"), row.number(12, "b_w_y"), row.number(13, "b_w_z"));
+    }
+    if (n >= 17) {
+      s.accel_bias_mps2 =
+          Eigen::Vector3d(row.number(14, "b_a_x"), row.number(15, "b_a_y"), row.number(16, "b_a_z"));
+    }
+    if (!states.empty() && s.t_ns <= states.back().t_ns) {
+      throw RowError{time_order_message(s.t_ns, states.back().t_ns, "ground-truth timestamp")};
+    }
+    s.T_w_b.linear() = q.toRotationMatrix();
+    s.T_w_b.translation() = p;
+    states.push_back(s);
+    columns = n;
+  });
+  return states;
+}
+
+std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log) {
+  const TextFile text(csv_file);
+  std::vector<EurocImageEntry> images;
+  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+    row.expect_columns(2, "timestamp [ns], filename");
+    EurocImageEntry entry;
+    entry.t_ns = row.integer_ns(0, "timestamp [ns]");
+    if (row.fields[1].empty()) throw RowError{"column 2 (filename): expected an image file name, got ''"};
+    if (row.fields[1].find('/') != std::string_view::npos) {
+      throw RowError{"column 2 (filename): expected a plain file name inside data/, got '" +
+                     std::string(row.fields[1]) + "'"};
+    }
+    if (!images.empty() && entry.t_ns <= images.back().t_ns) {
+      throw RowError{time_order_message(entry.t_ns, images.back().t_ns, "camera timestamp")};
+    }
+    entry.filename = std::string(row.fields[1]);
+    images.push_back(std::move(entry));
+  });
+  return images;
+}
+
+std::vector<ImuSample> read_euroc_imu(const std::filesystem::path& csv_file, IssueLog& log) {
+  const TextFile text(csv_file);
+  std::vector<ImuSample> samples;
+  samples.reserve(text.text().size() / 100);
+  Timestamp last_t_ns = 0;
+  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+    row.expect_columns(kImuColumns, "timestamp [ns], w_xyz [rad/s], a_xyz [m/s^2]");
+    ImuSample s;
+    s.t_ns = row.integer_ns(0, "timestamp [ns]");
+    s.gyro_radps = Eigen::Vector3d(row.number(1, "w_x"), row.number(2, "w_y"), row.number(3, "w_z"));
+    s.accel_mps2 = Eigen::Vector3d(row.number(4, "a_x"), row.number(5, "a_y"), row.number(6, "a_z"));
+    if (!samples.empty() && s.t_ns <= last_t_ns) {
+      const std::string message = time_order_message(s.t_ns, last_t_ns, "IMU timestamp");
+      if (log.strict()) throw RowError{message};
+      // Lenient: the sample stays where the file has it (the sync stage judges it per frame); the
+      // RowError only records the issue.
+      samples.push_back(s);
+      throw RowError{message + " (sample kept in file order)"};
+    }
+    samples.push_back(s);
+    last_t_ns = s.t_ns;
+  });
+  return samples;
+}
+
+std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem::path& times_file,
+                                                           IssueLog& log) {
+  const TextFile text(times_file);
+  std::vector<std::optional<Timestamp>> rows;
+  std::optional<Timestamp> last_t_ns;
+  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+    rows.emplace_back();  // the row keeps its index even when bad
+    row.expect_columns(1, "time in seconds");
+    const Timestamp t_ns = row.seconds_ns(0, "t_s");
+    if (last_t_ns && t_ns <= *last_t_ns) throw RowError{time_order_message(t_ns, *last_t_ns, "time")};
+    rows.back() = t_ns;
+    last_t_ns = t_ns;
+  });
+  return rows;
+}
+
+std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
+                                                                   IssueLog& log) {
+  const TextFile text(poses_file);
+  std::vector<std::optional<Eigen::Isometry3d>> rows;
+  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+    rows.emplace_back();
+    row.expect_columns(kKittiPoseColumns, "row-major 3x4 T_w_cam0");
+    const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, 0, "pose");
+    if (!is_rotation(M.leftCols<3>())) throw RowError{"rotation block is not a rotation matrix"};
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.linear() = M.leftCols<3>();
+    T.translation() = M.col(3);
+    rows.back() = T;
+  });
+  return rows;
+}
+
+}  // namespace io_detail
+
+// ====================== public strict API ======================
+
+std::vector<StampedPose> read_tum(const std::filesystem::path& file) {
+  IssueLog log(true, nullptr);
+  return io_detail::read_tum(file, log);
+}
+
+void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses) {
+  std::string out = "# timestamp tx ty tz qx qy qz qw\n";
+  out.reserve(poses.size() * 200);
+  for (const StampedPose& pose : poses) {
+    const Eigen::Quaterniond q(pose.T_w_b.linear());
+    io_detail::append_seconds(out, pose.t_ns);
+    const Eigen::Vector3d& p = pose.T_w_b.translation();
+    for (const double v : {p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w()}) {
+      out += ' ';
+      io_detail::append_double(out, v);
+    }
+    out += '\n';
+  }
+  io_detail::write_text_file(file, out);
+}
+
+std::vector<Timestamp> read_kitti_times(const std::filesystem::path& times_file) {
+  IssueLog log(true, nullptr);
+  std::vector<Timestamp> times;
+  for (const auto& t : io_detail::read_kitti_time_rows(times_file, log)) times.push_back(*t);
+  return times;
+}
+
+std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
+                                          const std::filesystem::path& times_file, bool allow_fewer) {
+  IssueLog log(true, nullptr);
+  const auto times = io_detail::read_kitti_time_rows(times_file, log);
+  const auto rows = io_detail::read_kitti_pose_rows(poses_file, log);
+  if (rows.size() > times.size() || (!allow_fewer && rows.size() != times.size())) {
+    throw DataError(poses_file, std::to_string(rows.size()) + " poses, expected " +
+                                    (allow_fewer ? "at most " : "") + std::to_string(times.size()) +
+                                    " (the rows of " + times_file.string() + ")");
+  }
+  std::vector<StampedPose> poses;
+  poses.reserve(rows.size());
+  for (std::size_t i = 0; i < rows.size(); ++i) poses.push_back(StampedPose{*times[i], *rows[i]});
+  return poses;
+}
+
+std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
+                                          const std::filesystem::path& times_file) {
+  return read_kitti_poses(poses_file, times_file, false);
+}
+
+CameraCalibration read_kitti_calib(const std::filesystem::path& calib_file, int camera_index) {
+  if (camera_index < 0 || camera_index >= kKittiCameras) {
+    throw DataError(calib_file, "camera index " + std::to_string(camera_index) + ", expected 0..3");
+  }
+  const TextFile text(calib_file);
+  IssueLog log(true, nullptr);
+  const std::string key = std::string("P").append(std::to_string(camera_index)).append(":");
+  std::optional<Eigen::Matrix<double, 3, 4>> P;
+  std::size_t line = 0;
+  io_detail::for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+    if (row.fields.front() != key) return;
+    row.expect_columns(1 + kKittiPoseColumns, key + " and a row-major 3x4 projection matrix");
+    P = kitti_row_matrix(row, 1, key.c_str());
+    line = row.line;
+  });
+  if (!P)
+    throw DataError(calib_file, "no line '" + key + "', expected the projection matrix of camera " +
+                                    std::to_string(camera_index));
+  const Eigen::Matrix3d K = P->leftCols<3>();
+  if (!(K(0, 0) > 0) || !(K(1, 1) > 0) || K(1, 0) != 0 || K(2, 0) != 0 || K(2, 1) != 0 || K(2, 2) != 1) {
+    throw DataError(calib_file, line,
+                    key + " expected a rectified projection [fx 0 cx tx; 0 fy cy ty; 0 0 1 tz]");
+  }
+  CameraCalibration camera;
+  camera.fx = K(0, 0);
+  camera.fy = K(1, 1);
+  camera.cx = K(0, 2);
+  camera.cy = K(1, 2);
+  // P_i = K [I | t_i] with x_ci = x_c0 + t_i, so camera i sits at -t_i in the camera-0 (body) frame.
+  const Eigen::Vector3d t_ci_c0 = K.inverse() * P->col(3);
+  camera.T_b_c = Eigen::Isometry3d::Identity();
+  camera.T_b_c.translation() = -t_ci_c0;
+  return camera;
+}
+
+void write_kitti_poses(const std::filesystem::path& poses_file,
+                       const std::vector<Eigen::Isometry3d>& T_w_cam0) {
+  std::string out;
+  out.reserve(T_w_cam0.size() * 250);
+  for (const Eigen::Isometry3d& T : T_w_cam0) {
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        if (r || c) out += ' ';
+        io_detail::append_double(out, T.matrix()(r, c));
+      }
+    }
+    out += '\n';
+  }
+  io_detail::write_text_file(poses_file, out);
+}
+
+void write_kitti_times(const std::filesystem::path& times_file, const std::vector<Timestamp>& t_ns) {
+  std::string out;
+  out.reserve(t_ns.size() * 24);
+  for (const Timestamp t : t_ns) {
+    io_detail::append_seconds(out, t);
+    out += '\n';
+  }
+  io_detail::write_text_file(times_file, out);
+}
+
+std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file) {
+  IssueLog log(true, nullptr);
+  return io_detail::read_euroc_groundtruth(csv_file, log);
+}
+
+std::vector<ImuSample> read_euroc_imu(const std::filesystem::path& csv_file) {
+  IssueLog log(true, nullptr);
+  return io_detail::read_euroc_imu(csv_file, log);
+}
+
+std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file) {
+  IssueLog log(true, nullptr);
+  return io_detail::read_euroc_camera_csv(csv_file, log);
+}
+
+void write_euroc_camera_csv(const std::filesystem::path& csv_file,
+                            const std::vector<EurocImageEntry>& images) {
+  std::string out = "#timestamp [ns],filename\n";
+  out.reserve(images.size() * 48);
+  for (const EurocImageEntry& image : images) {
+    io_detail::append_int(out, image.t_ns);
+    out += ',';
+    out += image.filename;
+    out += '\n';
+  }
+  io_detail::write_text_file(csv_file, out);
+}
+
+void write_euroc_imu(const std::filesystem::path& csv_file, const std::vector<ImuSample>& samples) {
+  std::string out =
+      "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+      "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]\n";
+  out.reserve(samples.size() * 140);
+  for (const ImuSample& s : samples) {
+    io_detail::append_int(out, s.t_ns);
+    for (const double v : {s.gyro_radps.x(), s.gyro_radps.y(), s.gyro_radps.z(), s.accel_mps2.x(),
+                           s.accel_mps2.y(), s.accel_mps2.z()}) {
+      out += ',';
+      io_detail::append_double(out, v);
+    }
+    out += '\n';
+  }
+  io_detail::write_text_file(csv_file, out);
+}
+
+void write_euroc_groundtruth(const std::filesystem::path& csv_file,
+                             const std::vector<GroundTruthState>& states) {
+  std::string out =
+      "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
+      "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad "
+      "s^-1], "
+      "b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]\n";
+  out.reserve(states.size() * 330);
+  for (const GroundTruthState& s : states) {
+    io_detail::append_int(out, s.t_ns);
+    const Eigen::Quaterniond q(s.T_w_b.linear());
+    const Eigen::Vector3d& p = s.T_w_b.translation();
+    for (const double v : {p.x(), p.y(), p.z(), q.w(), q.x(), q.y(), q.z(), s.v_w_mps.x(), s.v_w_mps.y(),
+                           s.v_w_mps.z(), s.gyro_bias_radps.x(), s.gyro_bias_radps.y(), s.gyro_bias_radps.z(),
+                           s.accel_bias_mps2.x(), s.accel_bias_mps2.y(), s.accel_bias_mps2.z()}) {
+      out += ',';
+      io_detail::append_double(out, v);
+    }
+    out += '\n';
+  }
+  io_detail::write_text_file(csv_file, out);
+}
+
+CameraCalibration read_euroc_camera_yaml(const std::filesystem::path& yaml_file) {
+  const YAML::Node root = load_yaml(yaml_file);
+  CameraCalibration camera;
+  camera.T_b_c = yaml_T_BS(yaml_file, root);
+  if (const YAML::Node rate = root["rate_hz"]) {
+    camera.rate_hz = yaml_number(yaml_file, rate, "rate_hz");
+    if (!(camera.rate_hz > 0)) throw DataError(yaml_file, yaml_line(rate), "rate_hz: expected > 0");
+  }
+  const YAML::Node resolution = require_key(yaml_file, root, "resolution");
+  const std::vector<double> size = yaml_numbers(yaml_file, resolution, "resolution [width, height]", 2);
+  if (size[0] < 1 || size[1] < 1 || size[0] != std::floor(size[0]) || size[1] != std::floor(size[1])) {
+    throw DataError(yaml_file, yaml_line(resolution),
+                    "resolution: expected two positive integers [width, height]");
+  }
+  camera.width_px = static_cast<int>(size[0]);
+  camera.height_px = static_cast<int>(size[1]);
+  if (const YAML::Node model = root["camera_model"]) {
+    if (!model.IsScalar() || model.Scalar() != "pinhole") {
+      throw DataError(yaml_file, yaml_line(model), "camera_model: expected 'pinhole'");
+    }
+  }
+  const YAML::Node intrinsics = require_key(yaml_file, root, "intrinsics");
+  const std::vector<double> k = yaml_numbers(yaml_file, intrinsics, "intrinsics [fu, fv, cu, cv]", 4);
+  if (!(k[0] > 0) || !(k[1] > 0)) {
+    throw DataError(yaml_file, yaml_line(intrinsics), "intrinsics: expected positive focal lengths fu, fv");
+  }
+  camera.fx = k[0];
+  camera.fy = k[1];
+  camera.cx = k[2];
+  camera.cy = k[3];
+  const YAML::Node model = root["distortion_model"];
+  const std::string model_name = model && model.IsScalar() ? model.Scalar() : std::string("none");
+  if (model_name == "radial-tangential" || model_name == "radtan") {
+    camera.distortion_model = DistortionModel::kRadTan;
+  } else if (model_name == "equidistant") {
+    camera.distortion_model = DistortionModel::kEquidistant;
+  } else if (model_name == "none") {
+    camera.distortion_model = DistortionModel::kNone;
+  } else {
+    throw DataError(
+        yaml_file, model ? yaml_line(model) : 0,
+        "distortion_model: '" + model_name + "', expected radial-tangential, equidistant or none");
+  }
+  if (camera.distortion_model != DistortionModel::kNone) {
+    const YAML::Node coefficients = require_key(yaml_file, root, "distortion_coefficients");
+    camera.distortion = yaml_numbers(yaml_file, coefficients,
+                                     camera.distortion_model == DistortionModel::kRadTan
+                                         ? "distortion_coefficients [k1, k2, p1, p2]"
+                                         : "distortion_coefficients [k1, k2, k3, k4]",
+                                     4);
+  }
+  return camera;
+}
+
+ImuCalibration read_euroc_imu_yaml(const std::filesystem::path& yaml_file) {
+  const YAML::Node root = load_yaml(yaml_file);
+  ImuCalibration imu;
+  imu.T_b_i = yaml_T_BS(yaml_file, root);
+  const auto non_negative = [&](const char* key) {
+    const YAML::Node node = require_key(yaml_file, root, key);
+    const double value = yaml_number(yaml_file, node, key);
+    if (value < 0) throw DataError(yaml_file, yaml_line(node), std::string(key) + ": expected >= 0");
+    return value;
+  };
+  imu.gyro_noise_density = non_negative("gyroscope_noise_density");
+  imu.gyro_random_walk = non_negative("gyroscope_random_walk");
+  imu.accel_noise_density = non_negative("accelerometer_noise_density");
+  imu.accel_random_walk = non_negative("accelerometer_random_walk");
+  const YAML::Node rate = require_key(yaml_file, root, "rate_hz");
+  imu.rate_hz = yaml_number(yaml_file, rate, "rate_hz");
+  if (!(imu.rate_hz > 0)) throw DataError(yaml_file, yaml_line(rate), "rate_hz: expected > 0");
+  return imu;
+}
+
+void write_euroc_camera_yaml(const std::filesystem::path& yaml_file, const CameraCalibration& camera) {
+  std::string out = "%YAML:1.0\n# written by loopgate\nsensor_type: camera\ncomment: loopgate camera\n\n";
+  append_T_BS(out, camera.T_b_c);
+  out += '\n';
+  if (camera.rate_hz > 0) append_key_number(out, "rate_hz", camera.rate_hz);  // 0 = unknown, key omitted
+  out += "resolution: [" + std::to_string(camera.width_px) + ", " + std::to_string(camera.height_px) + "]\n";
+  out += "camera_model: pinhole\nintrinsics: ";
+  const double k[4] = {camera.fx, camera.fy, camera.cx, camera.cy};
+  append_list(out, k, 4);
+  out += " #fu, fv, cu, cv\ndistortion_model: ";
+  switch (camera.distortion_model) {
+    case DistortionModel::kNone: out += "none"; break;
+    case DistortionModel::kRadTan: out += "radial-tangential"; break;
+    case DistortionModel::kEquidistant: out += "equidistant"; break;
+  }
+  out += "\ndistortion_coefficients: ";
+  append_list(out, camera.distortion.data(), camera.distortion.size());
+  out += '\n';
+  io_detail::write_text_file(yaml_file, out);
+}
+
+void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalibration& imu) {
+  std::string out = "%YAML:1.0\n# written by loopgate\nsensor_type: imu\ncomment: loopgate imu\n\n";
+  append_T_BS(out, imu.T_b_i);
+  append_key_number(out, "rate_hz", imu.rate_hz);
+  out += '\n';
+  append_key_number(out, "gyroscope_noise_density", imu.gyro_noise_density);
+  append_key_number(out, "gyroscope_random_walk", imu.gyro_random_walk);
+  append_key_number(out, "accelerometer_noise_density", imu.accel_noise_density);
+  append_key_number(out, "accelerometer_random_walk", imu.accel_random_walk);
+  io_detail::write_text_file(yaml_file, out);
+}
+
+Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, Timestamp t_ns) {
+  if (b.t_ns == a.t_ns) return a.T_w_b;
+  const double alpha = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+  const Eigen::Quaterniond qa(a.T_w_b.linear());
+  const Eigen::Quaterniond qb(b.T_w_b.linear());
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.linear() = qa.slerp(alpha, qb).normalized().toRotationMatrix();
+  T.translation() = (1.0 - alpha) * a.T_w_b.translation() + alpha * b.T_w_b.translation();
+  return T;
+}
+
+}  // namespace loopgate

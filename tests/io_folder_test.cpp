@@ -1,0 +1,141 @@
+// Image-folder reader: natural order, optional times.txt, colour to grey, damaged files, Nordland.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+
+void write_file(const fs::path& file, const std::string& text) {
+  fs::create_directories(file.parent_path());
+  std::ofstream(file, std::ios::binary) << text;
+}
+
+cv::Mat grey(int value, int width = 20, int height = 10) {
+  return cv::Mat(height, width, CV_8UC1, cv::Scalar(static_cast<double>(value)));
+}
+
+template <class Fn>
+DataError catch_data_error(Fn&& fn) {
+  try {
+    fn();
+  } catch (const DataError& e) {
+    return e;
+  }
+  ADD_FAILURE() << "expected a DataError";
+  return DataError("", "none");
+}
+
+TEST(IoFolder, NaturalOrderMixedFormatsAndRate) {
+  const fs::path dir = testing::make_temp_dir("io-folder");
+  cv::imwrite((dir / "img10.png").string(), grey(10));
+  cv::imwrite((dir / "img2.pgm").string(), grey(2));
+  cv::imwrite((dir / "img1.png").string(), grey(1));
+  cv::imwrite((dir / "img3.jpg").string(), grey(3));  // lossy, but a flat image survives
+  write_file(dir / "notes.txt", "not an image");
+  fs::create_directories(dir / "sub.png");  // a directory, not a file
+  OpenOptions options;
+  options.folder_rate_hz = 4.0;
+  const auto d = open_dataset(dir, options);
+  EXPECT_EQ(d->layout(), "folder");
+  ASSERT_EQ(d->frame_count(), 4u);
+  const std::vector<std::string> names = {"img1.png", "img2.pgm", "img3.jpg", "img10.png"};
+  const std::vector<int> values = {1, 2, 3, 10};
+  for (std::size_t i = 0; i < 4; ++i) {
+    EXPECT_EQ(d->image_path(i).filename().string(), names[i]);
+    EXPECT_EQ(d->frame_t_ns(i), static_cast<Timestamp>(i) * 250'000'000);
+    const cv::Mat image = d->load_image(i);
+    ASSERT_EQ(image.type(), CV_8UC1);
+    EXPECT_NEAR(cv::mean(image)[0], values[i], 0.5);
+  }
+  EXPECT_FALSE(d->has_imu());
+  EXPECT_FALSE(d->has_ground_truth());
+  EXPECT_FALSE(d->camera());
+  EXPECT_FALSE(d->ground_truth_T_w_b(1));
+  options.folder_rate_hz = 0;
+  EXPECT_THROW(open_image_folder(dir, options), ConfigError);
+}
+
+TEST(IoFolder, TimesFileAndColour) {
+  const fs::path dir = testing::make_temp_dir("io-folder-times");
+  for (int i = 0; i < 3; ++i) {
+    cv::Mat colour(10, 20, CV_8UC3, cv::Scalar(30.0 * i, 60.0, 90.0));  // B, G, R
+    cv::imwrite((dir / std::string("f").append(std::to_string(i)).append(".png")).string(), colour);
+  }
+  write_file(dir / "times.txt", "10.5\n10.75\n11.0\n");
+  const auto d = open_dataset(dir);
+  EXPECT_EQ(d->layout(), "folder");
+  ASSERT_EQ(d->frame_count(), 3u);
+  EXPECT_EQ(d->frame_t_ns(0), 10'500'000'000);
+  EXPECT_EQ(d->frame_t_ns(2), 11'000'000'000);
+  const cv::Mat image = d->load_image(1);
+  ASSERT_EQ(image.type(), CV_8UC1);
+  EXPECT_NEAR(image.at<unsigned char>(0, 0), 0.114 * 30 + 0.587 * 60 + 0.299 * 90, 1.0);
+
+  write_file(dir / "times.txt", "10.5\n10.5\n11.0\n");
+  const DataError e1 = catch_data_error([&] { open_dataset(dir); });
+  EXPECT_EQ(e1.line(), 2u);
+  EXPECT_NE(e1.message().find("duplicate time"), std::string::npos);
+  write_file(dir / "times.txt", "10.5\n10.75\n");
+  const DataError e2 = catch_data_error([&] { open_dataset(dir); });
+  EXPECT_NE(e2.message().find("2 rows, expected one per image (3 images)"), std::string::npos) << e2.what();
+  OpenOptions lenient;
+  lenient.strict = false;
+  EXPECT_EQ(open_dataset(dir, lenient)->frame_count(), 2u);
+}
+
+TEST(IoFolder, DamagedImagesAndEmptyFolder) {
+  const fs::path dir = testing::make_temp_dir("io-folder-bad");
+  EXPECT_THROW(open_image_folder(dir), DataError);  // no images
+  write_file(dir / "a0.png", "garbage");            // the first file does not decode: size comes from a1
+  cv::imwrite((dir / "a1.png").string(), grey(5));
+  cv::imwrite((dir / "a2.png").string(), grey(5, 21, 10));
+  cv::imwrite((dir / "a3.png").string(), grey(7));
+  cv::Mat deep(10, 20, CV_16UC1, cv::Scalar(1000.0));
+  cv::imwrite((dir / "a4.png").string(), deep);
+  const auto d = open_image_folder(dir);
+  ASSERT_EQ(d->frame_count(), 5u);
+  EXPECT_NE(catch_data_error([&] { d->load_image(0); }).message().find("frame 0: cannot decode image"),
+            std::string::npos);
+  EXPECT_NE(catch_data_error([&] { d->load_image(2); })
+                .message()
+                .find("image is 21x10, expected 20x10 like frame 1"),
+            std::string::npos);
+  EXPECT_NE(catch_data_error([&] { d->load_image(4); }).message().find("16-bit samples, expected 8-bit"),
+            std::string::npos);
+  EXPECT_EQ(d->load_image(3).at<unsigned char>(0, 0), 7);
+  fs::remove(dir / "a3.png");
+  EXPECT_NE(catch_data_error([&] { d->load_image(3); }).message().find("frame 3: image file missing"),
+            std::string::npos);
+}
+
+TEST(IoFolder, RealNordland) {
+  LOOPGATE_REQUIRE_SHARED_DATA("nordland-64x32/summer");
+  const auto d = open_dataset(testing::shared_data_dir() / "nordland-64x32/summer");
+  EXPECT_EQ(d->layout(), "folder");
+  ASSERT_EQ(d->frame_count(), 3576u);
+  EXPECT_EQ(d->image_path(0).filename().string(), "images-00010.png");
+  EXPECT_EQ(d->image_path(3575).filename().string(), "images-35760.png");
+  EXPECT_EQ(d->frame_t_ns(10), 10'000'000'000);  // default 1 Hz
+  for (const std::size_t i : {0u, 1000u, 3575u}) {
+    const cv::Mat image = d->load_image(i);
+    ASSERT_EQ(image.type(), CV_8UC1);
+    EXPECT_EQ(image.cols, 64);
+    EXPECT_EQ(image.rows, 32);
+    // The files are RGB with equal channels: grey equals any channel exactly.
+    const cv::Mat colour = cv::imread(d->image_path(i).string(), cv::IMREAD_COLOR);
+    cv::Mat channels[3];
+    cv::split(colour, channels);
+    EXPECT_EQ(cv::norm(image, channels[1], cv::NORM_INF), 0.0);
+  }
+}
+
+}  // namespace
+}  // namespace loopgate
