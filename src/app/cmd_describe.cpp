@@ -1,0 +1,159 @@
+// loopgate describe: DIRD descriptors of image files, one CSV line per image, optional descriptor pictures.
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "app/commands.hpp"
+#include "core/error.hpp"
+#include "stages/dird/dird_extractor.hpp"
+
+namespace loopgate::app {
+
+namespace {
+
+struct DescribeOptions {
+  std::vector<std::string> images;
+  std::string out_file;
+  std::string picture_dir;
+  int picture_scale = 1;
+  std::string normalization = "libdird";
+  bool flip_vertical = false;
+};
+
+// RFC 4180 quoting when the path holds a comma, a quote or a line break.
+std::string csv_field(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string quoted = "\"";
+  for (char c : text) {
+    if (c == '"') quoted += '"';
+    quoted += c;
+  }
+  return quoted + "\"";
+}
+
+// Decodes an image for DIRD: 8-bit grey/BGR/BGRA as stored; other depths or layouts through OpenCV's
+// 8-bit BGR conversion. Throws DataError naming the file.
+cv::Mat read_image(const std::filesystem::path& path) {
+  if (!std::filesystem::is_regular_file(path)) throw DataError(path, "no such image file");
+  cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  if (image.empty()) throw DataError(path, "cannot be decoded as an image");
+  if (image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3 && image.channels() != 4)) {
+    image = cv::imread(path.string(), cv::IMREAD_COLOR);
+    if (image.empty()) throw DataError(path, "cannot be decoded as an 8-bit image");
+  }
+  return image;
+}
+
+std::filesystem::path picture_path(const std::filesystem::path& dir, const std::filesystem::path& image,
+                                   std::set<std::string>& used) {
+  std::string stem = image.stem().string();
+  if (stem.empty()) stem = "image";
+  std::string name = stem + ".png";
+  for (int k = 2; used.count(name) != 0; ++k) name = stem + "-" + std::to_string(k) + ".png";
+  used.insert(name);
+  return dir / name;
+}
+
+int run_describe(const DescribeOptions& opt) {
+  DirdConfig config;
+  config.normalization = opt.normalization;
+  config.flip_vertical = opt.flip_vertical;
+  const DirdExtractor extractor(config);
+
+  std::ofstream file;
+  if (!opt.out_file.empty()) {
+    file.open(opt.out_file, std::ios::out | std::ios::trunc);
+    if (!file) throw DataError(opt.out_file, "cannot open the output file for writing");
+  }
+  std::ostream& out = opt.out_file.empty() ? std::cout : file;
+  if (!opt.picture_dir.empty()) std::filesystem::create_directories(opt.picture_dir);
+
+  std::set<std::string> used_names;
+  std::size_t failures = 0;
+  std::string line;
+  for (const std::string& image_path : opt.images) {
+    try {
+      const cv::Mat image = read_image(image_path);
+      const Descriptor descriptor = extractor.extract(image);
+      line = csv_field(image_path);
+      for (std::uint8_t b : descriptor) {
+        line += ',';
+        line += std::to_string(static_cast<int>(b));
+      }
+      line += '\n';
+      out << line;
+      if (!opt.picture_dir.empty()) {
+        cv::Mat picture = descriptor_picture(descriptor);
+        if (opt.picture_scale > 1) {
+          cv::resize(picture, picture, cv::Size(), opt.picture_scale, opt.picture_scale, cv::INTER_NEAREST);
+        }
+        const auto png = picture_path(opt.picture_dir, image_path, used_names);
+        if (!cv::imwrite(png.string(), picture)) throw DataError(png, "cannot write the descriptor picture");
+      }
+    } catch (const DataError& e) {
+      spdlog::error("describe: {}", e.what());
+      ++failures;
+    } catch (const cv::Exception& e) {
+      spdlog::error("describe: {}: {}", image_path, e.what());
+      ++failures;
+    }
+  }
+  out.flush();
+  if (!out) throw DataError(opt.out_file.empty() ? "<stdout>" : opt.out_file, "write failed");
+  if (failures > 0) {
+    spdlog::error("describe: {} of {} images failed", failures, opt.images.size());
+    return kExitFailure;
+  }
+  // Only when the CSV goes to a file: standard output carries the CSV itself.
+  if (!opt.out_file.empty()) {
+    spdlog::info("describe: {} descriptors ({} normalisation{}) -> {}", opt.images.size(), opt.normalization,
+                 opt.flip_vertical ? ", flipped vertically" : "", opt.out_file);
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void add_describe_command(CLI::App& app, int& exit_code) {
+  auto opt = std::make_shared<DescribeOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "describe",
+      "DIRD descriptors of images: one CSV line per image, 'path,b0,...,b3455' (3456 bytes). Colour images "
+      "are converted to grey with BT.601 weights (rounded). An unreadable image is reported by name, the "
+      "others are still described, and the exit status is non-zero.");
+  cmd->add_option("images", opt->images, "Image files")->required();
+  cmd->add_option("--out", opt->out_file, "CSV output file (default: standard output)");
+  cmd->add_option(
+      "--picture", opt->picture_dir,
+      "Also write each descriptor as a PNG picture into this directory, named after the image "
+      "(paper Fig. 3): the 3456 bytes row-major as 54 rows x 64 columns, byte value = grey level");
+  cmd->add_option("--picture-scale", opt->picture_scale, "Enlarge the pictures N times (nearest neighbour)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 64));
+  cmd->add_option("--normalization", opt->normalization,
+                  "libdird (bit-exact with the reference) or l2 (for low-contrast input)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"libdird", "l2"}));
+  cmd->add_flag("--flip-vertical", opt->flip_vertical,
+                "Read images bottom-up, as the reference command-line tool does");
+  cmd->callback([opt, &exit_code]() {
+    try {
+      exit_code = run_describe(*opt);
+    } catch (const std::exception& e) {
+      spdlog::error("describe: {}", e.what());
+      exit_code = kExitFailure;
+    }
+  });
+}
+
+}  // namespace loopgate::app

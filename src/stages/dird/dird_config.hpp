@@ -1,0 +1,59 @@
+// Configuration of the DIRD descriptor and of its similarity (docs: ../shared/docs/dird.md §1-2, §6).
+#pragma once
+
+#include <string>
+
+namespace loopgate {
+
+// Reference logistic constants of the original library for the L1 metric on full-resolution photographs
+// in `libdird` mode: sim(d) = 1 / (1 + exp((d - mu) / sigma)).
+constexpr double kDirdReferenceMuL1 = 70000.0 / 1.85;  // 37837.84
+constexpr double kDirdReferenceSigmaL1 = 4000.0;
+// Scale of the same logistic for the L2 metric under the assumption that the per-byte differences are of
+// equal size (L2 = L1 / sqrt(3456)). This is only an order of magnitude: with metric l2, mu and sigma must
+// be calibrated on the data (calibrate_logistic(), `loopgate calibrate`), validate() insists on it.
+constexpr double kDirdScaleMuL2 = kDirdReferenceMuL1 / 58.787753826796276;        // ~643.6
+constexpr double kDirdScaleSigmaL2 = kDirdReferenceSigmaL1 / 58.787753826796276;  // ~68.0
+
+struct DirdConfig {
+  // "libdird": per-pixel division by floor(sqrt(q)), bit-exact with the reference (pixels with
+  // floor(sqrt(q)) == 0 are invalid and zero their cell). "l2": division by sqrt(q), no invalid pixels.
+  std::string normalization = "libdird";
+  // Read the image bottom-up, as the reference command-line tool does.
+  bool flip_vertical = false;
+  // "l1" (sum of absolute byte differences, the reference) or "l2" (Euclidean).
+  std::string metric = "l1";
+  // Logistic similarity centre and scale, in distance units of `metric`.
+  double mu = kDirdReferenceMuL1;
+  double sigma = kDirdReferenceSigmaL1;
+  // Sparse similarity: only entries with sim > tau1 are kept.
+  double tau1 = 0.05;
+
+  template <class V>
+  void visit(V&& v) {
+    v("normalization", normalization);
+    v("flip_vertical", flip_vertical);
+    v("metric", metric);
+    v("mu", mu);
+    v("sigma", sigma);
+    v("tau1", tau1);
+  }
+  template <class V>
+  void visit(V&& v) const {
+    v("normalization", normalization);
+    v("flip_vertical", flip_vertical);
+    v("metric", metric);
+    v("mu", mu);
+    v("sigma", sigma);
+    v("tau1", tau1);
+  }
+
+  // Throws ConfigError naming the key: normalization in {libdird, l2}, metric in {l1, l2}, sigma > 0,
+  // finite mu, 0 < tau1 < 1, and with metric l2 mu/sigma must not be the L1 reference values.
+  void validate() const;
+
+  bool l2_normalization() const { return normalization == "l2"; }
+  bool l2_metric() const { return metric == "l2"; }
+};
+
+}  // namespace loopgate

@@ -1,0 +1,43 @@
+// Configuration of the sequence matching and non-maximum suppression (docs: ../shared/docs/dird.md §2-4).
+#pragma once
+
+namespace loopgate {
+
+struct MatchConfig {
+  // Safety margin in frames: only pairs (j, i) with i - j >= margin are compared (single-sequence mode).
+  // Reference 200 for KITTI-like driving at 10 Hz; about 10-20 for EuRoC at 20 Hz.
+  int margin = 200;
+  // L: number of consecutive current frames a matched sequence spans (20 for KITTI, ~10 for EuRoC).
+  int sequence_length = 20;
+  // A DP value is kept when DP > tau3 * L (1.0 for the KITTI reference values).
+  double tau3 = 0.05;
+  // Per step back in i, the earlier index j moves back by 0..max_step frames.
+  int max_step = 3;
+  // NMS window: values M(j - k, i + k), k = -nms_half_window..nms_half_window, along the anti-diagonal.
+  int nms_half_window = 59;
+
+  template <class V>
+  void visit(V&& v) {
+    v("margin", margin);
+    v("sequence_length", sequence_length);
+    v("tau3", tau3);
+    v("max_step", max_step);
+    v("nms_half_window", nms_half_window);
+  }
+  template <class V>
+  void visit(V&& v) const {
+    v("margin", margin);
+    v("sequence_length", sequence_length);
+    v("tau3", tau3);
+    v("max_step", max_step);
+    v("nms_half_window", nms_half_window);
+  }
+
+  // Throws ConfigError naming the key: margin >= 0, sequence_length >= 1, tau3 >= 0 (finite),
+  // max_step >= 0, nms_half_window >= 0.
+  void validate() const;
+
+  double dp_threshold() const { return tau3 * static_cast<double>(sequence_length); }
+};
+
+}  // namespace loopgate
