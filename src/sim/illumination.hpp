@@ -1,0 +1,84 @@
+// Per-frame lighting: exposure/gain, gamma, ambient + directional sun (Lambert), sky brightness,
+// vignetting, sensor noise; and a schedule over the sequence so revisits see different light.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+
+namespace loopgate::sim {
+
+// Radiance of a surface = albedo * (ambient + sun_intensity * max(0, n . sun_dir_w)); pixel value =
+// 255 * clamp(exposure * radiance * vignette)^(1/gamma) + noise. Defaults = a plain day.
+struct Illumination {
+  double exposure = 0.9;       // gain applied to radiance before gamma
+  double gamma = 2.2;          // display gamma (output = linear^(1/gamma))
+  double ambient = 0.35;       // ambient irradiance
+  double sun_intensity = 0.5;  // directional irradiance
+  // Unit direction TOWARDS the sun in the world frame. The default is "up" both for a KITTI-like world
+  // (up = -y) and an EuRoC-like world (up = +z).
+  Eigen::Vector3d sun_dir_w = Eigen::Vector3d(0.35, -0.65, 0.67).normalized();
+  double sky_brightness = 0.9;  // linear radiance of the sky (rays that hit nothing)
+  double vignetting = 0.25;     // relative darkening at the image corners (0 = none)
+  double noise_sigma = 1.5;     // sensor noise std-dev in grey levels (0..255 scale)
+};
+
+struct IlluminationSchedule {
+  std::string kind = "day-to-night";  // "constant" | "day-to-night" | "jump"
+  // Day (phase 0) and night (phase 1) end points.
+  double day_exposure = 0.9;
+  double night_exposure = 1.8;
+  double day_ambient = 0.35;
+  double night_ambient = 0.05;
+  double day_sun_intensity = 0.5;
+  double night_sun_intensity = 0.0;
+  double day_sky_brightness = 0.9;
+  double night_sky_brightness = 0.01;
+  double day_vignetting = 0.25;
+  double night_vignetting = 0.55;
+  double day_noise_sigma = 1.5;
+  double night_noise_sigma = 9.0;
+  double gamma = 2.2;
+  // Sun direction (towards the sun, world frame; normalised on use) at day; it sinks towards the
+  // horizontal at dusk.
+  double sun_dir_x = 0.35;
+  double sun_dir_y = -0.65;
+  double sun_dir_z = 0.67;
+  // day-to-night: day until transition_start, smooth (smoothstep) change to night at transition_end.
+  double transition_start = 0.35;
+  double transition_end = 0.75;
+  // jump: day before jump_phase, night from jump_phase on.
+  double jump_phase = 0.5;
+
+  template <class V>
+  void visit(V&& v) {
+    v("kind", kind);
+    v("day_exposure", day_exposure);
+    v("night_exposure", night_exposure);
+    v("day_ambient", day_ambient);
+    v("night_ambient", night_ambient);
+    v("day_sun_intensity", day_sun_intensity);
+    v("night_sun_intensity", night_sun_intensity);
+    v("day_sky_brightness", day_sky_brightness);
+    v("night_sky_brightness", night_sky_brightness);
+    v("day_vignetting", day_vignetting);
+    v("night_vignetting", night_vignetting);
+    v("day_noise_sigma", day_noise_sigma);
+    v("night_noise_sigma", night_noise_sigma);
+    v("gamma", gamma);
+    v("sun_dir_x", sun_dir_x);
+    v("sun_dir_y", sun_dir_y);
+    v("sun_dir_z", sun_dir_z);
+    v("transition_start", transition_start);
+    v("transition_end", transition_end);
+    v("jump_phase", jump_phase);
+  }
+  // Throws loopgate::ConfigError naming the key (kind values, ranges, sun direction not zero).
+  void validate() const;
+
+  // Lighting at phase in [0, 1] = position in the sequence (frame / (frames - 1)); clamped.
+  Illumination at(double phase) const;
+  // Night factor in [0, 1] at phase (0 = full day, 1 = full night).
+  double night_factor(double phase) const;
+};
+
+}  // namespace loopgate::sim

@@ -1,0 +1,55 @@
+// Per-pixel ray casting of a World through a CameraModel (distortion included), with illumination.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <opencv2/core/mat.hpp>
+#include <vector>
+
+#include "core/camera_model.hpp"
+#include "core/types.hpp"
+#include "sim/illumination.hpp"
+#include "sim/world.hpp"
+
+namespace loopgate::sim {
+
+// Rendering knobs (defaults suit both worlds).
+struct RendererConfig {
+  double near_m = 0.05;            // nothing closer than this is drawn
+  double far_m = 3000.0;           // rays end here (sky beyond)
+  double haze_distance_m = 500.0;  // distance at which surfaces are half faded into the horizon sky (0 = off)
+  double min_incidence_cos = 0.03;  // clamps the texture footprint at grazing angles
+  double sky_zenith_gain = 0.35;    // the sky gets brighter by this fraction towards the zenith
+
+  template <class V>
+  void visit(V&& v) {
+    v("near_m", near_m);
+    v("far_m", far_m);
+    v("haze_distance_m", haze_distance_m);
+    v("min_incidence_cos", min_incidence_cos);
+    v("sky_zenith_gain", sky_zenith_gain);
+  }
+  void validate() const;  // throws loopgate::ConfigError naming the key
+};
+
+class Renderer {
+ public:
+  // Keeps a reference to world (it must outlive the renderer). Precomputes one camera-frame ray per pixel.
+  Renderer(const World& world, const CameraCalibration& camera, const RendererConfig& config = {});
+
+  // 8-bit grey CV_8UC1 of camera.width_px x camera.height_px, seen from camera pose T_w_c. Const and
+  // thread-safe; deterministic: same inputs and noise_seed -> same bytes.
+  cv::Mat render(const Eigen::Isometry3d& T_w_c, const Illumination& light, std::uint64_t noise_seed) const;
+
+  const CameraModel& camera() const { return camera_; }
+
+ private:
+  const World& world_;
+  CameraModel camera_;
+  RendererConfig config_;
+  std::vector<float> ray_c_;          // 3 floats per pixel: unit bearing in the camera frame
+  std::vector<float> footprint_rad_;  // angular size of each pixel (radians)
+  std::vector<float> vignette_r2_;    // squared normalised distance of each pixel from the image centre
+};
+
+}  // namespace loopgate::sim

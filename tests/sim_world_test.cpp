@@ -1,0 +1,238 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "sim/world.hpp"
+#include "test_support.hpp"
+
+namespace loopgate::sim {
+namespace {
+
+const Eigen::Vector3d kKittiUp(0.0, -1.0, 0.0);
+const Eigen::Vector3d kEurocUp(0.0, 0.0, 1.0);
+
+// A rectangular block (width x depth metres, rounded corners) driven `laps` times, in a KITTI-like world
+// (x right, z forward, up = -y), one point per metre; plus a straight spur crossing the first side.
+std::vector<Eigen::Vector3d> block_route(double width_m, double depth_m, int laps) {
+  std::vector<Eigen::Vector3d> path;
+  const double r = 10.0;
+  for (int lap = 0; lap < laps; ++lap) {
+    const double lap_len = 2.0 * (width_m + depth_m - 4.0 * r) + 2.0 * M_PI * r;
+    for (double s = 0.0; s < lap_len; s += 1.0) {
+      // Walk the rounded rectangle: straight, quarter circle, ...
+      double rem = s;
+      const double straights[4] = {depth_m - 2 * r, width_m - 2 * r, depth_m - 2 * r, width_m - 2 * r};
+      Eigen::Vector2d p(0.0, r), dir(0.0, 1.0);
+      for (int k = 0; k < 4; ++k) {
+        const double seg = std::min(rem, straights[k]);
+        p += dir * seg;
+        rem -= seg;
+        if (rem <= 0.0) break;
+        const double arc = std::min(rem, 0.5 * M_PI * r);
+        const double a = arc / r;
+        const Eigen::Vector2d centre = p + Eigen::Vector2d(dir.y(), -dir.x()) * r;
+        const Eigen::Vector2d rel = p - centre;
+        p = centre + Eigen::Vector2d(rel.x() * std::cos(a) + rel.y() * std::sin(a),
+                                     -rel.x() * std::sin(a) + rel.y() * std::cos(a));
+        dir = Eigen::Vector2d(dir.x() * std::cos(a) + dir.y() * std::sin(a),
+                              -dir.x() * std::sin(a) + dir.y() * std::cos(a));
+        rem -= arc;
+        if (rem <= 0.0) break;
+      }
+      path.emplace_back(p.x(), -0.02 * p.y(), p.y());  // gentle slope
+    }
+  }
+  return path;
+}
+
+double horizontal_distance_to_quad_base(const Quad& q, const Eigen::Vector3d& p, const Eigen::Vector3d& up) {
+  const Eigen::Vector3d a = q.origin_w.cast<double>();
+  const Eigen::Vector3d b = a + q.axis_u_w.cast<double>() * q.width_m;
+  const auto flat = [&](const Eigen::Vector3d& x) { return Eigen::Vector3d(x - up * up.dot(x)); };
+  const Eigen::Vector3d fa = flat(a), fb = flat(b), fp = flat(p);
+  const Eigen::Vector3d ab = fb - fa;
+  const double t = std::clamp((fp - fa).dot(ab) / ab.squaredNorm(), 0.0, 1.0);
+  return (fa + t * ab - fp).norm();
+}
+
+int count_kind(const World& w, const std::string& kind) {
+  int n = 0;
+  for (const Structure& s : w.structures) n += s.kind == kind ? 1 : 0;
+  return n;
+}
+
+TEST(World, StreetFacadesKeepClearOfEveryPathPoint) {
+  const auto path = block_route(120.0, 80.0, 1);
+  WorldConfig config;
+  const World world = build_world(config, path, kKittiUp);
+  const int facades = count_kind(world, "facade");
+  EXPECT_GT(facades, 25);  // ~400 m of street, both sides
+  EXPECT_GT(count_kind(world, "ground"), 50);
+  EXPECT_GT(count_kind(world, "marking"), 50);
+  for (const Quad& q : world.quads) {
+    if (world.structures[static_cast<std::size_t>(q.structure)].kind != "facade") continue;
+    // Vertical, and never within the clearance of any path point.
+    EXPECT_NEAR(q.axis_v_w.cast<double>().dot(kKittiUp), 1.0, 1e-6);
+    for (const Eigen::Vector3d& p : path) {
+      ASSERT_GE(horizontal_distance_to_quad_base(q, p, kKittiUp), config.street_clearance_m - 1e-3);
+    }
+  }
+  // Ground lies below the camera by about the camera height, right under the path.
+  float t = 0, u = 0, v = 0;
+  for (std::size_t k = 0; k < path.size(); k += 37) {
+    const int hit = world.intersect(path[k].cast<float>(), -kKittiUp.cast<float>(), 0.0f, 100.0f, &t, &u, &v);
+    ASSERT_GE(hit, 0);
+    const std::string& kind =
+        world.structures[static_cast<std::size_t>(world.quads[static_cast<std::size_t>(hit)].structure)].kind;
+    EXPECT_TRUE(kind == "ground" || kind == "marking") << kind;
+    EXPECT_NEAR(t, config.street_camera_height_m, 0.3);
+  }
+}
+
+TEST(World, RevisitsReuseTheSameFacades) {
+  WorldConfig config;
+  const World once = build_world(config, block_route(120.0, 80.0, 1), kKittiUp);
+  const World twice = build_world(config, block_route(120.0, 80.0, 2), kKittiUp);
+  // The second lap adds (almost) nothing: at most a few pieces where the lap closes on itself.
+  EXPECT_LE(count_kind(twice, "facade"), count_kind(once, "facade") + 3);
+  EXPECT_GE(count_kind(twice, "facade"), count_kind(once, "facade"));
+  EXPECT_LE(count_kind(twice, "marking"), count_kind(once, "marking") + 4);
+  EXPECT_EQ(count_kind(once, "ground"), count_kind(twice, "ground"));
+}
+
+TEST(World, AliasingKnobReusesTheRequestedFractionOfSeeds) {
+  const auto path = block_route(160.0, 120.0, 1);
+  for (double fraction : {0.0, 0.1, 0.25}) {
+    WorldConfig config;
+    config.aliasing_fraction = fraction;
+    const World world = build_world(config, path, kKittiUp);
+    const int aliasable = world.aliasable_structure_count();
+    ASSERT_GT(aliasable, 20);
+    EXPECT_EQ(world.aliased_structure_count(), static_cast<int>(std::lround(fraction * aliasable)))
+        << fraction;
+    for (const Structure& s : world.structures) {
+      if (s.aliased_from < 0) continue;
+      const Structure& src = world.structures[static_cast<std::size_t>(s.aliased_from)];
+      EXPECT_EQ(s.texture_seed, src.texture_seed);
+      EXPECT_EQ(s.texture, src.texture);
+      EXPECT_EQ(s.kind, src.kind);
+      EXPECT_LT(src.aliased_from, 0);
+    }
+  }
+}
+
+TEST(World, BuildIsDeterministicAndSeedDependent) {
+  const auto path = block_route(100.0, 60.0, 1);
+  WorldConfig config;
+  config.aliasing_fraction = 0.2;
+  const World a = build_world(config, path, kKittiUp);
+  const World b = build_world(config, path, kKittiUp);
+  ASSERT_EQ(a.quads.size(), b.quads.size());
+  ASSERT_EQ(a.textures.size(), b.textures.size());
+  for (std::size_t k = 0; k < a.quads.size(); ++k) {
+    ASSERT_EQ(a.quads[k].origin_w, b.quads[k].origin_w);
+    ASSERT_EQ(a.quads[k].texture, b.quads[k].texture);
+  }
+  std::uint64_t sum_a = 0, sum_b = 0;
+  for (std::size_t k = 0; k < a.textures.size(); ++k) {
+    for (int v = 0; v < a.textures[k].height_px(); v += 3) {
+      for (int u = 0; u < a.textures[k].width_px(); u += 3) {
+        sum_a = sum_a * 31 + a.textures[k].texel(u, v);
+        sum_b = sum_b * 31 + b.textures[k].texel(u, v);
+      }
+    }
+  }
+  EXPECT_EQ(sum_a, sum_b);
+  config.seed = 2;
+  const World c = build_world(config, path, kKittiUp);
+  bool differs = c.quads.size() != a.quads.size();
+  for (std::size_t k = 0; !differs && k < a.textures.size() && k < c.textures.size(); ++k) {
+    differs = a.textures[k].width_px() != c.textures[k].width_px() ||
+              a.textures[k].texel(5, 5) != c.textures[k].texel(5, 5);
+  }
+  EXPECT_TRUE(differs);
+}
+
+TEST(World, HallEnclosesThePathWithClearObstacles) {
+  // A lawnmower flight in an EuRoC-like world (z up).
+  std::vector<Eigen::Vector3d> path;
+  for (int k = 0; k < 400; ++k) {
+    const double s = k * 0.05;
+    path.emplace_back(8.0 * std::sin(0.3 * s), 5.0 * std::sin(0.5 * s), 1.0 + 0.5 * std::sin(0.7 * s));
+  }
+  WorldConfig config;
+  config.kind = "hall";
+  config.aliasing_fraction = 0.1;
+  const World world = build_world(config, path, kEurocUp);
+  EXPECT_GT(count_kind(world, "wall"), 8);
+  EXPECT_GT(count_kind(world, "pillar"), 0);
+  EXPECT_GT(count_kind(world, "crate"), 0);
+  EXPECT_GT(count_kind(world, "floor"), 0);
+  EXPECT_GT(count_kind(world, "ceiling"), 0);
+  // Enclosed: from every few path points, rays in many directions all hit something within the room.
+  float t = 0, u = 0, v = 0;
+  for (std::size_t k = 0; k < path.size(); k += 40) {
+    for (int d = 0; d < 26; ++d) {
+      const Eigen::Vector3f dir(std::cos(d * 0.7f) * std::sin(d * 0.37f + 0.2f),
+                                std::sin(d * 0.7f) * std::sin(d * 0.37f + 0.2f), std::cos(d * 0.37f + 0.2f));
+      ASSERT_GE(world.intersect(path[k].cast<float>(), dir.normalized(), 0.0f, 1000.0f, &t, &u, &v), 0);
+      EXPECT_LT(t, 40.0f);
+    }
+  }
+  for (const Quad& q : world.quads) {
+    const std::string& kind = world.structures[static_cast<std::size_t>(q.structure)].kind;
+    if (kind != "pillar" && kind != "crate") continue;
+    for (const Eigen::Vector3d& p : path) {
+      ASSERT_GE(horizontal_distance_to_quad_base(q, p, kEurocUp), config.hall_clearance_m - 1e-3);
+    }
+  }
+}
+
+TEST(World, RejectsBadConfigAndInput) {
+  WorldConfig config;
+  config.kind = "forest";
+  EXPECT_THROW(config.validate(), ConfigError);
+  try {
+    config.validate();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("kind"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("hall"), std::string::npos);
+  }
+  config = WorldConfig{};
+  config.aliasing_fraction = 0.9;
+  EXPECT_THROW(config.validate(), ConfigError);
+  EXPECT_THROW(build_world(WorldConfig{}, {}, kKittiUp), DataError);
+  EXPECT_THROW(build_world(WorldConfig{}, {Eigen::Vector3d(NAN, 0, 0)}, kKittiUp), DataError);
+}
+
+TEST(World, Kitti00StreetKeepsClearOfTheWholeRoute) {
+  LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/poses.txt");
+  std::ifstream in(loopgate::testing::shared_data_dir() / "kitti/00/poses.txt");
+  std::vector<Eigen::Vector3d> path;
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream ss(line);
+    double m[12];
+    for (double& x : m) ss >> x;
+    path.emplace_back(m[3], m[7], m[11]);
+  }
+  ASSERT_EQ(path.size(), 4541u);
+  WorldConfig config;
+  config.aliasing_fraction = 0.1;
+  const World world = build_world(config, path, kKittiUp);
+  EXPECT_GT(count_kind(world, "facade"), 300);
+  EXPECT_NEAR(static_cast<double>(world.aliased_structure_count()) / world.aliasable_structure_count(), 0.1,
+              0.01);
+  for (const Quad& q : world.quads) {
+    if (world.structures[static_cast<std::size_t>(q.structure)].kind != "facade") continue;
+    for (const Eigen::Vector3d& p : path) {
+      ASSERT_GE(horizontal_distance_to_quad_base(q, p, kKittiUp), config.street_clearance_m - 1e-3);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace loopgate::sim
