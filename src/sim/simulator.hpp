@@ -1,0 +1,250 @@
+// The simulator driver: presets, trajectory + IMU + world + rendering, and the EuRoC ASL writer with a
+// simulation.json metadata file (parameters, illumination schedule, ground-truth loops).
+//
+// Output layout under DIR:
+//   mav0/cam0/data/<t_ns>.png, mav0/cam0/data.csv, mav0/cam0/sensor.yaml,
+//   mav0/imu0/data.csv, mav0/imu0/sensor.yaml, mav0/state_groundtruth_estimate0/data.csv,
+//   simulation.json
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/types.hpp"
+#include "sim/illumination.hpp"
+#include "sim/imu_synth.hpp"
+#include "sim/trajectory.hpp"
+#include "sim/world.hpp"
+
+namespace loopgate::sim {
+
+// Section "simulation": what to simulate and from which inputs.
+struct SimulationSettings {
+  std::string preset = "demo";
+  std::int64_t seed = 1;
+  std::int64_t max_frames = 0;  // 0 = every frame; N = the first N frames
+  // Trajectory source: "procedural" | "kitti" | "euroc" | "tum".
+  std::string trajectory_format = "procedural";
+  std::string trajectory_file;   // kitti poses.txt, euroc ground-truth csv or TUM file
+  std::string times_file;        // kitti times.txt
+  std::string frame_times_file;  // euroc cam0/data.csv: frames at these stamps (else at frame_rate_hz)
+  std::string camera_yaml;       // when set, the camera section is read from this EuRoC sensor.yaml
+  // IMU: "synthesised" (from the fitted trajectory) | "file" (a real EuRoC imu0/data.csv passed through).
+  std::string imu_source = "synthesised";
+  std::string imu_file;
+  std::string imu_yaml;        // when set, the imu noise section is read from this EuRoC sensor.yaml
+  double imu_padding_s = 0.1;  // IMU kept this far beyond the first/last frame (within the trajectory)
+  // Frame rate used when frames are not given by the trajectory samples or a frame-times file.
+  double frame_rate_hz = 20.0;
+  // World "up" (unit after normalisation): KITTI camera world -y, EuRoC world +z.
+  double up_x = 0.0;
+  double up_y = 0.0;
+  double up_z = 1.0;
+  int png_compression = 3;       // zlib level 0..9, fixed so the output is byte-identical per seed
+  int render_batch_frames = 32;  // frames rendered in parallel before being written in order
+
+  template <class V>
+  void visit(V&& v) {
+    v("preset", preset);
+    v("seed", seed);
+    v("max_frames", max_frames);
+    v("trajectory_format", trajectory_format);
+    v("trajectory_file", trajectory_file);
+    v("times_file", times_file);
+    v("frame_times_file", frame_times_file);
+    v("camera_yaml", camera_yaml);
+    v("imu_source", imu_source);
+    v("imu_file", imu_file);
+    v("imu_yaml", imu_yaml);
+    v("imu_padding_s", imu_padding_s);
+    v("frame_rate_hz", frame_rate_hz);
+    v("up_x", up_x);
+    v("up_y", up_y);
+    v("up_z", up_z);
+    v("png_compression", png_compression);
+    v("render_batch_frames", render_batch_frames);
+  }
+  void validate() const;
+};
+
+// Section "camera": pinhole intrinsics, radtan distortion, camera -> body extrinsic (T_b_c).
+struct CameraSettings {
+  int width_px = 640;
+  int height_px = 200;
+  double fx = 370.0;
+  double fy = 370.0;
+  double cx = 319.5;
+  double cy = 99.5;
+  std::string distortion_model = "none";  // "none" | "radtan"
+  double k1 = 0.0;
+  double k2 = 0.0;
+  double p1 = 0.0;
+  double p2 = 0.0;
+  double t_b_c_x_m = 0.0;
+  double t_b_c_y_m = 0.0;
+  double t_b_c_z_m = 0.0;
+  double q_b_c_w = 1.0;
+  double q_b_c_x = 0.0;
+  double q_b_c_y = 0.0;
+  double q_b_c_z = 0.0;
+
+  template <class V>
+  void visit(V&& v) {
+    v("width_px", width_px);
+    v("height_px", height_px);
+    v("fx", fx);
+    v("fy", fy);
+    v("cx", cx);
+    v("cy", cy);
+    v("distortion_model", distortion_model);
+    v("k1", k1);
+    v("k2", k2);
+    v("p1", p1);
+    v("p2", p2);
+    v("t_b_c_x_m", t_b_c_x_m);
+    v("t_b_c_y_m", t_b_c_y_m);
+    v("t_b_c_z_m", t_b_c_z_m);
+    v("q_b_c_w", q_b_c_w);
+    v("q_b_c_x", q_b_c_x);
+    v("q_b_c_y", q_b_c_y);
+    v("q_b_c_z", q_b_c_z);
+  }
+  void validate() const;
+  Eigen::Isometry3d T_b_c() const;
+  CameraCalibration calibration(double rate_hz) const;
+  static CameraSettings from_calibration(const CameraCalibration& calibration);
+};
+
+// Section "imu_noise": EuRoC-style continuous-time noise densities (ADIS16448 defaults).
+struct ImuNoiseSettings {
+  double gyro_noise_density = 1.6968e-04;   // rad / s / sqrt(Hz)
+  double gyro_random_walk = 1.9393e-05;     // rad / s^2 / sqrt(Hz)
+  double accel_noise_density = 2.0000e-03;  // m / s^2 / sqrt(Hz)
+  double accel_random_walk = 3.0000e-03;    // m / s^3 / sqrt(Hz)
+
+  template <class V>
+  void visit(V&& v) {
+    v("gyro_noise_density", gyro_noise_density);
+    v("gyro_random_walk", gyro_random_walk);
+    v("accel_noise_density", accel_noise_density);
+    v("accel_random_walk", accel_random_walk);
+  }
+  void validate() const;
+  ImuCalibration calibration(double rate_hz) const;
+};
+
+// Section "loops": ground-truth revisits: frame pairs (i < j) with j - i >= min_gap_frames, a camera
+// path of at least min_travel_m between them (so that standing still or hovering is not a revisit),
+// camera positions within radius_m (horizontal distance when horizontal_only), and optical axes within
+// max_view_angle_deg (180 = no check).
+struct LoopTruthSettings {
+  double radius_m = 2.0;
+  int min_gap_frames = 20;
+  double min_travel_m = 0.0;
+  bool horizontal_only = true;
+  double max_view_angle_deg = 180.0;
+
+  template <class V>
+  void visit(V&& v) {
+    v("radius_m", radius_m);
+    v("min_gap_frames", min_gap_frames);
+    v("min_travel_m", min_travel_m);
+    v("horizontal_only", horizontal_only);
+    v("max_view_angle_deg", max_view_angle_deg);
+  }
+  void validate() const;
+};
+
+// Everything a simulation run needs. A top-level configuration for the config system (visit_sections).
+struct SimulationConfig {
+  SimulationSettings simulation;
+  CameraSettings camera;
+  ProceduralRouteConfig route;
+  TrajectoryFitConfig fit;
+  ImuSynthConfig imu;
+  ImuNoiseSettings imu_noise;
+  WorldConfig world;
+  IlluminationSchedule illumination;
+  LoopTruthSettings loops;
+
+  template <class V>
+  void visit_sections(V&& v) {
+    v("simulation", simulation);
+    v("camera", camera);
+    v("route", route);
+    v("fit", fit);
+    v("imu", imu);
+    v("imu_noise", imu_noise);
+    v("world", world);
+    v("illumination", illumination);
+    v("loops", loops);
+  }
+  void validate() const;
+};
+
+// Names of the built-in presets: "demo", "kitti00", "euroc-mh05".
+std::vector<std::string> preset_names();
+// The configuration of a preset. Shared-data paths are resolved under `shared_data_dir` (see
+// default_shared_data_dir()). Throws ConfigError naming the allowed presets for an unknown name.
+SimulationConfig make_preset(const std::string& name, const std::filesystem::path& shared_data_dir);
+// $LOOPGATE_SHARED_DATA when set, else "../shared/data" relative to the current directory.
+std::filesystem::path default_shared_data_dir();
+
+// Ground-truth loops as compact intervals: query frame j revisits reference frames [first, last].
+struct LoopInterval {
+  std::int64_t query = 0;
+  std::int64_t first = 0;
+  std::int64_t last = 0;
+};
+std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& T_w_c,
+                                          const Eigen::Vector3d& up_w, const LoopTruthSettings& settings);
+
+// Inputs of a simulation before rendering: frames, fitted trajectory, IMU and ground truth.
+struct SimulationPlan {
+  std::vector<Timestamp> frame_t_ns;           // all frames of the sequence (before max_frames)
+  std::size_t frames_used = 0;                 // frames written (max_frames applied)
+  std::vector<Eigen::Isometry3d> T_w_c;        // camera pose per frame (all frames)
+  std::size_t frames_outside_trajectory = 0;   // frames (of those used) before/after the trajectory span
+  std::vector<ImuSample> imu;                  // the IMU written (synthesised or passed through)
+  std::vector<GroundTruthState> ground_truth;  // at the IMU times within the span and at frame times
+  std::vector<double> illumination_phase;      // per used frame
+  CameraCalibration camera;
+  ImuCalibration imu_calibration;
+  Eigen::Vector3d up_w = Eigen::Vector3d::UnitZ();
+  Timestamp trajectory_start_t_ns = 0;
+  Timestamp trajectory_end_t_ns = 0;
+  std::size_t trajectory_samples = 0;
+  std::size_t spline_controls = 0;
+};
+
+// Loads the inputs named by the config, fits the trajectory, makes / reads the IMU and the ground truth.
+// Throws DataError for missing or malformed input files, ConfigError for a bad configuration.
+// May update `config` (camera / imu_noise sections read from sensor.yaml files).
+SimulationPlan plan_simulation(SimulationConfig& config);
+
+struct SimulationSummary {
+  std::size_t frames = 0;
+  double duration_s = 0;
+  double distance_m = 0;
+  std::size_t loop_pairs = 0;
+  std::size_t loop_query_frames = 0;
+  std::size_t imu_samples = 0;
+  std::size_t ground_truth_rows = 0;
+  double elapsed_s = 0;
+  double render_s = 0;
+  std::filesystem::path out_dir;
+};
+
+struct SimulationRunOptions {
+  bool force = false;  // allow a non-empty output directory (its mav0/ and simulation.json are replaced)
+};
+
+// Runs the whole simulation into `out_dir`. Throws DataError (inputs, or a non-empty out_dir without
+// force), ConfigError (bad configuration).
+SimulationSummary run_simulation(SimulationConfig config, const std::filesystem::path& out_dir,
+                                 const SimulationRunOptions& options = {});
+
+}  // namespace loopgate::sim

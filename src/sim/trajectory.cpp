@@ -1,0 +1,342 @@
+#include "sim/trajectory.hpp"
+
+#include <Eigen/Sparse>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+#include "core/error.hpp"
+#include "io/trajectory_io.hpp"
+
+namespace loopgate::sim {
+
+namespace {
+
+constexpr double kSmallAngleRad = 1e-10;
+
+Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
+  Eigen::Matrix3d S;
+  S << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  return S;
+}
+
+// Uniform cubic B-spline basis (value, first and second derivative in u) for the four controls.
+struct Basis {
+  Eigen::Vector4d b, db, ddb;
+};
+Basis bspline_basis(double u) {
+  const double u2 = u * u;
+  const double u3 = u2 * u;
+  const double w = 1.0 - u;
+  Basis out;
+  out.b << w * w * w / 6.0, (3.0 * u3 - 6.0 * u2 + 4.0) / 6.0, (-3.0 * u3 + 3.0 * u2 + 3.0 * u + 1.0) / 6.0,
+      u3 / 6.0;
+  out.db << -w * w / 2.0, (9.0 * u2 - 12.0 * u) / 6.0, (-9.0 * u2 + 6.0 * u + 3.0) / 6.0, u2 / 2.0;
+  out.ddb << w, (18.0 * u - 12.0) / 6.0, (-18.0 * u + 6.0) / 6.0, u;
+  return out;
+}
+
+// Cumulative basis: lambda_j(u) = sum_{k>=j} b_k(u), j = 1..3 (lambda_0 = 1), and d/du.
+void cumulative_basis(double u, Eigen::Vector3d* lambda, Eigen::Vector3d* dlambda) {
+  const double u2 = u * u;
+  const double u3 = u2 * u;
+  *lambda << (5.0 + 3.0 * u - 3.0 * u2 + u3) / 6.0, (1.0 + 3.0 * u + 3.0 * u2 - 2.0 * u3) / 6.0, u3 / 6.0;
+  *dlambda << (3.0 - 6.0 * u + 3.0 * u2) / 6.0, (3.0 + 6.0 * u - 6.0 * u2) / 6.0, u2 / 2.0;
+}
+
+Eigen::Matrix3d orthonormalised(const Eigen::Matrix3d& R) {
+  return Eigen::Quaterniond(R).normalized().toRotationMatrix();
+}
+
+// Pose of the (time-sorted) samples at t, linear/slerp between neighbours, clamped at the ends.
+Eigen::Matrix3d sample_rotation_at(const std::vector<StampedPose>& poses, Timestamp t_ns) {
+  if (t_ns <= poses.front().t_ns) return poses.front().T_w_b.linear();
+  if (t_ns >= poses.back().t_ns) return poses.back().T_w_b.linear();
+  const auto it = std::upper_bound(poses.begin(), poses.end(), t_ns,
+                                   [](Timestamp t, const StampedPose& p) { return t < p.t_ns; });
+  const StampedPose& b = *it;
+  const StampedPose& a = *(it - 1);
+  return interpolate_pose(a, b, t_ns).linear();
+}
+
+}  // namespace
+
+Eigen::Matrix3d so3_exp(const Eigen::Vector3d& phi_rad) {
+  const double angle = phi_rad.norm();
+  if (angle < kSmallAngleRad) return Eigen::Matrix3d::Identity() + skew(phi_rad);
+  return Eigen::AngleAxisd(angle, phi_rad / angle).toRotationMatrix();
+}
+
+Eigen::Vector3d so3_log(const Eigen::Matrix3d& R) {
+  const Eigen::AngleAxisd aa(Eigen::Quaterniond(R).normalized());
+  double angle = aa.angle();
+  Eigen::Vector3d axis = aa.axis();
+  if (angle > std::numbers::pi) {  // keep the angle in [0, pi]
+    angle = 2.0 * std::numbers::pi - angle;
+    axis = -axis;
+  }
+  return angle * axis;
+}
+
+void TrajectoryFitConfig::validate() const {
+  if (!(knot_spacing_s >= 0.0)) throw ConfigError("knot_spacing_s must be >= 0 (0 = automatic)");
+  if (!(smoothing_weight >= 0.0)) throw ConfigError("smoothing_weight must be >= 0");
+  if (rotation_iterations < 1) throw ConfigError("rotation_iterations must be >= 1");
+  if (!(rotation_tolerance_rad > 0.0)) throw ConfigError("rotation_tolerance_rad must be > 0");
+}
+
+SplineTrajectory::SplineTrajectory(Timestamp start_t_ns, Timestamp end_t_ns, double knot_spacing_s,
+                                   std::vector<Eigen::Vector3d> position_controls_w,
+                                   std::vector<Eigen::Matrix3d> rotation_controls_w_b)
+    : start_t_ns_(start_t_ns),
+      end_t_ns_(end_t_ns),
+      dt_s_(knot_spacing_s),
+      positions_(std::move(position_controls_w)),
+      rotations_(std::move(rotation_controls_w_b)) {
+  if (positions_.size() < 4 || rotations_.size() != positions_.size()) {
+    throw std::invalid_argument("SplineTrajectory: need >= 4 position and as many rotation controls");
+  }
+  if (!(dt_s_ > 0.0) || end_t_ns_ < start_t_ns_)
+    throw std::invalid_argument("SplineTrajectory: bad time span");
+  rotation_deltas_.resize(rotations_.size() - 1);
+  for (std::size_t k = 0; k + 1 < rotations_.size(); ++k) {
+    rotation_deltas_[k] = so3_log(rotations_[k].transpose() * rotations_[k + 1]);
+  }
+}
+
+TrajectoryState SplineTrajectory::evaluate(Timestamp t_ns) const {
+  TrajectoryState state;
+  state.t_ns = t_ns;
+  const bool outside = t_ns < start_t_ns_ || t_ns > end_t_ns_;
+  const Timestamp t_eval_ns = std::clamp(t_ns, start_t_ns_, end_t_ns_);
+  const double tau = ns_to_s(t_eval_ns - start_t_ns_) / dt_s_;
+  const std::size_t segments = positions_.size() - 3;
+  std::size_t seg = static_cast<std::size_t>(std::max(0.0, std::floor(tau)));
+  if (seg >= segments) seg = segments - 1;
+  const double u = tau - static_cast<double>(seg);
+
+  const Basis basis = bspline_basis(u);
+  Eigen::Vector3d p = Eigen::Vector3d::Zero(), dp = Eigen::Vector3d::Zero(), ddp = Eigen::Vector3d::Zero();
+  for (int j = 0; j < 4; ++j) {
+    const Eigen::Vector3d& c = positions_[seg + static_cast<std::size_t>(j)];
+    p += basis.b[j] * c;
+    dp += basis.db[j] * c;
+    ddp += basis.ddb[j] * c;
+  }
+
+  Eigen::Vector3d lambda, dlambda;
+  cumulative_basis(u, &lambda, &dlambda);
+  Eigen::Matrix3d R = rotations_[seg];
+  Eigen::Vector3d omega = Eigen::Vector3d::Zero();
+  for (int j = 0; j < 3; ++j) {
+    const Eigen::Vector3d& d = rotation_deltas_[seg + static_cast<std::size_t>(j)];
+    const Eigen::Matrix3d A = so3_exp(lambda[j] * d);
+    R = R * A;
+    omega = A.transpose() * omega + (dlambda[j] / dt_s_) * d;
+  }
+
+  state.T_w_b.linear() = orthonormalised(R);
+  state.T_w_b.translation() = p;
+  if (!outside) {
+    state.v_w_mps = dp / dt_s_;
+    state.a_w_mps2 = ddp / (dt_s_ * dt_s_);
+    state.omega_b_radps = omega;
+  }
+  return state;
+}
+
+SplineTrajectory SplineTrajectory::fit(const std::vector<StampedPose>& poses,
+                                       const TrajectoryFitConfig& config) {
+  config.validate();
+  if (poses.size() < 2) throw std::invalid_argument("trajectory fit needs at least 2 poses");
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    if (poses[i].t_ns <= poses[i - 1].t_ns) {
+      throw std::invalid_argument("trajectory fit: timestamps must strictly increase (pose " +
+                                  std::to_string(i) + ")");
+    }
+  }
+  const Timestamp start_ns = poses.front().t_ns;
+  const Timestamp end_ns = poses.back().t_ns;
+  double dt_s = config.knot_spacing_s;
+  if (dt_s <= 0.0) {
+    std::vector<Timestamp> gaps(poses.size() - 1);
+    for (std::size_t i = 1; i < poses.size(); ++i) gaps[i - 1] = poses[i].t_ns - poses[i - 1].t_ns;
+    std::nth_element(gaps.begin(), gaps.begin() + static_cast<std::ptrdiff_t>(gaps.size() / 2), gaps.end());
+    dt_s = ns_to_s(gaps[gaps.size() / 2]);
+  }
+  const double span_s = ns_to_s(end_ns - start_ns);
+  const std::size_t segments =
+      std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(span_s / dt_s - 1e-9)));
+  const std::size_t n_controls = segments + 3;
+  const std::size_t n_samples = poses.size();
+
+  // Design matrix: row i holds the four basis weights of sample i.
+  std::vector<std::size_t> sample_seg(n_samples);
+  std::vector<Eigen::Vector4d> sample_w(n_samples);
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(n_samples * 4);
+  for (std::size_t i = 0; i < n_samples; ++i) {
+    const double tau = ns_to_s(poses[i].t_ns - start_ns) / dt_s;
+    std::size_t seg = static_cast<std::size_t>(std::max(0.0, std::floor(tau)));
+    if (seg >= segments) seg = segments - 1;
+    sample_seg[i] = seg;
+    sample_w[i] = bspline_basis(tau - static_cast<double>(seg)).b;
+    for (int j = 0; j < 4; ++j) {
+      triplets.emplace_back(static_cast<int>(i), static_cast<int>(seg) + j, sample_w[i][j]);
+    }
+  }
+  Eigen::SparseMatrix<double> A(static_cast<int>(n_samples), static_cast<int>(n_controls));
+  A.setFromTriplets(triplets.begin(), triplets.end());
+  triplets.clear();
+  for (std::size_t k = 0; k + 2 < n_controls; ++k) {
+    const int row = static_cast<int>(k);
+    triplets.emplace_back(row, row, 1.0);
+    triplets.emplace_back(row, row + 1, -2.0);
+    triplets.emplace_back(row, row + 2, 1.0);
+  }
+  Eigen::SparseMatrix<double> D(static_cast<int>(n_controls - 2), static_cast<int>(n_controls));
+  D.setFromTriplets(triplets.begin(), triplets.end());
+  const Eigen::SparseMatrix<double> At = A.transpose();
+  Eigen::SparseMatrix<double> M = At * A;
+  // A tiny ridge keeps the system definite even with no smoothing and sparse samples.
+  constexpr double kRidge = 1e-12;
+  Eigen::SparseMatrix<double> I(static_cast<int>(n_controls), static_cast<int>(n_controls));
+  I.setIdentity();
+  M += config.smoothing_weight * (Eigen::SparseMatrix<double>(D.transpose()) * D) + kRidge * I;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver(M);
+  if (solver.info() != Eigen::Success) throw std::invalid_argument("trajectory fit: singular system");
+
+  // Positions: linear least squares.
+  Eigen::MatrixXd P(static_cast<int>(n_samples), 3);
+  for (std::size_t i = 0; i < n_samples; ++i)
+    P.row(static_cast<int>(i)) = poses[i].T_w_b.translation().transpose();
+  const Eigen::MatrixXd C = solver.solve(At * P);
+  std::vector<Eigen::Vector3d> positions(n_controls);
+  for (std::size_t k = 0; k < n_controls; ++k) positions[k] = C.row(static_cast<int>(k)).transpose();
+
+  // Rotations: start from the samples interpolated at the controls' centre times, then Gauss-Newton with
+  // the (non-cumulative) basis as approximate Jacobian of a right perturbation of each control.
+  std::vector<Eigen::Matrix3d> rotations(n_controls);
+  for (std::size_t k = 0; k < n_controls; ++k) {
+    const double t_rel_s = (static_cast<double>(k) - 1.0) * dt_s;
+    rotations[k] = sample_rotation_at(poses, start_ns + s_to_ns(t_rel_s));
+  }
+  const Timestamp spline_end_ns = start_ns + s_to_ns(static_cast<double>(segments) * dt_s);
+  for (int iter = 0; iter < config.rotation_iterations; ++iter) {
+    const SplineTrajectory current(start_ns, std::max(end_ns, spline_end_ns), dt_s, positions, rotations);
+    Eigen::MatrixXd R_res(static_cast<int>(n_samples), 3);
+    double max_residual_rad = 0.0;
+    for (std::size_t i = 0; i < n_samples; ++i) {
+      const Eigen::Matrix3d R_spline = current.evaluate(poses[i].t_ns).T_w_b.linear();
+      const Eigen::Vector3d r = so3_log(R_spline.transpose() * poses[i].T_w_b.linear());
+      R_res.row(static_cast<int>(i)) = r.transpose();
+      max_residual_rad = std::max(max_residual_rad, r.norm());
+    }
+    if (max_residual_rad < config.rotation_tolerance_rad) break;
+    const Eigen::MatrixXd delta = solver.solve(At * R_res);
+    for (std::size_t k = 0; k < n_controls; ++k) {
+      rotations[k] = orthonormalised(rotations[k] * so3_exp(delta.row(static_cast<int>(k)).transpose()));
+    }
+  }
+  return SplineTrajectory(start_ns, end_ns, dt_s, std::move(positions), std::move(rotations));
+}
+
+std::vector<StampedPose> load_kitti_trajectory(const std::filesystem::path& poses_file,
+                                               const std::filesystem::path& times_file) {
+  return read_kitti_poses(poses_file, times_file);
+}
+
+std::vector<StampedPose> load_euroc_trajectory(const std::filesystem::path& csv_file) {
+  const std::vector<GroundTruthState> states = read_euroc_groundtruth(csv_file);
+  std::vector<StampedPose> poses;
+  poses.reserve(states.size());
+  for (const GroundTruthState& s : states) poses.push_back(StampedPose{s.t_ns, s.T_w_b});
+  return poses;
+}
+
+std::vector<StampedPose> load_tum_trajectory(const std::filesystem::path& file) {
+  return read_tum(file);
+}
+
+void ProceduralRouteConfig::validate() const {
+  if (!(corner_radius_m > 0.0)) throw ConfigError("corner_radius_m must be > 0");
+  if (!(length_x_m >= 2.0 * corner_radius_m) || !(length_y_m >= 2.0 * corner_radius_m)) {
+    throw ConfigError("length_x_m and length_y_m must be >= 2 * corner_radius_m");
+  }
+  if (laps < 1) throw ConfigError("laps must be >= 1");
+  if (frames < 2) throw ConfigError("frames must be >= 2");
+  if (!(rate_hz > 0.0)) throw ConfigError("rate_hz must be > 0");
+  if (!(speed_variation >= 0.0 && speed_variation < 1.0))
+    throw ConfigError("speed_variation must be in [0, 1)");
+  if (!(heading_wobble_period_s > 0.0)) throw ConfigError("heading_wobble_period_s must be > 0");
+}
+
+std::vector<StampedPose> make_procedural_route(const ProceduralRouteConfig& config) {
+  config.validate();
+  const double r = config.corner_radius_m;
+  const double straight_x = config.length_x_m - 2.0 * r;
+  const double straight_y = config.length_y_m - 2.0 * r;
+  const double arc = 0.5 * std::numbers::pi * r;
+  const double perimeter = 2.0 * (straight_x + straight_y) + 4.0 * arc;
+  const double total_m = perimeter * static_cast<double>(config.laps);
+  const double start_offset_m = 0.5 * straight_x;  // start mid-way along the first straight
+
+  // Point, heading at arc length s (mod perimeter) on the circuit; counter-clockwise, left turns.
+  auto circuit = [&](double s, Eigen::Vector2d* p, double* heading) {
+    s = std::fmod(s, perimeter);
+    if (s < 0.0) s += perimeter;
+    Eigen::Vector2d pos(-0.5 * config.length_x_m + r, -0.5 * config.length_y_m);
+    for (int piece = 0; piece < 4; ++piece) {
+      const double theta = 0.5 * std::numbers::pi * piece;
+      const Eigen::Vector2d dir(std::cos(theta), std::sin(theta));
+      const double straight = (piece % 2 == 0) ? straight_x : straight_y;
+      if (s <= straight) {
+        *p = pos + s * dir;
+        *heading = theta;
+        return;
+      }
+      s -= straight;
+      pos += straight * dir;
+      const Eigen::Vector2d centre = pos + r * Eigen::Vector2d(-dir.y(), dir.x());
+      if (s <= arc || piece == 3) {
+        const double phi = std::min(s, arc) / r;
+        *p = centre + r * Eigen::Vector2d(std::sin(theta + phi), -std::cos(theta + phi));
+        *heading = theta + phi;
+        return;
+      }
+      s -= arc;
+      pos = centre + r * Eigen::Vector2d(std::sin(theta + 0.5 * std::numbers::pi),
+                                         -std::cos(theta + 0.5 * std::numbers::pi));
+    }
+  };
+
+  const double cycles = config.speed_cycles_per_lap * static_cast<double>(config.laps);
+  std::vector<StampedPose> poses;
+  poses.reserve(static_cast<std::size_t>(config.frames));
+  for (int i = 0; i < config.frames; ++i) {
+    const double tau = static_cast<double>(i) / static_cast<double>(config.frames - 1);
+    const double t_s = static_cast<double>(i) / config.rate_hz;
+    const double modulation = cycles > 0.0 ? config.speed_variation / (2.0 * std::numbers::pi * cycles) *
+                                                 std::sin(2.0 * std::numbers::pi * cycles * tau)
+                                           : 0.0;
+    const double s = total_m * (tau + modulation);
+    Eigen::Vector2d p;
+    double heading = 0.0;
+    circuit(start_offset_m + s, &p, &heading);
+    const double lap_progress = s / perimeter;
+    const Eigen::Vector2d left(-std::sin(heading), std::cos(heading));
+    p += config.lap_lateral_offset_m * lap_progress * left;
+    const double yaw = heading + config.heading_wobble_rad *
+                                     std::sin(2.0 * std::numbers::pi * t_s / config.heading_wobble_period_s);
+    StampedPose pose;
+    pose.t_ns = config.start_t_ns + s_to_ns(t_s);
+    pose.T_w_b.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    pose.T_w_b.translation() = Eigen::Vector3d(p.x(), p.y(), config.camera_height_m);
+    poses.push_back(pose);
+  }
+  return poses;
+}
+
+}  // namespace loopgate::sim

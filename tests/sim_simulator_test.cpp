@@ -1,0 +1,338 @@
+// The simulator driver: presets, planning (frames, ground truth, IMU), ground-truth loops, and a small
+// run into the EuRoC layout read back through open_euroc.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "io/trajectory_io.hpp"
+#include "sim/renderer.hpp"
+#include "sim/simulator.hpp"
+#include "test_support.hpp"
+
+namespace loopgate::sim {
+namespace {
+
+std::filesystem::path shared() {
+  return loopgate::testing::shared_data_dir();
+}
+
+double pose_error(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return (a.translation() - b.translation()).norm() + so3_log(a.linear().transpose() * b.linear()).norm();
+}
+
+// Corners (Shi-Tomasi) of frame f tracked by pyramidal KLT into frame f + 1 of the preset, forward-backward
+// checked (0.5 px).
+int klt_tracked_between_consecutive_frames(SimulationConfig config, std::size_t frame) {
+  const SimulationPlan plan = plan_simulation(config);
+  std::vector<Eigen::Vector3d> path_w;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path_w.push_back(T.translation());
+  const World world = build_world(config.world, path_w, plan.up_w);
+  const Renderer renderer(world, plan.camera);
+  const double phase = static_cast<double>(frame) / static_cast<double>(plan.frame_t_ns.size() - 1);
+  const cv::Mat a = renderer.render(plan.T_w_c[frame], config.illumination.at(phase), 1);
+  const cv::Mat b = renderer.render(plan.T_w_c[frame + 1], config.illumination.at(phase), 2);
+  std::vector<cv::Point2f> corners;
+  cv::goodFeaturesToTrack(a, corners, 500, 0.01, 8.0);
+  if (corners.empty()) return 0;
+  std::vector<cv::Point2f> forward, backward;
+  std::vector<unsigned char> status_f, status_b;
+  std::vector<float> err;
+  cv::calcOpticalFlowPyrLK(a, b, corners, forward, status_f, err);
+  cv::calcOpticalFlowPyrLK(b, a, forward, backward, status_b, err);
+  int good = 0;
+  for (std::size_t i = 0; i < corners.size(); ++i) {
+    if (status_f[i] && status_b[i] && cv::norm(corners[i] - backward[i]) < 0.5) ++good;
+  }
+  return good;
+}
+
+TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
+  SimulationConfig demo = make_preset("demo", "");
+  const int demo_day = klt_tracked_between_consecutive_frames(demo, 120);
+  const int demo_night = klt_tracked_between_consecutive_frames(demo, 480);
+  std::printf("KLT tracks: demo day %d, demo night %d\n", demo_day, demo_night);
+  EXPECT_GE(demo_day, 100);
+  EXPECT_GE(demo_night, 100);
+  if (!shared().empty() && std::filesystem::exists(shared() / "kitti/00/poses.txt")) {
+    const int kitti = klt_tracked_between_consecutive_frames(make_preset("kitti00", shared()), 1000);
+    std::printf("KLT tracks: kitti00 frame 1000 -> 1001: %d\n", kitti);
+    EXPECT_GE(kitti, 100);
+  }
+  if (!shared().empty() && std::filesystem::exists(shared() / "euroc/MH_05_difficult/mav0/imu0/data.csv")) {
+    const int mh05 = klt_tracked_between_consecutive_frames(make_preset("euroc-mh05", shared()), 1000);
+    std::printf("KLT tracks: euroc-mh05 frame 1000 -> 1001: %d\n", mh05);
+    EXPECT_GE(mh05, 100);
+  }
+}
+
+TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"demo", "kitti00", "euroc-mh05"}));
+  for (const std::string& name : preset_names()) {
+    SimulationConfig c = make_preset(name, "/nonexistent");
+    EXPECT_EQ(c.simulation.preset, name);
+    EXPECT_NO_THROW(c.validate()) << name;
+  }
+  try {
+    make_preset("kitti01", "/nonexistent");
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("demo"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("kitti01"), std::string::npos) << e.what();
+  }
+  SimulationConfig bad = make_preset("demo", "");
+  bad.simulation.imu_source = "magic";
+  EXPECT_THROW(bad.validate(), ConfigError);
+}
+
+TEST(SimulatorPresets, KittiAndEurocPresetParameters) {
+  const SimulationConfig k = make_preset("kitti00", "/data");
+  EXPECT_EQ(k.simulation.trajectory_file, "/data/kitti/00/poses.txt");
+  EXPECT_EQ(k.camera.width_px, 1241);
+  EXPECT_EQ(k.camera.height_px, 376);
+  EXPECT_DOUBLE_EQ(k.camera.fx, 718.856);
+  EXPECT_DOUBLE_EQ(k.camera.cx, 607.1928);
+  EXPECT_DOUBLE_EQ(k.simulation.up_y, -1.0);
+  EXPECT_EQ(k.world.kind, "street");
+  const SimulationConfig e = make_preset("euroc-mh05", "/data");
+  EXPECT_EQ(e.simulation.imu_source, "file");
+  EXPECT_EQ(e.world.kind, "hall");
+  EXPECT_EQ(e.camera.distortion_model, "radtan");
+}
+
+TEST(LoopTruth, OutAndBackAlongALine) {
+  // 0..49 go along x, 50..99 come back along the same line 0.5 m to the side.
+  std::vector<Eigen::Isometry3d> T_w_c(100, Eigen::Isometry3d::Identity());
+  for (int i = 0; i < 50; ++i)
+    T_w_c[static_cast<std::size_t>(i)].translation() = Eigen::Vector3d(i, 0.0, 0.0);
+  for (int i = 50; i < 100; ++i) {
+    T_w_c[static_cast<std::size_t>(i)].translation() = Eigen::Vector3d(99 - i, 0.0, 0.5);
+    T_w_c[static_cast<std::size_t>(i)].linear() =
+        Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  }
+  LoopTruthSettings settings;
+  settings.radius_m = 1.2;
+  settings.min_gap_frames = 20;
+  settings.horizontal_only = false;
+  const auto loops = find_loop_truth(T_w_c, Eigen::Vector3d::UnitY(), settings);
+  // Query 99 (x = 0) revisits frames 0 and 1 (x = 0, 1 at 0.5 m and ~1.1 m).
+  ASSERT_FALSE(loops.empty());
+  EXPECT_EQ(loops.back().query, 99);
+  EXPECT_EQ(loops.back().first, 0);
+  EXPECT_EQ(loops.back().last, 1);
+  for (const LoopInterval& l : loops) EXPECT_GE(l.query - l.last, 20);
+  // Facing the opposite way: no loop once the view angle is limited.
+  settings.max_view_angle_deg = 90.0;
+  EXPECT_TRUE(find_loop_truth(T_w_c, Eigen::Vector3d::UnitY(), settings).empty());
+  // Horizontal distance only (up = z ignores the 0.5 m in z).
+  settings.max_view_angle_deg = 180.0;
+  settings.horizontal_only = true;
+  settings.radius_m = 0.1;
+  const auto horizontal = find_loop_truth(T_w_c, Eigen::Vector3d::UnitZ(), settings);
+  ASSERT_FALSE(horizontal.empty());
+  EXPECT_EQ(horizontal.back().first, 0);
+  EXPECT_EQ(horizontal.back().last, 0);
+}
+
+TEST(LoopTruth, StandingStillIsNotARevisitWithMinTravel) {
+  const std::vector<Eigen::Isometry3d> parked(60, Eigen::Isometry3d::Identity());
+  LoopTruthSettings settings;
+  settings.min_gap_frames = 20;
+  EXPECT_EQ(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).size(), 40u);  // every j >= 20
+  settings.min_travel_m = 1.0;
+  EXPECT_TRUE(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).empty());
+  settings.min_travel_m = -1.0;
+  EXPECT_THROW(settings.validate(), ConfigError);
+}
+
+TEST(SimulatorPlan, DemoFramesGroundTruthAndImuAgree) {
+  SimulationConfig config = make_preset("demo", "");
+  config.simulation.seed = 3;
+  const SimulationPlan plan = plan_simulation(config);
+  EXPECT_EQ(config.world.seed, 3);
+  ASSERT_EQ(plan.frame_t_ns.size(), 600u);
+  EXPECT_EQ(plan.frames_used, 600u);
+  EXPECT_EQ(plan.frames_outside_trajectory, 0u);
+  EXPECT_DOUBLE_EQ(plan.illumination_phase.back(), 1.0);
+  EXPECT_NEAR(plan.camera.rate_hz, 10.0, 1e-9);
+  // 59.9 s at 200 Hz.
+  EXPECT_EQ(plan.imu.size(), 11981u);
+  // Ground truth contains every frame time, and body * T_b_c is the camera pose rendered.
+  const Eigen::Isometry3d T_b_c = plan.camera.T_b_c;
+  for (std::size_t f = 0; f < plan.frames_used; f += 37) {
+    const auto it = std::find_if(plan.ground_truth.begin(), plan.ground_truth.end(),
+                                 [&](const GroundTruthState& s) { return s.t_ns == plan.frame_t_ns[f]; });
+    ASSERT_NE(it, plan.ground_truth.end()) << "frame " << f;
+    EXPECT_LT(pose_error(it->T_w_b * T_b_c, plan.T_w_c[f]), 1e-12);
+  }
+  // The camera looks forward along the motion (optical axis . velocity > 0) and is level.
+  const Eigen::Vector3d motion = plan.T_w_c[101].translation() - plan.T_w_c[99].translation();
+  EXPECT_GT(plan.T_w_c[100].linear().col(2).dot(motion.normalized()), 0.99);
+  EXPECT_NEAR(plan.T_w_c[100].linear().col(1).z(), -1.0, 1e-3);  // image y (down) = -up
+  // Speed about 7 m/s: a KITTI-like street drive.
+  const double speed = plan.ground_truth[500].v_w_mps.norm();
+  EXPECT_GT(speed, 4.0);
+  EXPECT_LT(speed, 12.0);
+}
+
+TEST(SimulatorPlan, PrefixRunMatchesTheFullRun) {
+  SimulationConfig full = make_preset("demo", "");
+  SimulationConfig prefix = make_preset("demo", "");
+  prefix.simulation.max_frames = 40;
+  const SimulationPlan a = plan_simulation(full);
+  const SimulationPlan b = plan_simulation(prefix);
+  ASSERT_EQ(b.frames_used, 40u);
+  EXPECT_EQ(b.frame_t_ns.size(), 600u);
+  for (std::size_t f = 0; f < 40; ++f) {
+    EXPECT_EQ(a.T_w_c[f].matrix(), b.T_w_c[f].matrix());
+    EXPECT_EQ(a.illumination_phase[f], b.illumination_phase[f]);
+  }
+  // IMU up to the 40th frame plus the padding.
+  EXPECT_EQ(b.imu.back().t_ns, b.frame_t_ns[39] + 100'000'000);
+  for (std::size_t k = 0; k < b.imu.size(); ++k) {
+    ASSERT_EQ(a.imu[k].t_ns, b.imu[k].t_ns);
+    ASSERT_EQ(a.imu[k].accel_mps2, b.imu[k].accel_mps2);
+  }
+}
+
+TEST(SimulatorPlan, MissingTrajectoryFileIsADataError) {
+  SimulationConfig config = make_preset("kitti00", "/nonexistent/data");
+  try {
+    plan_simulation(config);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("/nonexistent/data/kitti/00/poses.txt"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(SimulatorPlan, Kitti00) {
+  LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/poses.txt");
+  SimulationConfig config = make_preset("kitti00", shared());
+  const SimulationPlan plan = plan_simulation(config);
+  ASSERT_EQ(plan.frame_t_ns.size(), 4541u);
+  EXPECT_EQ(plan.frames_used, 4541u);
+  EXPECT_EQ(plan.camera.width_px, 1241);
+  EXPECT_NEAR(plan.up_w.y(), -1.0, 1e-12);
+  // The smoothed fit stays close to every KITTI pose.
+  const auto poses = read_kitti_poses(shared() / "kitti/00/poses.txt", shared() / "kitti/00/times.txt");
+  double max_error_m = 0.0;
+  for (std::size_t f = 0; f < poses.size(); ++f) {
+    max_error_m = std::max(max_error_m, (plan.T_w_c[f].translation() - poses[f].T_w_b.translation()).norm());
+  }
+  EXPECT_LT(max_error_m, 0.2);
+  // The synthesised IMU is car-like: world acceleration R a_b + g_w, 99th percentile below 5 m/s^2.
+  EXPECT_GT(plan.ground_truth.size(), plan.imu.size());  // IMU times + frame times
+  std::vector<double> accel_w;
+  const Eigen::Vector3d g_w = -9.81 * plan.up_w;
+  for (const ImuSample& sample : plan.imu) {
+    const auto gt = std::lower_bound(plan.ground_truth.begin(), plan.ground_truth.end(), sample.t_ns,
+                                     [](const GroundTruthState& s, Timestamp t) { return s.t_ns < t; });
+    ASSERT_NE(gt, plan.ground_truth.end());
+    ASSERT_EQ(gt->t_ns, sample.t_ns);
+    accel_w.push_back((gt->T_w_b.linear() * sample.accel_mps2 + g_w).norm());
+  }
+  std::sort(accel_w.begin(), accel_w.end());
+  const double p99 = accel_w[accel_w.size() * 99 / 100];
+  std::printf("kitti00: fit max error %.3f m, |a_w| p99 %.2f m/s^2, %zu IMU samples\n", max_error_m, p99,
+              plan.imu.size());
+  EXPECT_LT(p99, 5.0);
+}
+
+TEST(SimulatorPlan, EurocMh05PassesTheRealImuThrough) {
+  LOOPGATE_REQUIRE_SHARED_DATA("euroc/MH_05_difficult/mav0/imu0/data.csv");
+  SimulationConfig config = make_preset("euroc-mh05", shared());
+  const SimulationPlan plan = plan_simulation(config);
+  EXPECT_EQ(plan.frame_t_ns.size(), 2273u);
+  EXPECT_EQ(plan.camera.width_px, 752);
+  EXPECT_EQ(plan.camera.distortion_model, DistortionModel::kRadTan);
+  EXPECT_NEAR(plan.camera.fx, 458.654, 1e-9);
+  EXPECT_NEAR(plan.camera.T_b_c.translation().x(), -0.0216401454975, 1e-12);
+  EXPECT_NEAR(plan.imu_calibration.gyro_noise_density, 1.6968e-04, 1e-12);
+  // Frames before/after the ground truth span hold the end poses.
+  EXPECT_GT(plan.frames_outside_trajectory, 0u);
+  EXPECT_LT(plan.frames_outside_trajectory, 60u);
+  const auto real = read_euroc_imu(shared() / "euroc/MH_05_difficult/mav0/imu0/data.csv");
+  ASSERT_GT(plan.imu.size(), 22000u);
+  const auto it = std::find_if(real.begin(), real.end(),
+                               [&](const ImuSample& s) { return s.t_ns == plan.imu[500].t_ns; });
+  ASSERT_NE(it, real.end());
+  EXPECT_EQ(it->gyro_radps, plan.imu[500].gyro_radps);
+  EXPECT_EQ(it->accel_mps2, plan.imu[500].accel_mps2);
+  // Ground truth at a frame inside the span is close to the recorded one.
+  const auto recorded =
+      read_euroc_groundtruth(shared() / "euroc/MH_05_difficult/mav0/state_groundtruth_estimate0/data.csv");
+  const std::size_t f = 1000;
+  const auto rec = std::lower_bound(recorded.begin(), recorded.end(), plan.frame_t_ns[f],
+                                    [](const GroundTruthState& s, Timestamp t) { return s.t_ns < t; });
+  const Eigen::Isometry3d T_w_b = plan.T_w_c[f] * plan.camera.T_b_c.inverse();
+  EXPECT_LT((T_w_b.translation() - rec->T_w_b.translation()).norm(), 0.01);
+}
+
+TEST(SimulatorRun, WritesTheEurocLayoutThatReadsBack) {
+  const auto out = loopgate::testing::make_temp_dir("sim-run") / "demo";
+  SimulationConfig config = make_preset("demo", "");
+  config.simulation.max_frames = 6;
+  config.simulation.seed = 11;
+  const SimulationSummary summary = run_simulation(config, out);
+  EXPECT_EQ(summary.frames, 6u);
+  EXPECT_NEAR(summary.duration_s, 0.5, 1e-9);
+  EXPECT_GT(summary.distance_m, 2.0);
+  for (const char* rel :
+       {"mav0/cam0/data.csv", "mav0/cam0/sensor.yaml", "mav0/imu0/data.csv", "mav0/imu0/sensor.yaml",
+        "mav0/state_groundtruth_estimate0/data.csv", "simulation.json"}) {
+    EXPECT_TRUE(std::filesystem::is_regular_file(out / rel)) << rel;
+  }
+  std::size_t pngs = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out / "mav0/cam0/data"))
+    pngs += entry.path().extension() == ".png";
+  EXPECT_EQ(pngs, 6u);
+
+  std::ifstream json_in(out / "simulation.json");
+  const nlohmann::json meta = nlohmann::json::parse(json_in);
+  EXPECT_EQ(meta["preset"], "demo");
+  EXPECT_EQ(meta["seed"], 11);
+  EXPECT_EQ(meta["frames"]["count"], 6);
+  EXPECT_EQ(meta["illumination"]["phase"].size(), 6u);
+  EXPECT_EQ(meta["parameters"]["world"]["kind"], "street");
+  EXPECT_EQ(meta["parameters"]["simulation"]["seed"], 11);
+
+  const auto dataset = open_euroc(out);
+  ASSERT_EQ(dataset->frame_count(), 6u);
+  EXPECT_TRUE(dataset->has_images());
+  const cv::Mat image = dataset->load_image(3);
+  EXPECT_EQ(image.cols, 640);
+  EXPECT_EQ(image.rows, 200);
+  ASSERT_TRUE(dataset->has_ground_truth());
+  SimulationConfig same = config;
+  const SimulationPlan plan = plan_simulation(same);
+  for (std::size_t f = 0; f < 6; ++f) {
+    EXPECT_EQ(dataset->frame_t_ns(f), plan.frame_t_ns[f]);
+    const auto T_w_b = dataset->ground_truth_T_w_b(f);
+    ASSERT_TRUE(T_w_b.has_value());
+    EXPECT_LT(pose_error(*T_w_b * plan.camera.T_b_c, plan.T_w_c[f]), 1e-5);
+  }
+  ASSERT_TRUE(dataset->camera().has_value());
+  EXPECT_NEAR(dataset->camera()->fx, 370.0, 1e-9);
+
+  // A non-empty output is refused without force, replaced with it.
+  EXPECT_THROW(run_simulation(config, out), DataError);
+  SimulationRunOptions force;
+  force.force = true;
+  config.simulation.max_frames = 3;
+  EXPECT_EQ(run_simulation(config, out, force).frames, 3u);
+  std::size_t pngs_after = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out / "mav0/cam0/data")) {
+    pngs_after += entry.is_regular_file() ? 1 : 0;
+  }
+  EXPECT_EQ(pngs_after, 3u);
+}
+
+}  // namespace
+}  // namespace loopgate::sim
