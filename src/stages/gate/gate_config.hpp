@@ -1,0 +1,73 @@
+// Configuration of the pose gate and of the candidate areas (docs: ../shared/docs/pose-gating.md §2-4,
+// paper.md §4 eq. 8-10). Section "gate".
+#pragma once
+
+#include <string>
+
+namespace loopgate {
+
+struct GateConfig {
+  // Only past frames j <= i - gap_frames are searched (paper: 30; should follow the frame rate).
+  int gap_frames = 30;
+  // beta: allowed drift between j and i, added to the threshold, in metres (per environment).
+  double beta_m = 5.0;
+  // sigma_i = sqrt(lambda_max(P_i)) ("max_eigen", the default) or sqrt(trace(P_i)) ("trace").
+  std::string sigma_norm = "max_eigen";
+  // Threshold = confidence_scale * sigma_i + beta (1.96: 95 % of a Gaussian, eq. 10).
+  double confidence_scale = 1.96;
+  // Numerical noise allowed in a position covariance: eigenvalues down to -covariance_tolerance_m2 are
+  // accepted (more negative ones, or non-finite entries, are bad input).
+  double covariance_tolerance_m2 = 1e-9;
+  // KD-tree leaf size (nanoflann) and the number of Euclidean nearest neighbours whose exact combined
+  // distance seeds the search radius (speed only: the result is exact for any value >= 1).
+  int kdtree_leaf_size = 10;
+  int kdtree_seed_neighbours = 4;
+
+  // Candidate areas (pose-gating.md §4). Two gated query frames belong to one cluster when at most
+  // area_max_hole_frames non-gated frames separate them and their nearest j differ by at most
+  // area_j_tolerance_frames plus the number of query frames between them.
+  int area_max_hole_frames = 10;
+  int area_j_tolerance_frames = 30;
+  // Margins of the rectangle [i_first - m_i, i_last] x [j_min - m_j, j_max + m_j]. m_i must be >= the
+  // sequence length L of the DP (checked by CandidateAreaTracker against the L it is given).
+  int area_margin_query_frames = 20;
+  int area_margin_reference_frames = 20;
+
+  template <class V>
+  void visit(V&& v) {
+    v("gap_frames", gap_frames);
+    v("beta_m", beta_m);
+    v("sigma_norm", sigma_norm);
+    v("confidence_scale", confidence_scale);
+    v("covariance_tolerance_m2", covariance_tolerance_m2);
+    v("kdtree_leaf_size", kdtree_leaf_size);
+    v("kdtree_seed_neighbours", kdtree_seed_neighbours);
+    v("area_max_hole_frames", area_max_hole_frames);
+    v("area_j_tolerance_frames", area_j_tolerance_frames);
+    v("area_margin_query_frames", area_margin_query_frames);
+    v("area_margin_reference_frames", area_margin_reference_frames);
+  }
+  template <class V>
+  void visit(V&& v) const {
+    v("gap_frames", gap_frames);
+    v("beta_m", beta_m);
+    v("sigma_norm", sigma_norm);
+    v("confidence_scale", confidence_scale);
+    v("covariance_tolerance_m2", covariance_tolerance_m2);
+    v("kdtree_leaf_size", kdtree_leaf_size);
+    v("kdtree_seed_neighbours", kdtree_seed_neighbours);
+    v("area_max_hole_frames", area_max_hole_frames);
+    v("area_j_tolerance_frames", area_j_tolerance_frames);
+    v("area_margin_query_frames", area_margin_query_frames);
+    v("area_margin_reference_frames", area_margin_reference_frames);
+  }
+
+  // Throws ConfigError naming the key: gap_frames >= 1, beta_m >= 0 (finite), sigma_norm in {max_eigen,
+  // trace}, confidence_scale >= 0 (finite),
+  // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size >= 1, kdtree_seed_neighbours >= 1, area_* >= 0.
+  void validate() const;
+  // Throws ConfigError unless area_margin_query_frames >= sequence_length (the DP's L).
+  void validate_for_sequence_length(int sequence_length) const;
+};
+
+}  // namespace loopgate
