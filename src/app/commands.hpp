@@ -12,5 +12,8 @@ constexpr int kExitInterrupted = 130;  // SIGINT: outputs written for the frames
 
 // Each add_*_command adds its subcommand to `app`; its callback stores the exit code in `exit_code`.
 void add_simulate_command(CLI::App& app, int& exit_code);
+void add_describe_command(CLI::App& app, int& exit_code);
+void add_calibrate_command(CLI::App& app, int& exit_code);
+void add_run_command(CLI::App& app, int& exit_code);
 
 }  // namespace loopgate::app

@@ -1,4 +1,5 @@
 // loopgate: illumination-robust, pose-gated visual loop-closure detection.
+#include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -8,6 +9,8 @@
 #include "app/commands.hpp"
 
 int main(int argc, char** argv) {
+  // Logs go to stderr: stdout carries results (CSV lines, tables) that users pipe into files.
+  spdlog::set_default_logger(spdlog::stderr_color_mt("loopgate"));
   CLI::App app{"loopgate: pose-gated, illumination-robust visual loop-closure detection (DIRD)"};
   app.set_version_flag("--version", std::string("loopgate ") + LOOPGATE_VERSION);
   app.require_subcommand(1);
@@ -19,6 +22,10 @@ int main(int argc, char** argv) {
 
   int exit_code = loopgate::app::kExitOk;
   // subcommands are registered below (one line each)
+  loopgate::app::add_simulate_command(app, exit_code);
+  loopgate::app::add_describe_command(app, exit_code);
+  loopgate::app::add_calibrate_command(app, exit_code);
+  loopgate::app::add_run_command(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -1,0 +1,194 @@
+#include "io/config.hpp"
+
+#include <spdlog/spdlog.h>
+#include <yaml-cpp/yaml.h>
+
+#include <algorithm>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+namespace loopgate {
+
+namespace {
+
+std::string join(const std::vector<std::string>& items, const std::string& separator) {
+  std::string out;
+  for (std::size_t i = 0; i < items.size(); ++i) out += (i ? separator : "") + items[i];
+  return out;
+}
+
+std::string trim(const std::string& text) {
+  std::size_t begin = 0;
+  std::size_t end = text.size();
+  while (begin < end && std::isspace(static_cast<unsigned char>(text[begin]))) ++begin;
+  while (end > begin && std::isspace(static_cast<unsigned char>(text[end - 1]))) --end;
+  return text.substr(begin, end - begin);
+}
+
+std::string where(const std::string& origin) {
+  return origin.empty() ? std::string{} : " (" + origin + ")";
+}
+
+[[noreturn]] void throw_type(const std::string& name, const RawConfigValue& value, const char* type) {
+  throw ConfigError(name + ": expected " + type + ", got '" + value.text + "'" + where(value.origin));
+}
+
+std::string mark_origin(const std::string& origin, const YAML::Mark& mark) {
+  return origin + ":" + std::to_string(mark.line + 1);
+}
+
+RawConfig parse_yaml(const std::string& text, const std::string& origin) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(origin + ":" + std::to_string(e.mark.line + 1) + ": invalid YAML: " + e.msg);
+  }
+  RawConfig raw;
+  if (!root || root.IsNull()) return raw;
+  if (!root.IsMap()) {
+    throw ConfigError(origin + ": expected a mapping of sections (section: {key: value})");
+  }
+  for (const auto& section : root) {
+    const std::string section_name = section.first.as<std::string>();
+    const YAML::Node& body = section.second;
+    if (body.IsNull()) continue;
+    if (!body.IsMap()) {
+      throw ConfigError(section_name + ": expected a mapping of key: value" +
+                        where(mark_origin(origin, body.Mark())));
+    }
+    for (const auto& entry : body) {
+      const std::string key = entry.first.as<std::string>();
+      const YAML::Node& value = entry.second;
+      const std::string value_origin = mark_origin(origin, value.Mark());
+      if (value.IsNull()) {
+        raw.set(section_name, key, "", value_origin);
+      } else if (value.IsScalar()) {
+        raw.set(section_name, key, value.Scalar(), value_origin);
+      } else {
+        throw ConfigError(section_name + "." + key + ": expected a scalar value" + where(value_origin));
+      }
+    }
+  }
+  return raw;
+}
+
+}  // namespace
+
+RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  if (!in) throw ConfigError(file.string() + ": cannot read the configuration file");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return parse_yaml(buffer.str(), file.string());
+}
+
+RawConfig RawConfig::from_yaml_string(const std::string& text, const std::string& origin) {
+  return parse_yaml(text, origin);
+}
+
+void RawConfig::set(const std::string& section, const std::string& key, const std::string& value,
+                    const std::string& origin) {
+  sections_[section][key] = RawConfigValue{value, origin};
+}
+
+void RawConfig::apply_override(const std::string& assignment) {
+  const auto equals = assignment.find('=');
+  const std::string name = trim(assignment.substr(0, equals));
+  const auto dot = name.find('.');
+  if (equals == std::string::npos || dot == std::string::npos || dot == 0 || dot + 1 == name.size()) {
+    throw ConfigError("--set '" + assignment + "': expected section.key=value");
+  }
+  set(name.substr(0, dot), name.substr(dot + 1), trim(assignment.substr(equals + 1)), "--set " + assignment);
+}
+
+namespace config_detail {
+
+bool parse_bool(const std::string& name, const RawConfigValue& value) {
+  std::string lower = value.text;
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (lower == "true" || lower == "yes" || lower == "on" || lower == "1") return true;
+  if (lower == "false" || lower == "no" || lower == "off" || lower == "0") return false;
+  throw_type(name, value, "a bool (true/false)");
+}
+
+template <class T>
+T parse_integer(const std::string& name, const RawConfigValue& value, const char* type) {
+  const std::string text = trim(value.text);
+  T out{};
+  const char* begin = text.data();
+  const char* end = begin + text.size();
+  if (begin != end && *begin == '+') ++begin;
+  const auto [ptr, ec] = std::from_chars(begin, end, out);
+  if (text.empty() || ec != std::errc{} || ptr != end) throw_type(name, value, type);
+  return out;
+}
+
+int parse_int(const std::string& name, const RawConfigValue& value) {
+  return parse_integer<int>(name, value, "an integer (int)");
+}
+
+std::int64_t parse_int64(const std::string& name, const RawConfigValue& value) {
+  return parse_integer<std::int64_t>(name, value, "an integer (int64)");
+}
+
+double parse_double(const std::string& name, const RawConfigValue& value) {
+  const std::string text = trim(value.text);
+  double out = 0;
+  const char* begin = text.data();
+  const char* end = begin + text.size();
+  if (begin != end && *begin == '+') ++begin;
+  const auto [ptr, ec] = std::from_chars(begin, end, out);
+  if (text.empty() || ec != std::errc{} || ptr != end || !std::isfinite(out)) {
+    throw_type(name, value, "a finite number (double)");
+  }
+  return out;
+}
+
+void throw_unknown(const std::string& what, const std::string& name, const std::string& origin,
+                   const std::vector<std::string>& allowed) {
+  throw ConfigError("unknown " + what + " '" + name + "'" + where(origin) +
+                    "; known: " + join(allowed, ", "));
+}
+
+std::string format_value(bool value) {
+  return value ? "true" : "false";
+}
+std::string format_value(int value) {
+  return std::to_string(value);
+}
+std::string format_value(std::int64_t value) {
+  return std::to_string(value);
+}
+std::string format_value(double value) {
+  char buffer[64];
+  const auto [ptr, ec] = std::to_chars(buffer, buffer + sizeof(buffer), value);
+  return ec == std::errc{} ? std::string(buffer, ptr) : std::string("nan");
+}
+std::string format_value(const std::string& value) {
+  return "'" + value + "'";
+}
+
+}  // namespace config_detail
+
+void log_config_lines(const std::vector<std::string>& lines) {
+  spdlog::info("configuration:");
+  for (const auto& line : lines) spdlog::info("  {}", line);
+}
+
+void require_one_of(const std::string& name, const std::string& value,
+                    const std::vector<std::string>& allowed) {
+  if (std::find(allowed.begin(), allowed.end(), value) == allowed.end()) {
+    throw ConfigError(name + ": '" + value + "' is not one of " + join(allowed, "|"));
+  }
+}
+
+void require(bool ok, const std::string& name, const std::string& message, const std::string& value) {
+  if (!ok) throw ConfigError(name + ": must be " + message + " (got " + value + ")");
+}
+
+}  // namespace loopgate

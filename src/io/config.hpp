@@ -1,0 +1,172 @@
+// The configuration system: sections of typed parameters loaded from YAML, overridden from the command
+// line (`--set section.key=value`), printed at start and echoed as JSON into the run summary.
+//
+// A section is any struct with
+//   template <class V> void visit(V&& v) { v("key", field); ... }   // bool, int, int64_t, double, string
+//   void validate() const;                                          // throws ConfigError naming the key
+// and a top-level configuration is any struct with
+//   template <class V> void visit_sections(V&& v) { v("run", run); v("sync", sync); ... }
+// Adding a section (e.g. DirdConfig "dird") is one member and one line in visit_sections().
+//
+// YAML layout: a mapping of section name -> mapping of key -> scalar. Unknown sections or keys, values of
+// the wrong type and non-scalar values throw ConfigError naming "section.key" (and file:line for YAML).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <string_view>
+#include <type_traits>
+#include <vector>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+// One raw (still textual) value and where it came from ("FILE:LINE" or "--set").
+struct RawConfigValue {
+  std::string text;
+  std::string origin;
+};
+
+// Raw values by section and key, before they are given types.
+class RawConfig {
+ public:
+  // Parses a YAML file. Throws ConfigError (file name, line) for unreadable files, bad YAML, a top level
+  // that is not a mapping of mappings, or non-scalar values.
+  static RawConfig from_yaml_file(const std::filesystem::path& file);
+  static RawConfig from_yaml_string(const std::string& text, const std::string& origin = "<string>");
+
+  // Applies "section.key=value" (throws ConfigError when the form is wrong).
+  void apply_override(const std::string& assignment);
+  void set(const std::string& section, const std::string& key, const std::string& value,
+           const std::string& origin);
+
+  const std::map<std::string, std::map<std::string, RawConfigValue>>& sections() const { return sections_; }
+
+ private:
+  std::map<std::string, std::map<std::string, RawConfigValue>> sections_;
+};
+
+namespace config_detail {
+
+// Conversions from text with the expected type named in errors ("bool", "int", "int64", "double", "string").
+bool parse_bool(const std::string& name, const RawConfigValue& value);
+int parse_int(const std::string& name, const RawConfigValue& value);
+std::int64_t parse_int64(const std::string& name, const RawConfigValue& value);
+double parse_double(const std::string& name, const RawConfigValue& value);
+[[noreturn]] void throw_unknown(const std::string& what, const std::string& name, const std::string& origin,
+                                const std::vector<std::string>& allowed);
+
+template <class T>
+void assign(const std::string& name, const RawConfigValue& value, T& field) {
+  if constexpr (std::is_same_v<T, bool>) {
+    field = parse_bool(name, value);
+  } else if constexpr (std::is_same_v<T, int>) {
+    field = parse_int(name, value);
+  } else if constexpr (std::is_same_v<T, std::int64_t>) {
+    field = parse_int64(name, value);
+  } else if constexpr (std::is_same_v<T, double>) {
+    field = parse_double(name, value);
+  } else if constexpr (std::is_same_v<T, std::string>) {
+    field = value.text;
+  } else {
+    static_assert(sizeof(T) == 0, "config fields are bool, int, int64_t, double or std::string");
+  }
+}
+
+// Text form used when printing (doubles in shortest round-trip form).
+std::string format_value(bool value);
+std::string format_value(int value);
+std::string format_value(std::int64_t value);
+std::string format_value(double value);
+std::string format_value(const std::string& value);
+
+}  // namespace config_detail
+
+// Applies the raw values of one section to `section` (keys must exist in its visit()).
+template <class Section>
+void apply_section(const std::string& section_name, const std::map<std::string, RawConfigValue>& values,
+                   Section& section) {
+  for (const auto& [key, value] : values) {
+    bool found = false;
+    std::vector<std::string> keys;
+    section.visit([&](std::string_view field_key, auto& field) {
+      keys.emplace_back(field_key);
+      if (field_key == key) {
+        config_detail::assign(section_name + "." + key, value, field);
+        found = true;
+      }
+    });
+    if (!found) config_detail::throw_unknown("key", section_name + "." + key, value.origin, keys);
+  }
+}
+
+// Applies every raw value to `config` (a struct with visit_sections), then validates every section.
+template <class Config>
+void apply_config(const RawConfig& raw, Config& config) {
+  for (const auto& [section_name, values] : raw.sections()) {
+    bool found = false;
+    std::vector<std::string> names;
+    config.visit_sections([&](std::string_view name, auto& section) {
+      names.emplace_back(name);
+      if (name == section_name) {
+        apply_section(section_name, values, section);
+        found = true;
+      }
+    });
+    if (!found) {
+      const std::string origin = values.empty() ? std::string{} : values.begin()->second.origin;
+      config_detail::throw_unknown("section", section_name, origin, names);
+    }
+  }
+  config.visit_sections([](std::string_view, auto& section) { section.validate(); });
+}
+
+// Loads `file` (when not empty), applies the overrides in order, validates.
+template <class Config>
+Config load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides = {}) {
+  RawConfig raw = file.empty() ? RawConfig{} : RawConfig::from_yaml_file(file);
+  for (const auto& assignment : overrides) raw.apply_override(assignment);
+  Config config;
+  apply_config(raw, config);
+  return config;
+}
+
+// {"section": {"key": value, ...}, ...} with JSON types matching the fields.
+template <class Config>
+nlohmann::json config_to_json(Config& config) {
+  nlohmann::json json = nlohmann::json::object();
+  config.visit_sections([&](std::string_view name, auto& section) {
+    nlohmann::json& out = json[std::string(name)];
+    out = nlohmann::json::object();
+    section.visit([&](std::string_view key, auto& field) { out[std::string(key)] = field; });
+  });
+  return json;
+}
+
+// "section.key = value" lines, one per parameter, in visit order.
+template <class Config>
+std::vector<std::string> config_to_lines(Config& config) {
+  std::vector<std::string> lines;
+  config.visit_sections([&](std::string_view name, auto& section) {
+    section.visit([&](std::string_view key, auto& field) {
+      lines.push_back(std::string(name) + "." + std::string(key) + " = " +
+                      config_detail::format_value(field));
+    });
+  });
+  return lines;
+}
+
+// Logs the configuration through spdlog (info), one line per parameter.
+void log_config_lines(const std::vector<std::string>& lines);
+
+// Helper for validate(): throws ConfigError "NAME: 'VALUE' is not one of a|b|c" unless value is allowed.
+void require_one_of(const std::string& name, const std::string& value,
+                    const std::vector<std::string>& allowed);
+// Helper for validate(): throws ConfigError "NAME: must be MESSAGE (got VALUE)" when !ok.
+void require(bool ok, const std::string& name, const std::string& message, const std::string& value);
+
+}  // namespace loopgate

@@ -1,0 +1,149 @@
+#include "io/writers.hpp"
+
+#include <spdlog/fmt/fmt.h>
+
+#include <cmath>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+namespace {
+
+std::string csv_escape(const std::string& cell) {
+  if (cell.find_first_of(",\"\n\r") == std::string::npos) return cell;
+  std::string out = "\"";
+  for (const char c : cell) {
+    if (c == '"') out += '"';
+    out += c;
+  }
+  out += '"';
+  return out;
+}
+
+void open_stream(std::ofstream& out, const std::filesystem::path& file) {
+  if (file.has_parent_path()) {
+    std::error_code ec;
+    std::filesystem::create_directories(file.parent_path(), ec);
+  }
+  out.open(file, std::ios::out | std::ios::trunc);
+  if (!out) throw DataError(file, "cannot open for writing");
+}
+
+void check_stream(const std::ofstream& out, const std::filesystem::path& file) {
+  if (!out) throw DataError(file, "write failed (disk full or file removed?)");
+}
+
+}  // namespace
+
+std::string format_fixed(double value, int decimals) {
+  if (std::isnan(value)) return "nan";
+  if (std::isinf(value)) return value > 0 ? "inf" : "-inf";
+  if (value == 0.0) value = 0.0;  // no "-0.000"
+  return fmt::format("{:.{}f}", value, decimals);
+}
+
+CsvWriter::CsvWriter(const std::filesystem::path& file, const std::vector<std::string>& columns) {
+  open(file, columns);
+}
+
+void CsvWriter::open(const std::filesystem::path& file, const std::vector<std::string>& columns) {
+  file_ = file;
+  columns_ = columns.size();
+  open_stream(out_, file);
+  write_row(columns);
+}
+
+void CsvWriter::write_row(const std::vector<std::string>& cells) {
+  if (cells.size() != columns_) {
+    throw DataError(
+        file_, "row has " + std::to_string(cells.size()) + " cells, expected " + std::to_string(columns_));
+  }
+  for (std::size_t i = 0; i < cells.size(); ++i) {
+    if (i) out_ << ',';
+    out_ << csv_escape(cells[i]);
+  }
+  out_ << '\n';
+  check_stream(out_, file_);
+}
+
+void CsvWriter::flush() {
+  out_.flush();
+  check_stream(out_, file_);
+}
+
+void CsvWriter::close() {
+  if (out_.is_open()) {
+    out_.close();
+    check_stream(out_, file_);
+  }
+}
+
+TumWriter::TumWriter(const std::filesystem::path& file) {
+  open(file);
+}
+
+void TumWriter::open(const std::filesystem::path& file) {
+  file_ = file;
+  open_stream(out_, file);
+}
+
+void TumWriter::write(Timestamp t_ns, const Eigen::Isometry3d& T_w_b) {
+  const Eigen::Vector3d p = T_w_b.translation();
+  const Eigen::Quaterniond q(T_w_b.rotation());
+  out_ << fmt::format("{:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f} {:.9f}\n", ns_to_s(t_ns), p.x(),
+                      p.y(), p.z(), q.x(), q.y(), q.z(), q.w());
+  check_stream(out_, file_);
+}
+
+void TumWriter::flush() {
+  out_.flush();
+  check_stream(out_, file_);
+}
+
+void TumWriter::close() {
+  if (out_.is_open()) {
+    out_.close();
+    check_stream(out_, file_);
+  }
+}
+
+void write_json_file(const std::filesystem::path& file, const nlohmann::json& json) {
+  std::filesystem::path tmp = file;
+  tmp += ".tmp";
+  {
+    std::ofstream out;
+    open_stream(out, tmp);
+    out << json.dump(2) << '\n';
+    out.close();
+    check_stream(out, tmp);
+  }
+  std::error_code ec;
+  std::filesystem::rename(tmp, file, ec);
+  if (ec) throw DataError(file, "cannot rename " + tmp.string() + ": " + ec.message());
+}
+
+void TraceWriter::name_thread(int thread_id, const std::string& name) {
+  thread_names_.emplace_back(thread_id, name);
+}
+
+void TraceWriter::write(const std::filesystem::path& file) const {
+  nlohmann::json events = nlohmann::json::array();
+  for (const auto& [tid, name] : thread_names_) {
+    events.push_back(
+        {{"name", "thread_name"}, {"ph", "M"}, {"pid", 1}, {"tid", tid}, {"args", {{"name", name}}}});
+  }
+  for (const auto& e : events_) {
+    nlohmann::json event = {{"name", e.name},    {"cat", e.category},    {"ph", "X"},
+                            {"ts", e.start_us},  {"dur", e.duration_us}, {"pid", 1},
+                            {"tid", e.thread_id}};
+    nlohmann::json args = nlohmann::json::object();
+    if (e.seq >= 0) args["seq"] = e.seq;
+    if (e.frame >= 0) args["frame"] = e.frame;
+    event["args"] = args;
+    events.push_back(std::move(event));
+  }
+  write_json_file(file, {{"traceEvents", events}, {"displayTimeUnit", "ms"}});
+}
+
+}  // namespace loopgate

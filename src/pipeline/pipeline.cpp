@@ -1,0 +1,709 @@
+#include "pipeline/pipeline.hpp"
+
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <tbb/flow_graph.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
+#include <tbb/task_scheduler_observer.h>
+#include <unistd.h>
+
+#include <Eigen/Eigenvalues>
+#include <array>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <mutex>
+#include <opencv2/core/mat.hpp>
+#include <thread>
+#include <unordered_map>
+
+#include "core/error.hpp"
+#include "io/config.hpp"
+#include "io/dataset.hpp"
+#include "io/writers.hpp"
+#include "pipeline/stage_profiler.hpp"
+
+#if defined(__SANITIZE_THREAD__)
+// ThreadSanitizer builds: oneTBB comes from an uninstrumented system library, so the synchronisation of
+// its scheduler (task hand-over, small-object pool reuse, the end of wait_for_all) is invisible and its
+// header-inlined internals show up as races. Only races whose top frame is inside a oneTBB header are
+// suppressed; our node bodies make their hand-overs explicit (FrameRecord::acquire/release, one mutex
+// per serial stage) and stay checked.
+extern "C" const char* __tsan_default_suppressions() {
+  // race_top: only reports whose top frame lies in a oneTBB header; and the publication of a freshly
+  // constructed node's aggregator (exact inlined frame name) to the worker that TBB spawns at make_edge.
+  return "race_top:/usr/include/oneapi/tbb/\n"
+         "race:^aggregator_generic$\n";
+}
+#endif
+
+namespace loopgate {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+enum Stage : std::size_t { kSync, kDecode, kOdometry, kSink, kStageCount };
+constexpr std::array<const char*, kStageCount> kStageNames = {"sync", "decode", "odometry", "sink"};
+constexpr std::size_t kMaxMessagesPerFrame = 4;  // per-frame reasons kept in frames.csv
+constexpr std::size_t kMaxListedProblems = 200;  // frames / dataset issues listed in summary.json
+constexpr double kProgressPeriodS = 0.25;
+constexpr auto kWorkerLeaveTimeout = std::chrono::milliseconds(2000);
+constexpr auto kPollPeriod = std::chrono::milliseconds(20);  // producer: stop-flag polling while waiting
+
+// Small stable index per thread, for the trace tracks.
+int thread_index() {
+  static std::atomic<int> next{0};
+  thread_local const int index = next.fetch_add(1);
+  return index;
+}
+
+double cpu_seconds() {
+  rusage usage{};
+  ::getrusage(RUSAGE_SELF, &usage);
+  const auto seconds = [](const timeval& tv) {
+    return static_cast<double>(tv.tv_sec) + 1e-6 * static_cast<double>(tv.tv_usec);
+  };
+  return seconds(usage.ru_utime) + seconds(usage.ru_stime);
+}
+
+double peak_rss_mb() {
+  rusage usage{};
+  ::getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+struct StageStamp {
+  std::int64_t enter_ns = 0;
+  std::int64_t exit_ns = 0;
+  int thread = -1;
+};
+
+struct FrameRecord {
+  std::uint64_t seq = 0;
+  std::size_t frame = 0;
+  Timestamp t_ns = 0;
+  std::int64_t release_ns = 0;
+  std::int64_t deadline_ns = 0;  // 0: no deadline (rate max)
+  SyncedImu imu;
+  bool imu_synced = false;
+  bool needs_pixels = false;
+  bool decoded = false;
+  cv::Mat image;
+  OdometryOutput odometry;
+  bool has_pose = false;
+  std::vector<std::string> warnings;
+  std::vector<std::string> errors;
+  std::array<StageStamp, kStageCount> stamps{};
+
+  // The hand-over between nodes goes through TBB's scheduler, whose synchronisation ThreadSanitizer
+  // cannot see (uninstrumented library); each node body starts with acquire() and ends with release()
+  // so that the happens-before edge is explicit.
+  mutable std::atomic<int> handoff{0};
+  void acquire() const { static_cast<void>(handoff.load(std::memory_order_acquire)); }
+  void release() const { handoff.fetch_add(1, std::memory_order_release); }
+};
+// Messages carry the sequence number by value (the sequencers read it without touching the record)
+// and a pointer to the record, owned by PipelineRun::live_: created by the producer, destroyed by the
+// sink once the frame is written; whatever a failed run leaves is freed at the end.
+struct FrameMsg {
+  std::uint64_t seq = 0;
+  FrameRecord* record = nullptr;
+};
+using FramePtr = FrameMsg;
+
+void add_message(std::vector<std::string>& list, std::string message) {
+  list.push_back(std::move(message));
+}
+
+std::string join_messages(const std::vector<std::string>& messages) {
+  std::string out;
+  const std::size_t shown = std::min(messages.size(), kMaxMessagesPerFrame);
+  for (std::size_t i = 0; i < shown; ++i) out += (i ? "; " : "") + messages[i];
+  if (messages.size() > shown) out += fmt::format("; ... {} more", messages.size() - shown);
+  return out;
+}
+
+// Counts the worker threads inside the arena. When the graph is drained, the run waits until every
+// worker has left before tearing the graph down: the acquire of the last exit orders everything the
+// workers did before the teardown, visibly for ThreadSanitizer too (TBB's own synchronisation lives in an
+// uninstrumented library).
+// Constant-initialised (no run-time write that a worker could race with); shared by concurrent runs,
+// which then only wait for each other's workers too.
+std::atomic<int> g_workers_inside{0};
+
+class WorkerExitObserver : public tbb::task_scheduler_observer {
+ public:
+  explicit WorkerExitObserver(tbb::task_arena& arena) : tbb::task_scheduler_observer(arena) { observe(true); }
+  ~WorkerExitObserver() override { observe(false); }
+  void on_scheduler_entry(bool is_worker) override {
+    if (is_worker) g_workers_inside.fetch_add(1, std::memory_order_acq_rel);
+  }
+  void on_scheduler_exit(bool is_worker) override {
+    if (is_worker) g_workers_inside.fetch_sub(1, std::memory_order_acq_rel);
+  }
+  bool wait_until_all_left(std::chrono::milliseconds timeout) const {
+    const auto deadline = Clock::now() + timeout;
+    while (g_workers_inside.load(std::memory_order_acquire) > 0) {
+      if (Clock::now() > deadline) return false;
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
+    }
+    return true;
+  }
+};
+
+class PipelineRun {
+ public:
+  PipelineRun(const PipelineConfig& config, const Dataset& dataset, const std::filesystem::path& out_dir,
+              const std::atomic<bool>* stop)
+      : config_(config),
+        dataset_(dataset),
+        out_dir_(out_dir),
+        stop_(stop),
+        rate_(config.run.rate_factor()),
+        profiler_({kStageNames.begin(), kStageNames.end()}) {
+    std::tie(first_frame_, last_frame_) = config_.run.frame_range(dataset_.frame_count());
+    decode_all_ = config_.run.decode == "all";
+    if (decode_all_ && !dataset_.has_images()) {
+      spdlog::warn("run.decode is 'all' but dataset {} has no images: nothing to decode",
+                   dataset_.root().string());
+      decode_all_ = false;
+    }
+    if (dataset_.has_imu())
+      synchronizer_ = std::make_unique<ImuSynchronizer>(dataset_.imu_samples(), config_.sync);
+    odometry_ = make_odometry_source(config_.odometry, dataset_);
+    const std::string progress = config_.output.progress;
+    show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
+  }
+
+  RunResult run();
+
+ private:
+  std::int64_t now_ns() const {
+    return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - start_).count();
+  }
+
+  template <class Body>
+  auto node_body(Stage stage, Body body) {
+    return [this, stage, body](FramePtr message) -> FramePtr {
+      FrameRecord& r = *message.record;
+      r.acquire();
+      r.stamps[stage].enter_ns = now_ns();
+      r.stamps[stage].thread = thread_index();
+      try {
+        body(r);
+      } catch (const std::exception& e) {
+        record_failure(stage, r, e.what());
+        r.release();
+        throw;
+      }
+      r.stamps[stage].exit_ns = now_ns();
+      r.release();
+      return message;
+    };
+  }
+
+  void stage_sync(FrameRecord& r);
+  void stage_decode(FrameRecord& r) const;
+  void stage_odometry(FrameRecord& r);
+  void stage_sink(FrameRecord& r);
+  void record_failure(std::size_t stage, const FrameRecord& r, const std::string& what);
+  void produce(tbb::flow::queue_node<FramePtr>& queue, RunResult& result);
+  void open_outputs();
+  void show_progress(bool final);
+  nlohmann::json make_summary(const RunResult& result);
+
+  const PipelineConfig& config_;
+  const Dataset& dataset_;
+  std::filesystem::path out_dir_;
+  const std::atomic<bool>* stop_;
+  std::optional<double> rate_;
+  std::size_t first_frame_ = 0;
+  std::size_t last_frame_ = 0;
+  bool decode_all_ = false;
+  bool show_progress_ = false;
+  Clock::time_point start_ = Clock::now();
+
+  // sync node state
+  std::mutex sync_mutex_;
+  std::unique_ptr<ImuSynchronizer> synchronizer_;
+  bool have_last_sync_t_ = false;
+  Timestamp last_sync_t_ns_ = 0;
+
+  // odometry node state
+  std::mutex odometry_mutex_;
+  std::unique_ptr<OdometrySource> odometry_;
+
+  // sink node state (everything below is touched by the sink only, and by run() after the drain)
+  std::mutex sink_mutex_;
+  CsvWriter frames_csv_;
+  CsvWriter timing_csv_;
+  TumWriter trajectory_;
+  TraceWriter trace_;
+  StageProfiler profiler_;
+  std::uint64_t next_sink_seq_ = 0;
+  std::size_t processed_ = 0, frames_ok_ = 0, frames_warning_ = 0, frames_error_ = 0;
+  std::size_t deadline_misses_ = 0, decoded_ = 0, odometry_lost_ = 0, image_errors_ = 0;
+  std::size_t imu_gaps_ = 0, imu_out_of_order_ = 0, imu_duplicates_ = 0, imu_missing_frames_ = 0;
+  bool have_first_t_ = false;
+  Timestamp first_t_ns_ = 0, last_t_ns_ = 0;
+  nlohmann::json problem_frames_ = nlohmann::json::array();
+  std::size_t problem_frame_count_ = 0;
+  std::int64_t last_progress_ns_ = 0;
+
+  // frames inside the graph, by seq
+  std::mutex live_mutex_;
+  std::unordered_map<std::uint64_t, std::unique_ptr<FrameRecord>> live_;
+
+  // shared between the producer and the sink
+  std::mutex flight_mutex_;
+  std::condition_variable flight_cv_;
+  int in_flight_ = 0;
+
+  // failure (first one wins)
+  std::mutex failure_mutex_;
+  std::atomic<bool> failed_{false};
+  std::string failure_;
+};
+
+void PipelineRun::record_failure(std::size_t stage, const FrameRecord& r, const std::string& what) {
+  {
+    std::lock_guard lock(failure_mutex_);
+    if (!failed_.load()) {
+      failure_ = fmt::format("stage '{}' failed on seq {} (frame {}, t = {:.6f} s): {}", kStageNames[stage],
+                             r.seq, r.frame, ns_to_s(r.t_ns), what);
+      failed_.store(true);
+    }
+  }
+  flight_cv_.notify_all();
+}
+
+void PipelineRun::stage_sync(FrameRecord& r) {
+  std::lock_guard lock(sync_mutex_);
+  r.needs_pixels = decode_all_ || odometry_->needs_images();
+  if (!synchronizer_) return;
+  if (have_last_sync_t_ && r.t_ns <= last_sync_t_ns_) {
+    add_message(r.errors,
+                fmt::format("frame time {:.6f} s does not increase: IMU not synced", ns_to_s(r.t_ns)));
+    return;
+  }
+  have_last_sync_t_ = true;
+  last_sync_t_ns_ = r.t_ns;
+  r.imu = synchronizer_->next(r.t_ns);
+  r.imu_synced = true;
+  for (const auto& message : r.imu.report.messages) add_message(r.warnings, message);
+}
+
+void PipelineRun::stage_decode(FrameRecord& r) const {
+  if (!r.needs_pixels) return;
+  try {
+    r.image = dataset_.load_image(r.frame);
+    r.decoded = true;
+  } catch (const DataError& e) {
+    add_message(r.errors, std::string("image: ") + e.what());
+  }
+}
+
+void PipelineRun::stage_odometry(FrameRecord& r) {
+  std::lock_guard lock(odometry_mutex_);
+  OdometryInput input;
+  input.frame = r.frame;
+  input.t_ns = r.t_ns;
+  if (odometry_->needs_ground_truth()) input.T_w_b_true = dataset_.ground_truth_T_w_b(r.frame);
+  input.imu = r.imu_synced ? &r.imu.samples : nullptr;
+  input.image = r.decoded ? &r.image : nullptr;
+  try {
+    r.odometry = odometry_->process(input);
+    r.has_pose = true;
+  } catch (const DataError& e) {
+    add_message(r.errors, std::string("odometry: ") + e.what());
+    return;
+  }
+  if (r.odometry.pose.status != OdometryStatus::kTracking) {
+    add_message(r.warnings, fmt::format("odometry {}{}{}", to_string(r.odometry.pose.status),
+                                        r.odometry.reason.empty() ? "" : ": ", r.odometry.reason));
+  }
+}
+
+void PipelineRun::stage_sink(FrameRecord& r) {
+  std::lock_guard lock(sink_mutex_);
+  if (r.seq != next_sink_seq_) {
+    throw std::logic_error(fmt::format("sink received seq {} while expecting {}", r.seq, next_sink_seq_));
+  }
+  ++next_sink_seq_;
+
+  const std::string status = !r.errors.empty() ? "error" : !r.warnings.empty() ? "warning" : "ok";
+  std::vector<std::string> messages = r.errors;
+  messages.insert(messages.end(), r.warnings.begin(), r.warnings.end());
+  const std::string reason = join_messages(messages);
+
+  std::vector<std::string> row = {std::to_string(r.seq), std::to_string(r.frame), std::to_string(r.t_ns),
+                                  format_fixed(ns_to_s(r.t_ns), 9)};
+  const PoseEstimate& pose = r.odometry.pose;
+  if (r.has_pose) {
+    const Eigen::Vector3d p = pose.T_w_b.translation();
+    const Eigen::Quaterniond q(pose.T_w_b.rotation());
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(pose.position_cov_m2(),
+                                                                Eigen::EigenvaluesOnly);
+    const double sigma_m = std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
+    for (const double value : {p.x(), p.y(), p.z(), q.x(), q.y(), q.z(), q.w()})
+      row.push_back(format_fixed(value, 9));
+    row.push_back(format_fixed(sigma_m, 9));
+    row.emplace_back(to_string(pose.status));
+    if (pose.status != OdometryStatus::kLost) trajectory_.write(r.t_ns, pose.T_w_b);
+  } else {
+    for (int i = 0; i < 8; ++i) row.emplace_back("");
+    row.emplace_back("none");
+  }
+  row.push_back(std::to_string(r.imu.samples.size()));
+  row.emplace_back(r.decoded ? "y" : "n");
+  row.push_back(status);
+  row.push_back(reason);
+  frames_csv_.write_row(row);
+
+  ++processed_;
+  (status == "ok" ? frames_ok_ : status == "warning" ? frames_warning_ : frames_error_)++;
+  if (r.decoded) ++decoded_;
+  if (r.needs_pixels && !r.decoded) ++image_errors_;
+  if (r.has_pose && pose.status == OdometryStatus::kLost) ++odometry_lost_;
+  imu_gaps_ += static_cast<std::size_t>(r.imu.report.gaps);
+  imu_out_of_order_ += static_cast<std::size_t>(r.imu.report.out_of_order);
+  imu_duplicates_ += static_cast<std::size_t>(r.imu.report.duplicates);
+  if (r.imu.report.imu_missing) ++imu_missing_frames_;
+  if (!have_first_t_) {
+    have_first_t_ = true;
+    first_t_ns_ = r.t_ns;
+  }
+  last_t_ns_ = r.t_ns;
+  if (status != "ok") {
+    if (problem_frames_.size() < kMaxListedProblems) {
+      problem_frames_.push_back({{"seq", r.seq}, {"frame", r.frame}, {"status", status}, {"reason", reason}});
+    }
+    ++problem_frame_count_;
+  }
+  r.image.release();
+
+  const std::int64_t exit_ns = now_ns();
+  r.stamps[kSink].exit_ns = exit_ns;
+  if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) ++deadline_misses_;
+
+  std::vector<std::string> timing = {std::to_string(r.seq), std::to_string(r.frame)};
+  double total_ms = 0;
+  std::int64_t previous_exit_ns = r.release_ns;
+  for (std::size_t s = 0; s < kStageCount; ++s) {
+    const double service_ms = 1e-6 * static_cast<double>(r.stamps[s].exit_ns - r.stamps[s].enter_ns);
+    const double wait_ms = 1e-6 * static_cast<double>(r.stamps[s].enter_ns - previous_exit_ns);
+    previous_exit_ns = r.stamps[s].exit_ns;
+    profiler_.add(s, service_ms, wait_ms);
+    total_ms += service_ms;
+    timing.push_back(format_fixed(service_ms, 4));
+    if (config_.output.trace) {
+      trace_.add(TraceEvent{kStageNames[s], "stage", 1e-3 * static_cast<double>(r.stamps[s].enter_ns),
+                            1e-3 * static_cast<double>(r.stamps[s].exit_ns - r.stamps[s].enter_ns),
+                            r.stamps[s].thread, static_cast<std::int64_t>(r.seq),
+                            static_cast<std::int64_t>(r.frame)});
+    }
+  }
+  const double latency_ms = 1e-6 * static_cast<double>(exit_ns - r.release_ns);
+  profiler_.add_latency(latency_ms);
+  timing.push_back(format_fixed(latency_ms, 4));
+  timing.push_back(format_fixed(total_ms, 4));
+  timing_csv_.write_row(timing);
+
+  if (processed_ % static_cast<std::size_t>(config_.output.flush_every) == 0) {
+    frames_csv_.flush();
+    timing_csv_.flush();
+    trajectory_.flush();
+  }
+  if (show_progress_ && exit_ns - last_progress_ns_ > static_cast<std::int64_t>(kProgressPeriodS * 1e9)) {
+    last_progress_ns_ = exit_ns;
+    show_progress(false);
+  }
+  {
+    std::lock_guard flight_lock(flight_mutex_);
+    --in_flight_;
+  }
+  flight_cv_.notify_all();
+}
+
+void PipelineRun::show_progress(bool final) {
+  const double elapsed_s = 1e-9 * static_cast<double>(now_ns());
+  const std::size_t total = last_frame_ - first_frame_;
+  const double fps = elapsed_s > 0 ? static_cast<double>(processed_) / elapsed_s : 0.0;
+  const double data_s = have_first_t_ ? ns_to_s(last_t_ns_ - first_t_ns_) : 0.0;
+  const double rtf = elapsed_s > 0 ? data_s / elapsed_s : 0.0;
+  const double eta_s = fps > 0 ? static_cast<double>(total - std::min(total, processed_)) / fps : 0.0;
+  const std::string line = fmt::format("\r[run] {}/{} frames  {:.1f} frames/s  rtf {:.2f}x  ETA {:.0f} s   ",
+                                       processed_, total, fps, rtf, eta_s);
+  std::fputs(line.c_str(), stderr);
+  if (final) std::fputs("\n", stderr);
+  std::fflush(stderr);
+}
+
+void PipelineRun::open_outputs() {
+  std::filesystem::create_directories(out_dir_);
+  frames_csv_.open(out_dir_ / "frames.csv",
+                   {"seq", "frame", "t_ns", "t_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw", "sigma_m",
+                    "odom_status", "imu_samples", "decoded", "status", "reason"});
+  std::vector<std::string> timing_columns = {"seq", "frame"};
+  for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
+  timing_columns.emplace_back("latency_ms");
+  timing_columns.emplace_back("total_ms");
+  timing_csv_.open(out_dir_ / "timing.csv", timing_columns);
+  trajectory_.open(out_dir_ / "trajectory.tum");
+}
+
+void PipelineRun::produce(tbb::flow::queue_node<FramePtr>& queue, RunResult& result) {
+  const int max_in_flight = config_.run.max_in_flight;
+  const Timestamp t_first_ns = dataset_.frame_t_ns(first_frame_);
+  const std::int64_t producer_start_ns = now_ns();
+  const auto stop_requested = [&] { return (stop_ && stop_->load()) || failed_.load(); };
+  std::uint64_t next_seq = 0;
+  for (std::size_t frame = first_frame_; frame < last_frame_; ++frame) {
+    if (stop_requested()) break;
+    const Timestamp t_ns = dataset_.frame_t_ns(frame);
+    std::int64_t deadline_ns = 0;
+    bool released = false;
+    if (rate_) {
+      // Release on the replay clock; sleep in short slices so that a stop request is seen quickly.
+      const auto release_ns =
+          producer_start_ns + static_cast<std::int64_t>(static_cast<double>(t_ns - t_first_ns) / *rate_);
+      while (!stop_requested() && now_ns() < release_ns) {
+        std::this_thread::sleep_for(
+            std::min<std::chrono::nanoseconds>(std::chrono::nanoseconds(release_ns - now_ns()), kPollPeriod));
+      }
+      if (stop_requested()) break;
+      ++result.frames_in;
+      released = true;
+      {
+        std::lock_guard lock(flight_mutex_);
+        if (in_flight_ >= max_in_flight) {
+          ++result.frames_dropped;
+          continue;  // dropped before it gets a sequence number
+        }
+      }
+      double budget_ns = config_.run.deadline_ms * 1e6;
+      if (budget_ns <= 0) {
+        const Timestamp next_t_ns =
+            frame + 1 < dataset_.frame_count() ? dataset_.frame_t_ns(frame + 1) : t_ns;
+        const Timestamp prev_t_ns = frame > 0 ? dataset_.frame_t_ns(frame - 1) : t_ns;
+        const Timestamp period_ns = next_t_ns > t_ns ? next_t_ns - t_ns : t_ns - prev_t_ns;
+        budget_ns = static_cast<double>(period_ns) / *rate_;
+      }
+      deadline_ns = now_ns() + static_cast<std::int64_t>(budget_ns);
+    } else {
+      std::unique_lock lock(flight_mutex_);
+      while (in_flight_ >= max_in_flight && !stop_requested()) flight_cv_.wait_for(lock, kPollPeriod);
+      if (stop_requested()) break;
+    }
+    FrameRecord* record = nullptr;
+    {
+      auto owned = std::make_unique<FrameRecord>();
+      record = owned.get();
+      std::lock_guard lock(live_mutex_);
+      live_.emplace(next_seq, std::move(owned));
+    }
+    record->seq = next_seq++;
+    record->frame = frame;
+    record->t_ns = t_ns;
+    record->release_ns = now_ns();
+    record->deadline_ns = deadline_ns;
+    record->release();
+    {
+      std::lock_guard lock(flight_mutex_);
+      ++in_flight_;
+    }
+    if (!released) ++result.frames_in;
+    queue.try_put(FrameMsg{record->seq, record});
+  }
+  result.interrupted = stop_ && stop_->load();
+}
+
+RunResult PipelineRun::run() {
+  RunResult result;
+  open_outputs();
+  const int threads = config_.run.threads;
+  spdlog::info("run: {} frames [{}, {}) of {} ({}), rate {}, {} worker threads, at most {} in flight",
+               last_frame_ - first_frame_, first_frame_, last_frame_, dataset_.root().string(),
+               dataset_.layout(), config_.run.rate, threads, config_.run.max_in_flight);
+
+  // `threads` workers run the nodes; the calling thread produces outside the arena and joins it to drain.
+  tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
+                                  static_cast<std::size_t>(threads) + 1);
+  tbb::task_arena arena(threads + 1, 1);
+  arena.initialize();
+  WorkerExitObserver workers(arena);
+  using namespace tbb::flow;
+  std::unique_ptr<graph> g;
+  std::unique_ptr<queue_node<FramePtr>> queue;
+  std::unique_ptr<limiter_node<FramePtr, int>> limiter;
+  const auto seq_of = [](const FramePtr& message) { return static_cast<std::size_t>(message.seq); };
+  std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_out;
+  std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry;
+  std::unique_ptr<function_node<FramePtr, int>> sink;
+  arena.execute([&] {
+    g = std::make_unique<graph>();
+    queue = std::make_unique<queue_node<FramePtr>>(*g);
+    limiter = std::make_unique<limiter_node<FramePtr, int>>(
+        *g, static_cast<std::size_t>(config_.run.max_in_flight));
+    seq_in = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
+    seq_decoded = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
+    seq_out = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
+    sync = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, serial, node_body(kSync, [this](FrameRecord& r) { stage_sync(r); }));
+    decode = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, unlimited, node_body(kDecode, [this](FrameRecord& r) { stage_decode(r); }));
+    odometry = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, serial, node_body(kOdometry, [this](FrameRecord& r) { stage_odometry(r); }));
+    sink = std::make_unique<function_node<FramePtr, int>>(*g, serial, [this](FramePtr message) -> int {
+      FrameRecord& r = *message.record;
+      r.acquire();
+      r.stamps[kSink].enter_ns = now_ns();
+      r.stamps[kSink].thread = thread_index();
+      try {
+        stage_sink(r);
+      } catch (const std::exception& e) {
+        record_failure(kSink, r, e.what());
+        throw;
+      }
+      std::lock_guard lock(live_mutex_);
+      live_.erase(r.seq);
+      return 1;
+    });
+    make_edge(*queue, *limiter);
+    make_edge(*limiter, *seq_in);
+    make_edge(*seq_in, *sync);
+    make_edge(*sync, *decode);
+    make_edge(*decode, *seq_decoded);
+    make_edge(*seq_decoded, *odometry);
+    make_edge(*odometry, *seq_out);
+    make_edge(*seq_out, *sink);
+    make_edge(*sink, limiter->decrementer());
+  });
+
+  const double cpu_start_s = cpu_seconds();
+  start_ = Clock::now();
+  produce(*queue, result);
+  try {
+    g->wait_for_all();
+  } catch (const std::exception& e) {
+    std::lock_guard lock(failure_mutex_);
+    if (!failed_.load()) {
+      failure_ = e.what();
+      failed_.store(true);
+    }
+  }
+  result.wall_s = 1e-9 * static_cast<double>(now_ns());
+  result.cpu_s = cpu_seconds() - cpu_start_s;
+  if (!workers.wait_until_all_left(kWorkerLeaveTimeout)) {
+    spdlog::debug("run: TBB workers still in the arena at teardown");
+  }
+  result.peak_rss_mb = peak_rss_mb();
+  {
+    std::lock_guard lock(failure_mutex_);
+    result.failed = failed_.load();
+    result.error = failure_;
+  }
+
+  std::lock_guard lock(sink_mutex_);
+  if (show_progress_) show_progress(true);
+  frames_csv_.close();
+  timing_csv_.close();
+  trajectory_.close();
+  result.frames_processed = processed_;
+  result.deadline_misses = deadline_misses_;
+  result.frames_ok = frames_ok_;
+  result.frames_warning = frames_warning_;
+  result.frames_error = frames_error_;
+  result.data_s = have_first_t_ ? ns_to_s(last_t_ns_ - first_t_ns_) : 0.0;
+  result.realtime_factor = result.wall_s > 0 ? result.data_s / result.wall_s : 0.0;
+  result.profile_table =
+      profiler_.table(result.wall_s) +
+      fmt::format(
+          "cpu {:.2f} s / wall {:.2f} s = {:.2f} cores busy; {} frames in, {} processed, "
+          "{} dropped, {} deadline misses; real-time factor {:.2f}\n",
+          result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
+          result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
+          result.realtime_factor);
+  result.summary = make_summary(result);
+  write_json_file(out_dir_ / "summary.json", result.summary);
+  if (config_.output.trace) {
+    trace_.name_thread(0, "producer");
+    for (int t = 1; t <= threads + 1; ++t) trace_.name_thread(t, fmt::format("thread {}", t));
+    trace_.write(out_dir_ / "trace.json");
+  }
+  if (result.failed) spdlog::error("run failed: {}", result.error);
+  return result;
+}
+
+nlohmann::json PipelineRun::make_summary(const RunResult& result) {
+  PipelineConfig echo = config_;
+  nlohmann::json issues = nlohmann::json::array();
+  for (const auto& issue : dataset_.issues()) {
+    if (issues.size() >= kMaxListedProblems) break;
+    issues.push_back(issue.file.string() + (issue.line ? ":" + std::to_string(issue.line) : "") + ": " +
+                     issue.message);
+  }
+  std::size_t imu_anomalies_total = 0;
+  if (synchronizer_) imu_anomalies_total = synchronizer_->anomalies().size();
+  return {
+      {"config", config_to_json(echo)},
+      {"dataset",
+       {{"root", dataset_.root().string()},
+        {"layout", dataset_.layout()},
+        {"frame_count", dataset_.frame_count()},
+        {"first_frame", first_frame_},
+        {"last_frame", last_frame_},
+        {"has_images", dataset_.has_images()},
+        {"has_imu", dataset_.has_imu()},
+        {"has_ground_truth", dataset_.has_ground_truth()}}},
+      {"frames_in", result.frames_in},
+      {"frames_processed", result.frames_processed},
+      {"frames_dropped", result.frames_dropped},
+      {"deadline_misses", result.deadline_misses},
+      {"wall_s", result.wall_s},
+      {"data_s", result.data_s},
+      {"realtime_factor", result.realtime_factor},
+      {"throughput_fps",
+       result.wall_s > 0 ? static_cast<double>(result.frames_processed) / result.wall_s : 0.0},
+      {"cpu_s", result.cpu_s},
+      {"cpu_wall_ratio", result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0},
+      {"peak_rss_mb", result.peak_rss_mb},
+      {"threads", config_.run.threads},
+      {"interrupted", result.interrupted},
+      {"failed", result.failed},
+      {"error", result.error},
+      {"counts",
+       {{"frames_ok", result.frames_ok},
+        {"frames_warning", result.frames_warning},
+        {"frames_error", result.frames_error},
+        {"decoded", decoded_},
+        {"odometry_lost", odometry_lost_}}},
+      {"stages", profiler_.to_json()},
+      {"data_issues",
+       {{"dataset_issue_count", dataset_.issues().size()},
+        {"dataset_issues", issues},
+        {"image_errors", image_errors_},
+        {"imu_gaps", imu_gaps_},
+        {"imu_out_of_order", imu_out_of_order_},
+        {"imu_duplicates", imu_duplicates_},
+        {"imu_missing_frames", imu_missing_frames_},
+        {"imu_anomalies_in_stream", imu_anomalies_total},
+        {"frames_with_issues", problem_frame_count_},
+        {"frames", problem_frames_}}},
+  };
+}
+
+}  // namespace
+
+RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
+                       const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
+  config.validate();
+  if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
+  PipelineRun run(config, dataset, out_dir, stop);
+  return run.run();
+}
+
+}  // namespace loopgate

@@ -1,0 +1,95 @@
+#include "stages/odometry/drift_odometry.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <stdexcept>
+
+namespace loopgate {
+
+namespace {
+Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
+  return m;
+}
+}  // namespace
+
+Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions) {
+  if (positions.size() < 3) throw std::invalid_argument("plane_normal: fewer than 3 positions");
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : positions) mean += p;
+  mean /= static_cast<double>(positions.size());
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const auto& p : positions) scatter += (p - mean) * (p - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
+  Eigen::Vector3d normal = solver.eigenvectors().col(0);  // smallest eigenvalue first
+  Eigen::Index largest = 0;
+  normal.cwiseAbs().maxCoeff(&largest);
+  if (normal[largest] < 0) normal = -normal;
+  return normal;
+}
+
+DriftOdometry::DriftOdometry(const OdometryConfig& config, const Eigen::Vector3d& axis_w)
+    : config_(config), axis_w_(axis_w.normalized()), rng_(static_cast<std::uint64_t>(config.seed)) {}
+
+OdometryOutput DriftOdometry::process(const OdometryInput& input) {
+  OdometryOutput out;
+  out.pose.t_ns = input.t_ns;
+  if (!input.T_w_b_true) {
+    // No truth at this frame: hold the last estimate (never a made-up pose), report lost.
+    out.pose.T_w_b = estimate_T_w_b_;
+    out.pose.cov = last_cov_;
+    out.pose.status = OdometryStatus::kLost;
+    out.reason = "no ground truth at this frame";
+    return out;
+  }
+  const Eigen::Isometry3d& T_true = *input.T_w_b_true;
+  if (!initialised_) {
+    initialised_ = true;
+    estimate_T_w_b_ = T_true;
+  } else {
+    const Eigen::Vector3d delta_p = T_true.translation() - last_true_T_w_b_.translation();
+    const double d_m = delta_p.norm();
+    const double sqrt_d = std::sqrt(d_m);
+    distance_m_ += d_m;
+    // Random walks.
+    psi_rad_ += config_.drift_heading_sigma_rad_per_sqrt_m * sqrt_d * normal_(rng_);
+    scale_ += config_.drift_scale_sigma_per_sqrt_m * sqrt_d * normal_(rng_);
+    const Eigen::Vector3d noise_p(normal_(rng_), normal_(rng_), normal_(rng_));
+    const Eigen::Matrix3d R_drift = Eigen::AngleAxisd(psi_rad_, axis_w_).toRotationMatrix();
+    estimate_T_w_b_.translation() +=
+        (1.0 + scale_) * (R_drift * delta_p) + config_.drift_position_sigma_m_per_sqrt_m * sqrt_d * noise_p;
+    // Covariance of the same model, linearised.
+    const double var_psi_step = std::pow(config_.drift_heading_sigma_rad_per_sqrt_m, 2) * d_m;
+    const double var_s_step = std::pow(config_.drift_scale_sigma_per_sqrt_m, 2) * d_m;
+    const double var_p_step = std::pow(config_.drift_position_sigma_m_per_sqrt_m, 2) * d_m;
+    cov_(3, 3) += var_psi_step;
+    cov_(4, 4) += var_s_step;
+    Eigen::Matrix<double, 5, 5> F = Eigen::Matrix<double, 5, 5>::Identity();
+    F.block<3, 1>(0, 3) = skew(axis_w_) * delta_p;
+    F.block<3, 1>(0, 4) = delta_p;
+    cov_ = F * cov_ * F.transpose();
+    cov_.topLeftCorner<3, 3>() += var_p_step * Eigen::Matrix3d::Identity();
+    cov_ = 0.5 * (cov_ + cov_.transpose());
+  }
+  last_true_T_w_b_ = T_true;
+  const Eigen::Matrix3d R_drift = Eigen::AngleAxisd(psi_rad_, axis_w_).toRotationMatrix();
+  estimate_T_w_b_.linear() = R_drift * T_true.rotation();
+
+  const Eigen::Vector3d axis_b = T_true.rotation().transpose() * axis_w_;
+  Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+  cov.topLeftCorner<3, 3>() =
+      cov_.topLeftCorner<3, 3>() + std::pow(config_.initial_sigma_m, 2) * Eigen::Matrix3d::Identity();
+  cov.bottomRightCorner<3, 3>() = cov_(3, 3) * axis_b * axis_b.transpose() +
+                                  std::pow(config_.initial_sigma_rad, 2) * Eigen::Matrix3d::Identity();
+  cov.topRightCorner<3, 3>() = cov_.block<3, 1>(0, 3) * axis_b.transpose();
+  cov.bottomLeftCorner<3, 3>() = cov.topRightCorner<3, 3>().transpose();
+  last_cov_ = cov;
+
+  out.pose.T_w_b = estimate_T_w_b_;
+  out.pose.cov = cov;
+  out.pose.status = OdometryStatus::kTracking;
+  return out;
+}
+
+}  // namespace loopgate

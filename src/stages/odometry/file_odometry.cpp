@@ -1,0 +1,70 @@
+#include "stages/odometry/file_odometry.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+
+namespace loopgate {
+
+FileOdometry::FileOdometry(const OdometryConfig& config, std::vector<StampedPose> poses)
+    : config_(config), poses_(std::move(poses)) {
+  if (poses_.empty()) throw std::invalid_argument("FileOdometry: empty trajectory");
+  cumulative_m_.resize(poses_.size(), 0.0);
+  for (std::size_t i = 1; i < poses_.size(); ++i) {
+    cumulative_m_[i] =
+        cumulative_m_[i - 1] + (poses_[i].T_w_b.translation() - poses_[i - 1].T_w_b.translation()).norm();
+  }
+}
+
+double FileOdometry::distance_at(Timestamp t_ns) const {
+  if (t_ns <= poses_.front().t_ns) return 0.0;
+  if (t_ns >= poses_.back().t_ns) return cumulative_m_.back();
+  const auto it = std::upper_bound(poses_.begin(), poses_.end(), t_ns,
+                                   [](Timestamp t, const StampedPose& p) { return t < p.t_ns; });
+  const std::size_t b = static_cast<std::size_t>(it - poses_.begin());
+  const std::size_t a = b - 1;
+  const double alpha =
+      static_cast<double>(t_ns - poses_[a].t_ns) / static_cast<double>(poses_[b].t_ns - poses_[a].t_ns);
+  return cumulative_m_[a] + alpha * (cumulative_m_[b] - cumulative_m_[a]);
+}
+
+OdometryOutput FileOdometry::process(const OdometryInput& input) {
+  OdometryOutput out;
+  const Timestamp t_ns = input.t_ns;
+  out.pose.t_ns = t_ns;
+  const auto max_gap_ns = static_cast<Timestamp>(config_.file_max_gap_s * 1e9);
+  const auto it = std::upper_bound(poses_.begin(), poses_.end(), t_ns,
+                                   [](Timestamp t, const StampedPose& p) { return t < p.t_ns; });
+  bool lost = false;
+  if (it == poses_.begin() || it == poses_.end()) {
+    // Outside the trajectory's span: the nearest end, lost unless it is the exact last pose.
+    const StampedPose& nearest = it == poses_.begin() ? poses_.front() : poses_.back();
+    out.pose.T_w_b = nearest.T_w_b;
+    lost = nearest.t_ns != t_ns;
+    if (lost) out.reason = "frame time outside the trajectory file's span";
+  } else {
+    const StampedPose& a = *(it - 1);
+    const StampedPose& b = *it;
+    const double alpha = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
+    out.pose.T_w_b.translation() = (1.0 - alpha) * a.T_w_b.translation() + alpha * b.T_w_b.translation();
+    out.pose.T_w_b.linear() = Eigen::Quaterniond(a.T_w_b.rotation())
+                                  .slerp(alpha, Eigen::Quaterniond(b.T_w_b.rotation()))
+                                  .normalized()
+                                  .toRotationMatrix();
+    out.pose.v_w_mps = (b.T_w_b.translation() - a.T_w_b.translation()) / ns_to_s(b.t_ns - a.t_ns);
+    out.pose.has_velocity = true;
+    if (std::min(t_ns - a.t_ns, b.t_ns - t_ns) > max_gap_ns) {
+      lost = true;
+      out.reason = "trajectory file has no pose within file_max_gap_s of the frame";
+    }
+  }
+  const double d_m = distance_at(t_ns);
+  out.pose.cov.topLeftCorner<3, 3>() =
+      (config_.file_sigma2_a_m2 + config_.file_sigma2_b_m2_per_m * d_m) * Eigen::Matrix3d::Identity();
+  out.pose.cov.bottomRightCorner<3, 3>() =
+      (config_.file_rot_sigma2_a_rad2 + config_.file_rot_sigma2_b_rad2_per_m * d_m) *
+      Eigen::Matrix3d::Identity();
+  out.pose.status = lost ? OdometryStatus::kLost : OdometryStatus::kTracking;
+  return out;
+}
+
+}  // namespace loopgate

@@ -1,0 +1,249 @@
+// End-to-end tests of `loopgate run`: the real binary on generated KITTI-layout data, on a small
+// simulated demo, and on the shared KITTI 00 thumbnails (skipped when absent).
+#include <fcntl.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+#include <thread>
+
+#include "test_support.hpp"
+
+extern char** environ;
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string read_file(const fs::path& file) {
+  std::ifstream in(file);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+std::vector<std::vector<std::string>> read_csv(const fs::path& file) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(read_file(file));
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells(1);
+    bool quoted = false;
+    for (const char c : line) {
+      if (c == '"') {
+        quoted = !quoted;
+      } else if (c == ',' && !quoted) {
+        cells.emplace_back();
+      } else {
+        cells.back() += c;
+      }
+    }
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+// A KITTI-layout dataset: image_0/NNNNNN.png (64 x 32 textured), times.txt (10 Hz), poses.txt (a drive
+// along z). Frames in `corrupt` get a file that is not a PNG.
+fs::path make_kitti_dataset(int frames, const std::vector<int>& corrupt = {}) {
+  const fs::path dir = testing::make_temp_dir("e2e-kitti");
+  fs::create_directories(dir / "image_0");
+  std::ofstream times(dir / "times.txt");
+  std::ofstream poses(dir / "poses.txt");
+  for (int i = 0; i < frames; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%06d.png", i);
+    if (std::find(corrupt.begin(), corrupt.end(), i) != corrupt.end()) {
+      std::ofstream(dir / "image_0" / name) << "this is not a png";
+    } else {
+      cv::Mat image(32, 64, CV_8UC1);
+      for (int r = 0; r < image.rows; ++r) {
+        for (int c = 0; c < image.cols; ++c)
+          image.at<std::uint8_t>(r, c) = static_cast<std::uint8_t>((r * 9 + c * 5 + i) % 200);
+      }
+      cv::imwrite((dir / "image_0" / name).string(), image);
+    }
+    times << std::scientific << 0.1 * i << "\n";
+    poses << "1 0 0 " << 0.05 * std::sin(0.1 * i) << " 0 1 0 0 0 0 1 " << 1.0 * i << "\n";
+  }
+  return dir;
+}
+
+std::string run(const std::string& args, int* status) {
+  std::string output;
+  *status = testing::run_command(testing::loopgate_binary().string() + " " + args, &output);
+  return output;
+}
+
+TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
+  const fs::path dataset = make_kitti_dataset(60, {25});
+  const fs::path out = testing::make_temp_dir("e2e-run-out");
+  int status = -1;
+  const std::string output =
+      run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
+              dataset.string() + " --out " + out.string() + " --set run.decode=all --threads 2 --trace",
+          &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 60u) << output;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    EXPECT_EQ(rows[i][0], std::to_string(i));
+    EXPECT_EQ(rows[i][1], std::to_string(i));
+    EXPECT_EQ(rows[i][15], i == 25 ? "error" : "ok") << i << ": " << rows[i][16];
+  }
+  EXPECT_NE(rows[25][16].find("000025.png"), std::string::npos) << rows[25][16];
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["frames_in"].get<int>(), 60);
+  EXPECT_EQ(summary["frames_processed"].get<int>(), 60);
+  EXPECT_EQ(summary["frames_dropped"].get<int>(), 0);
+  EXPECT_EQ(summary["counts"]["frames_error"].get<int>(), 1);
+  EXPECT_EQ(summary["data_issues"]["image_errors"].get<int>(), 1);
+  EXPECT_EQ(summary["config"]["run"]["decode"].get<std::string>(), "all");
+  EXPECT_NEAR(summary["data_s"].get<double>(), 5.9, 1e-6);
+  for (const char* stage : {"sync", "decode", "odometry", "sink"}) {
+    EXPECT_EQ(summary["stages"][stage]["calls"].get<int>(), 60) << stage;
+  }
+  EXPECT_EQ(read_csv(out / "timing.csv").size(), 60u);
+  EXPECT_TRUE(nlohmann::json::parse(read_file(out / "trace.json")).contains("traceEvents"));
+  EXPECT_NE(output.find("p99 ms"), std::string::npos) << "profiler table on stderr";
+}
+
+TEST(E2eRun, ConfigErrorsNameTheKey) {
+  const fs::path dataset = make_kitti_dataset(3);
+  const fs::path out = testing::make_temp_dir("e2e-run-bad");
+  int status = -1;
+  std::string output = run(
+      "run --dataset " + dataset.string() + " --out " + out.string() + " --set odometry.sigma=1", &status);
+  EXPECT_EQ(status, 1);
+  EXPECT_NE(output.find("unknown key 'odometry.sigma'"), std::string::npos) << output;
+  output = run("run --dataset " + dataset.string() + " --out " + out.string() + " --rate fast", &status);
+  EXPECT_EQ(status, 1);
+  EXPECT_NE(output.find("run.rate"), std::string::npos) << output;
+}
+
+TEST(E2eRun, SigintDrainsWritesOutputsAndExits130) {
+  const fs::path dataset = make_kitti_dataset(100);  // 10 s of data, replayed in real time
+  const fs::path out = testing::make_temp_dir("e2e-run-int");
+  const std::string binary = testing::loopgate_binary().string();
+  std::vector<std::string> args = {
+      binary,       "run",    "--dataset", dataset.string(), "--out",
+      out.string(), "--rate", "1.0",       "--set",          "odometry.heading_axis=y"};
+  std::vector<char*> argv;
+  for (auto& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, "/dev/null", O_WRONLY, 0);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, binary.c_str(), &actions, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&actions);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));
+  ASSERT_EQ(::kill(pid, SIGINT), 0);
+  int wstatus = 0;
+  ASSERT_EQ(::waitpid(pid, &wstatus, 0), pid);
+  ASSERT_TRUE(WIFEXITED(wstatus));
+  EXPECT_EQ(WEXITSTATUS(wstatus), 130);
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+  const int processed = summary["frames_processed"].get<int>();
+  EXPECT_GT(processed, 0);
+  EXPECT_LT(processed, 100);
+  EXPECT_EQ(summary["frames_in"].get<int>(), processed);
+  EXPECT_EQ(read_csv(out / "frames.csv").size(), static_cast<std::size_t>(processed));
+  EXPECT_EQ(read_csv(out / "timing.csv").size(), static_cast<std::size_t>(processed));
+}
+
+TEST(E2eRun, SimulatedDemoWithImu) {
+  const fs::path sim = testing::make_temp_dir("e2e-run-sim");
+  int status = -1;
+  std::string output = run("simulate --preset demo --frames 30 --force --out " + sim.string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  const fs::path out = testing::make_temp_dir("e2e-run-sim-out");
+  output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+                   sim.string() + " --out " + out.string() + " --set run.decode=all",
+               &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 30u);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    EXPECT_EQ(rows[i][1], std::to_string(i));
+    EXPECT_EQ(rows[i][15], "ok") << rows[i][16];
+    EXPECT_EQ(rows[i][14], "y");
+    if (i > 0) {
+      EXPECT_GE(std::stoi(rows[i][13]), 2);  // IMU samples between consecutive images
+    }
+  }
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["frames_processed"].get<int>(), 30);
+  EXPECT_TRUE(summary["dataset"]["has_imu"].get<bool>());
+
+  // Damage the IMU file: drop 60 rows (0.3 s at 200 Hz) in the middle and cut the last line in half.
+  const fs::path imu_csv = sim / "mav0" / "imu0" / "data.csv";
+  std::istringstream original(read_file(imu_csv));
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(original, line);) lines.push_back(line);
+  ASSERT_GT(lines.size(), 500u);
+  std::ofstream damaged(imu_csv, std::ios::trunc);
+  for (std::size_t i = 0; i + 1 < lines.size(); ++i) {
+    if (i < 300 || i >= 360) damaged << lines[i] << "\n";
+  }
+  damaged << lines.back().substr(0, lines.back().size() / 2);
+  damaged.close();
+  const fs::path out2 = testing::make_temp_dir("e2e-run-sim-bad");
+  output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+                   sim.string() + " --out " + out2.string(),
+               &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto rows2 = read_csv(out2 / "frames.csv");
+  ASSERT_EQ(rows2.size(), 30u);
+  int gap_frames = 0;
+  for (const auto& row : rows2) {
+    if (row[16].find("IMU gap") != std::string::npos) {
+      ++gap_frames;
+      EXPECT_EQ(row[15], "warning");
+    }
+  }
+  EXPECT_GE(gap_frames, 3);  // a 0.3 s gap overlaps at least 3 frame intervals of 0.1 s
+  const auto summary2 = nlohmann::json::parse(read_file(out2 / "summary.json"));
+  EXPECT_EQ(summary2["data_issues"]["imu_gaps"].get<int>(), gap_frames);
+  EXPECT_GE(summary2["data_issues"]["dataset_issue_count"].get<int>(), 1) << summary2["data_issues"].dump();
+  EXPECT_EQ(summary2["frames_processed"].get<int>(), 30);
+}
+
+TEST(E2eRun, KittiThumbsEveryFrameOnceInOrder) {
+  LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs");
+  const fs::path out = testing::make_temp_dir("e2e-run-thumbs");
+  int status = -1;
+  const std::string output =
+      run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
+              (testing::shared_data_dir() / "kitti/00/thumbs").string() + " --out " + out.string() +
+              " --set run.decode=all",
+          &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 4540u);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    ASSERT_EQ(rows[i][0], std::to_string(i));
+    ASSERT_EQ(rows[i][1], std::to_string(i));
+    ASSERT_EQ(rows[i][15], "ok");
+  }
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["frames_in"].get<int>(), 4540);
+  EXPECT_EQ(summary["frames_processed"].get<int>() + summary["frames_dropped"].get<int>(),
+            summary["frames_in"].get<int>());
+  EXPECT_GT(summary["realtime_factor"].get<double>(), 0.0);
+}
+
+}  // namespace
+}  // namespace loopgate

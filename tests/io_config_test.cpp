@@ -1,0 +1,184 @@
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "io/config.hpp"
+#include "io/writers.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+struct AlphaSection {
+  bool enabled = false;
+  int count = 3;
+  std::int64_t seed = 7;
+  double gain = 1.5;
+  std::string mode = "fast";
+
+  template <class V>
+  void visit(V&& v) {
+    v("enabled", enabled);
+    v("count", count);
+    v("seed", seed);
+    v("gain", gain);
+    v("mode", mode);
+  }
+  void validate() const {
+    require_one_of("alpha.mode", mode, {"fast", "slow"});
+    require(count >= 0, "alpha.count", ">= 0", std::to_string(count));
+  }
+};
+
+struct BetaSection {
+  double sigma_m = 0.25;
+  template <class V>
+  void visit(V&& v) {
+    v("sigma_m", sigma_m);
+  }
+  void validate() const {}
+};
+
+struct TestConfig {
+  AlphaSection alpha;
+  BetaSection beta;
+  template <class V>
+  void visit_sections(V&& v) {
+    v("alpha", alpha);
+    v("beta", beta);
+  }
+};
+
+TestConfig from_yaml(const std::string& text, const std::vector<std::string>& overrides = {}) {
+  RawConfig raw = RawConfig::from_yaml_string(text, "test.yaml");
+  for (const auto& o : overrides) raw.apply_override(o);
+  TestConfig config;
+  apply_config(raw, config);
+  return config;
+}
+
+std::string error_of(const std::string& text, const std::vector<std::string>& overrides = {}) {
+  try {
+    from_yaml(text, overrides);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(IoConfig, DefaultsWhenEmpty) {
+  const TestConfig config = from_yaml("");
+  EXPECT_FALSE(config.alpha.enabled);
+  EXPECT_EQ(config.alpha.count, 3);
+  EXPECT_DOUBLE_EQ(config.beta.sigma_m, 0.25);
+}
+
+TEST(IoConfig, LoadsEveryType) {
+  const TestConfig config = from_yaml(
+      "alpha:\n  enabled: true\n  count: 12\n  seed: 12345678901\n  gain: -2.5e-3\n  mode: slow\n"
+      "beta:\n  sigma_m: 4\n");
+  EXPECT_TRUE(config.alpha.enabled);
+  EXPECT_EQ(config.alpha.count, 12);
+  EXPECT_EQ(config.alpha.seed, 12345678901LL);
+  EXPECT_DOUBLE_EQ(config.alpha.gain, -2.5e-3);
+  EXPECT_EQ(config.alpha.mode, "slow");
+  EXPECT_DOUBLE_EQ(config.beta.sigma_m, 4.0);
+}
+
+TEST(IoConfig, UnknownKeyIsNamedWithLine) {
+  const std::string error = error_of("alpha:\n  count: 2\n  cuont: 3\n");
+  EXPECT_NE(error.find("unknown key 'alpha.cuont'"), std::string::npos) << error;
+  EXPECT_NE(error.find("test.yaml:3"), std::string::npos) << error;
+  EXPECT_NE(error.find("count"), std::string::npos) << error;
+}
+
+TEST(IoConfig, UnknownSectionIsNamed) {
+  const std::string error = error_of("gamma:\n  x: 1\n");
+  EXPECT_NE(error.find("unknown section 'gamma'"), std::string::npos) << error;
+  EXPECT_NE(error.find("alpha, beta"), std::string::npos) << error;
+}
+
+TEST(IoConfig, WrongTypeNamesKeyAndType) {
+  std::string error = error_of("alpha:\n  count: 2.5\n");
+  EXPECT_NE(error.find("alpha.count: expected an integer (int), got '2.5'"), std::string::npos) << error;
+  error = error_of("beta:\n  sigma_m: abc\n");
+  EXPECT_NE(error.find("beta.sigma_m: expected a finite number (double)"), std::string::npos) << error;
+  error = error_of("alpha:\n  enabled: maybe\n");
+  EXPECT_NE(error.find("alpha.enabled: expected a bool"), std::string::npos) << error;
+  error = error_of("alpha:\n  count: [1, 2]\n");
+  EXPECT_NE(error.find("alpha.count: expected a scalar"), std::string::npos) << error;
+  error = error_of("alpha:\n  count: 99999999999\n");
+  EXPECT_NE(error.find("alpha.count"), std::string::npos) << error;
+}
+
+TEST(IoConfig, ValidateNamesKeyAndAllowedValues) {
+  const std::string error = error_of("alpha:\n  mode: medium\n");
+  EXPECT_NE(error.find("alpha.mode: 'medium' is not one of fast|slow"), std::string::npos) << error;
+  EXPECT_NE(error_of("alpha:\n  count: -1\n").find("alpha.count: must be >= 0"), std::string::npos);
+}
+
+TEST(IoConfig, SetOverridesYamlInOrder) {
+  const TestConfig config = from_yaml(
+      "alpha:\n  count: 2\n", {"alpha.count=5", "beta.sigma_m = 0.5", "alpha.count=6", "alpha.mode=slow"});
+  EXPECT_EQ(config.alpha.count, 6);
+  EXPECT_DOUBLE_EQ(config.beta.sigma_m, 0.5);
+  EXPECT_EQ(config.alpha.mode, "slow");
+}
+
+TEST(IoConfig, SetErrors) {
+  EXPECT_NE(error_of("", {"alpha.nope=1"}).find("unknown key 'alpha.nope' (--set alpha.nope=1)"),
+            std::string::npos);
+  EXPECT_NE(error_of("", {"alphacount=1"}).find("expected section.key=value"), std::string::npos);
+  EXPECT_NE(error_of("", {"alpha.count"}).find("expected section.key=value"), std::string::npos);
+  EXPECT_NE(error_of("", {"alpha.count=x"}).find("alpha.count: expected an integer"), std::string::npos);
+}
+
+TEST(IoConfig, JsonEchoAndLinesKeepTypes) {
+  TestConfig config = from_yaml("alpha:\n  gain: 0.1\n");
+  const nlohmann::json json = config_to_json(config);
+  EXPECT_EQ(json["alpha"]["count"].get<int>(), 3);
+  EXPECT_TRUE(json["alpha"]["gain"].is_number_float());
+  EXPECT_DOUBLE_EQ(json["alpha"]["gain"].get<double>(), 0.1);
+  EXPECT_EQ(json["alpha"]["mode"].get<std::string>(), "fast");
+  EXPECT_FALSE(json["alpha"]["enabled"].get<bool>());
+  const auto lines = config_to_lines(config);
+  ASSERT_EQ(lines.size(), 6u);
+  EXPECT_EQ(lines[3], "alpha.gain = 0.1");
+  EXPECT_EQ(lines[4], "alpha.mode = 'fast'");
+}
+
+TEST(IoConfig, FileErrorsNameTheFile) {
+  const auto dir = testing::make_temp_dir("config");
+  EXPECT_THROW(load_config<TestConfig>(dir / "absent.yaml"), ConfigError);
+  { std::ofstream(dir / "bad.yaml") << "alpha:\n  count: [1,\n"; }
+  try {
+    load_config<TestConfig>(dir / "bad.yaml");
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.yaml"), std::string::npos) << e.what();
+  }
+  { std::ofstream(dir / "good.yaml") << "# comment\nbeta:\n  sigma_m: 2\n"; }
+  const TestConfig config = load_config<TestConfig>(dir / "good.yaml", {"alpha.seed=9"});
+  EXPECT_DOUBLE_EQ(config.beta.sigma_m, 2.0);
+  EXPECT_EQ(config.alpha.seed, 9);
+}
+
+TEST(IoWriters, CsvQuotesAndChecksWidth) {
+  const auto dir = testing::make_temp_dir("writers");
+  {
+    CsvWriter csv(dir / "a.csv", {"x", "y"});
+    csv.write_row({"1", "a,b"});
+    csv.write_row({"2", "say \"hi\""});
+    EXPECT_THROW(csv.write_row({"3"}), DataError);
+  }
+  std::ifstream in(dir / "a.csv");
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  const std::string content = buffer.str();
+  EXPECT_EQ(content, "x,y\n1,\"a,b\"\n2,\"say \"\"hi\"\"\"\n");
+  EXPECT_EQ(format_fixed(1.0 / 3.0, 3), "0.333");
+}
+
+}  // namespace
+}  // namespace loopgate

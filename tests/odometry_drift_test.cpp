@@ -1,0 +1,137 @@
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+
+#include "core/error.hpp"
+#include "stages/odometry/drift_odometry.hpp"
+
+namespace loopgate {
+namespace {
+
+// A planar drive on a circle of radius 50 m in the x-y plane (z up), 1 m per frame.
+Eigen::Isometry3d circle_pose(int k) {
+  const double radius_m = 50.0;
+  const double theta = static_cast<double>(k) / radius_m;
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(radius_m * std::sin(theta), radius_m * (1.0 - std::cos(theta)), 1.5);
+  T.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return T;
+}
+
+std::vector<PoseEstimate> run(const OdometryConfig& config, int frames) {
+  DriftOdometry odometry(config, Eigen::Vector3d::UnitZ());
+  std::vector<PoseEstimate> out;
+  for (int k = 0; k < frames; ++k) {
+    OdometryInput input;
+    input.frame = static_cast<std::size_t>(k);
+    input.t_ns = k * 100'000'000LL;
+    input.T_w_b_true = circle_pose(k);
+    out.push_back(odometry.process(input).pose);
+  }
+  return out;
+}
+
+TEST(OdometryDrift, DeterministicBySeed) {
+  OdometryConfig config;
+  const auto a = run(config, 200);
+  const auto b = run(config, 200);
+  config.seed = 2;
+  const auto c = run(config, 200);
+  ASSERT_EQ(a.size(), 200u);
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_TRUE(a[i].T_w_b.isApprox(b[i].T_w_b, 0.0));
+    EXPECT_EQ(a[i].cov, b[i].cov);
+  }
+  EXPECT_GT((a.back().T_w_b.translation() - c.back().T_w_b.translation()).norm(), 1e-6);
+  // The covariance does not depend on the seed (it follows the truth), the estimate does.
+  EXPECT_TRUE(a.back().cov.isApprox(c.back().cov, 1e-12));
+}
+
+TEST(OdometryDrift, StartsAtTruthAndDrifts) {
+  const auto poses = run(OdometryConfig{}, 300);
+  EXPECT_TRUE(poses[0].T_w_b.isApprox(circle_pose(0), 1e-12));
+  EXPECT_EQ(poses[0].status, OdometryStatus::kTracking);
+  const double error_m = (poses.back().T_w_b.translation() - circle_pose(299).translation()).norm();
+  EXPECT_GT(error_m, 1e-4);
+  EXPECT_LT(error_m, 10.0);
+}
+
+TEST(OdometryDrift, CovarianceGrowsWithDistance) {
+  const auto poses = run(OdometryConfig{}, 300);
+  double previous = -1;
+  for (const auto& pose : poses) {
+    const double trace = pose.position_cov_m2().trace();
+    EXPECT_GE(trace, previous);
+    previous = trace;
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> solver(pose.cov);
+    EXPECT_GT(solver.eigenvalues().minCoeff(), 0.0);  // positive definite thanks to the floors
+  }
+  EXPECT_GT(poses.back().position_cov_m2().trace(), 10.0 * poses[1].position_cov_m2().trace());
+  EXPECT_NEAR(poses[0].position_cov_m2().trace(), 3 * 0.01 * 0.01, 1e-15);
+}
+
+// The covariance matches the drift it describes: over many seeds, the mean squared position error is
+// the predicted trace (within Monte-Carlo noise), and the normalised error squared averages 3.
+TEST(OdometryDrift, CovarianceConsistentWithDriftMonteCarlo) {
+  OdometryConfig config;
+  config.drift_heading_sigma_rad_per_sqrt_m = 0.002;
+  config.drift_scale_sigma_per_sqrt_m = 0.003;
+  config.drift_position_sigma_m_per_sqrt_m = 0.02;
+  constexpr int kRuns = 300;
+  constexpr int kFrames = 150;
+  double sum_sq_m2 = 0;
+  double sum_nees = 0;
+  double predicted_m2 = 0;
+  for (int seed = 0; seed < kRuns; ++seed) {
+    config.seed = seed;
+    const auto poses = run(config, kFrames);
+    const Eigen::Vector3d error = poses.back().T_w_b.translation() - circle_pose(kFrames - 1).translation();
+    sum_sq_m2 += error.squaredNorm();
+    const Eigen::Matrix3d P = poses.back().position_cov_m2();
+    sum_nees += error.dot(P.ldlt().solve(error));
+    predicted_m2 = P.trace();
+  }
+  const double ratio = sum_sq_m2 / kRuns / predicted_m2;
+  EXPECT_GT(ratio, 0.8) << "mean squared error / predicted trace";
+  EXPECT_LT(ratio, 1.25);
+  EXPECT_NEAR(sum_nees / kRuns, 3.0, 0.6);
+}
+
+TEST(OdometryDrift, LostWithoutTruthHoldsLastEstimate) {
+  DriftOdometry odometry(OdometryConfig{}, Eigen::Vector3d::UnitZ());
+  OdometryInput input;
+  input.T_w_b_true = circle_pose(0);
+  const auto first = odometry.process(input);
+  input.T_w_b_true.reset();
+  input.t_ns = 1;
+  const auto lost = odometry.process(input);
+  EXPECT_EQ(lost.pose.status, OdometryStatus::kLost);
+  EXPECT_FALSE(lost.reason.empty());
+  EXPECT_TRUE(lost.pose.T_w_b.isApprox(first.pose.T_w_b, 0.0));
+}
+
+TEST(OdometryDrift, PlaneNormal) {
+  std::vector<Eigen::Vector3d> positions;
+  for (int k = 0; k < 100; ++k) positions.push_back(circle_pose(k).translation());
+  const Eigen::Vector3d n = plane_normal(positions);
+  EXPECT_NEAR(n.z(), 1.0, 1e-9);
+  // KITTI camera frames: the ground plane is x-z, the normal is y.
+  for (auto& p : positions) p = Eigen::Vector3d(p.x(), 0.01 * std::sin(p.x()), p.y());
+  EXPECT_NEAR(std::abs(plane_normal(positions).y()), 1.0, 1e-3);
+}
+
+TEST(OdometryDrift, ConfigValidation) {
+  OdometryConfig config;
+  config.source = "ekf2";
+  EXPECT_THROW(config.validate(), ConfigError);
+  config.source = "file";
+  EXPECT_THROW(config.validate(), ConfigError);  // no file
+  config.file = "traj.txt";
+  EXPECT_NO_THROW(config.validate());
+  config.drift_scale_sigma_per_sqrt_m = -1;
+  EXPECT_THROW(config.validate(), ConfigError);
+}
+
+}  // namespace
+}  // namespace loopgate

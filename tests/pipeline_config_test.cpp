@@ -1,0 +1,79 @@
+#include "pipeline/pipeline_config.hpp"
+
+#include <gtest/gtest.h>
+
+#include "core/error.hpp"
+#include "io/config.hpp"
+
+namespace loopgate {
+namespace {
+
+std::filesystem::path config_file(const std::string& name) {
+  return std::filesystem::path(LOOPGATE_SOURCE_DIR) / "configs" / (name + ".yaml");
+}
+
+std::string error_of(const std::vector<std::string>& overrides) {
+  try {
+    load_config<PipelineConfig>({}, overrides);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(PipelineConfig, ShippedConfigsLoad) {
+  for (const std::string name : {"demo", "kitti00-thumbs", "euroc-mh05", "kitti00"}) {
+    SCOPED_TRACE(name);
+    const auto config = load_config<PipelineConfig>(config_file(name));
+    EXPECT_FALSE(config.run.dataset.empty());
+    EXPECT_EQ(config.run.rate, "max");
+    EXPECT_EQ(config.run.threads, 2);
+  }
+  const auto thumbs = load_config<PipelineConfig>(config_file("kitti00-thumbs"));
+  EXPECT_EQ(thumbs.odometry.source, "drift");
+  EXPECT_EQ(thumbs.odometry.heading_axis, "y");
+  const auto mh05 = load_config<PipelineConfig>(config_file("euroc-mh05"));
+  EXPECT_EQ(mh05.odometry.source, "file");
+  EXPECT_DOUBLE_EQ(mh05.odometry.file_sigma2_b_m2_per_m, 0.002);
+}
+
+TEST(PipelineConfig, SetOverridesEverySection) {
+  const auto config = load_config<PipelineConfig>(
+      config_file("demo"),
+      {"run.rate=1.5", "sync.max_gap_ms=7.5", "odometry.seed=42", "output.trace=true", "run.frames=10:20"});
+  EXPECT_EQ(config.run.rate_factor(), 1.5);
+  EXPECT_DOUBLE_EQ(config.sync.max_gap_ms, 7.5);
+  EXPECT_EQ(config.odometry.seed, 42);
+  EXPECT_TRUE(config.output.trace);
+  EXPECT_EQ(config.run.frame_range(100), std::make_pair(std::size_t{10}, std::size_t{20}));
+  EXPECT_EQ(config.run.frame_range(15), std::make_pair(std::size_t{10}, std::size_t{15}));
+}
+
+TEST(PipelineConfig, BadValuesNameTheKey) {
+  EXPECT_NE(error_of({"run.rate=fast"}).find("run.rate: 'fast' is not 'max' or a positive number"),
+            std::string::npos);
+  EXPECT_NE(error_of({"run.rate=-1"}).find("run.rate"), std::string::npos);
+  EXPECT_NE(error_of({"run.threads=0"}).find("run.threads: must be in 1..256"), std::string::npos);
+  EXPECT_NE(error_of({"run.threads=two"}).find("run.threads: expected an integer"), std::string::npos);
+  EXPECT_NE(error_of({"run.decode=sometimes"}).find("run.decode: 'sometimes' is not one of lazy|all"),
+            std::string::npos);
+  EXPECT_NE(error_of({"run.frames=20:10"}).find("run.frames"), std::string::npos);
+  EXPECT_NE(error_of({"run.frames=a:b"}).find("run.frames"), std::string::npos);
+  EXPECT_NE(error_of({"odometry.source=ekf2"}).find("odometry.source: 'ekf2' is not one of drift|file"),
+            std::string::npos);
+  EXPECT_NE(error_of({"odometry.sorce=drift"}).find("unknown key 'odometry.sorce'"), std::string::npos);
+  EXPECT_NE(error_of({"gate.radius=1"}).find("unknown section 'gate'"), std::string::npos);
+  EXPECT_NE(error_of({"output.progress=maybe"}).find("output.progress"), std::string::npos);
+}
+
+TEST(PipelineConfig, EchoHasEverySection) {
+  PipelineConfig config;
+  const auto json = config_to_json(config);
+  for (const char* section : {"run", "sync", "odometry", "output"})
+    EXPECT_TRUE(json.contains(section)) << section;
+  EXPECT_EQ(json["run"]["rate"].get<std::string>(), "max");
+  EXPECT_EQ(json["odometry"]["seed"].get<std::int64_t>(), 1);
+}
+
+}  // namespace
+}  // namespace loopgate

@@ -1,0 +1,222 @@
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <fstream>
+#include <sstream>
+#include <thread>
+
+#include "pipeline/pipeline.hpp"
+#include "pipeline_fake_dataset.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+using testing::FakeDataset;
+
+std::string read_file(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+// Rows of a CSV (header removed), split on commas outside quotes.
+std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(read_file(file));
+  std::string line;
+  bool header = true;
+  while (std::getline(in, line)) {
+    if (header) {
+      header = false;
+      continue;
+    }
+    std::vector<std::string> cells(1);
+    bool quoted = false;
+    for (const char c : line) {
+      if (c == '"') {
+        quoted = !quoted;
+      } else if (c == ',' && !quoted) {
+        cells.emplace_back();
+      } else {
+        cells.back() += c;
+      }
+    }
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+PipelineConfig base_config(int threads = 2) {
+  PipelineConfig config;
+  config.run.threads = threads;
+  config.run.decode = "all";
+  config.output.progress = "off";
+  return config;
+}
+
+TEST(PipelineGraph, EveryFrameExactlyOnceInOrder) {
+  FakeDataset dataset(300);
+  const auto out = testing::make_temp_dir("pipeline-order");
+  PipelineConfig config = base_config();
+  config.output.trace = true;
+  const RunResult result = run_pipeline(config, dataset, out);
+  EXPECT_FALSE(result.failed) << result.error;
+  EXPECT_EQ(result.frames_in, 300u);
+  EXPECT_EQ(result.frames_processed, 300u);
+  EXPECT_EQ(result.frames_dropped, 0u);
+  EXPECT_EQ(result.frames_ok + result.frames_warning + result.frames_error, result.frames_processed);
+  EXPECT_EQ(result.frames_ok, 300u);
+
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 300u);
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    ASSERT_EQ(rows[i].size(), 17u);
+    EXPECT_EQ(rows[i][0], std::to_string(i));  // seq
+    EXPECT_EQ(rows[i][1], std::to_string(i));  // frame
+    EXPECT_EQ(rows[i][14], "y");               // decoded
+    EXPECT_EQ(rows[i][15], "ok");
+  }
+  // 100 ms between frames at 200 Hz: 21 samples (both ends interpolated) except the first frame.
+  EXPECT_EQ(rows[0][13], "1");
+  EXPECT_EQ(rows[1][13], "21");
+  EXPECT_EQ(read_csv(out / "timing.csv").size(), 300u);
+  EXPECT_EQ(read_csv(out / "trajectory.tum").size() + 1, 300u);  // read_csv drops the first line
+
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["frames_in"].get<int>(), 300);
+  EXPECT_EQ(summary["frames_processed"].get<int>(), 300);
+  EXPECT_EQ(summary["stages"]["decode"]["calls"].get<int>(), 300);
+  EXPECT_GT(summary["stages"]["decode"]["p50_ms"].get<double>(), 0.0);
+  EXPECT_EQ(summary["config"]["run"]["threads"].get<int>(), 2);
+  EXPECT_EQ(summary["counts"]["decoded"].get<int>(), 300);
+  EXPECT_NEAR(summary["data_s"].get<double>(), 29.9, 1e-9);
+  const auto trace = nlohmann::json::parse(read_file(out / "trace.json"));
+  EXPECT_GE(trace["traceEvents"].size(), 4u * 300u);
+  EXPECT_NE(result.profile_table.find("odometry"), std::string::npos);
+}
+
+TEST(PipelineGraph, OneAndTwoThreadsGiveIdenticalOutputs) {
+  FakeDataset dataset(200);
+  dataset.corrupt_frames = {17};
+  dataset.cut_imu(1'000'000'000 + 5'020'000'000LL, 1'000'000'000 + 5'300'000'000LL);
+  std::string frames[2], trajectory[2];
+  for (int threads = 1; threads <= 2; ++threads) {
+    const auto out = testing::make_temp_dir("pipeline-threads");
+    const RunResult result = run_pipeline(base_config(threads), dataset, out);
+    ASSERT_FALSE(result.failed) << result.error;
+    frames[threads - 1] = read_file(out / "frames.csv");
+    trajectory[threads - 1] = read_file(out / "trajectory.tum");
+  }
+  EXPECT_GT(frames[0].size(), 1000u);
+  EXPECT_EQ(frames[0], frames[1]);
+  EXPECT_EQ(trajectory[0], trajectory[1]);
+}
+
+TEST(PipelineGraph, BadInputReportedPerFrameAndRunCompletes) {
+  FakeDataset dataset(100);
+  dataset.corrupt_frames = {40};
+  // No IMU between 3.02 s and 3.3 s (frames at 1.0 + 0.1 k s): frames 21, 22, 23 overlap the gap.
+  dataset.cut_imu(3'020'000'000LL, 3'300'000'000LL);
+  dataset.add_issue("truncated last line");
+  const auto out = testing::make_temp_dir("pipeline-bad");
+  const RunResult result = run_pipeline(base_config(), dataset, out);
+  EXPECT_FALSE(result.failed) << result.error;
+  EXPECT_EQ(result.frames_processed, 100u);
+  EXPECT_EQ(result.frames_error, 1u);
+  EXPECT_EQ(result.frames_warning, 3u);
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 100u);
+  EXPECT_EQ(rows[40][15], "error");
+  EXPECT_NE(rows[40][16].find("corrupt PNG"), std::string::npos) << rows[40][16];
+  EXPECT_EQ(rows[40][14], "n");
+  EXPECT_EQ(rows[40][12], "tracking");  // the pose does not need the pixels
+  for (const int k : {21, 22, 23}) {
+    EXPECT_EQ(rows[static_cast<std::size_t>(k)][15], "warning") << k;
+    EXPECT_NE(rows[static_cast<std::size_t>(k)][16].find("IMU gap"), std::string::npos);
+  }
+  EXPECT_EQ(rows[24][15], "ok");
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["data_issues"]["image_errors"].get<int>(), 1);
+  EXPECT_EQ(summary["data_issues"]["imu_gaps"].get<int>(), 3);
+  EXPECT_EQ(summary["data_issues"]["frames_with_issues"].get<int>(), 4);
+  EXPECT_EQ(summary["data_issues"]["dataset_issue_count"].get<int>(), 1);
+  EXPECT_NE(summary["data_issues"]["dataset_issues"][0].get<std::string>().find("data.csv:42: truncated"),
+            std::string::npos);
+}
+
+TEST(PipelineGraph, FrameRangeAndLazyDecode) {
+  FakeDataset dataset(50);
+  dataset.corrupt_frames = {12};  // never decoded: nothing needs pixels with the drift source
+  PipelineConfig config = base_config();
+  config.run.decode = "lazy";
+  config.run.frames = "10:20";
+  const auto out = testing::make_temp_dir("pipeline-range");
+  const RunResult result = run_pipeline(config, dataset, out);
+  EXPECT_EQ(result.frames_processed, 10u);
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), 10u);
+  EXPECT_EQ(rows.front()[0], "0");
+  EXPECT_EQ(rows.front()[1], "10");
+  EXPECT_EQ(rows.back()[1], "19");
+  for (const auto& row : rows) EXPECT_EQ(row[14], "n");
+  EXPECT_EQ(result.frames_ok, 10u);
+}
+
+TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
+  FakeDataset dataset(60);
+  dataset.decode_delay_ms = 15;  // slower than the 2 ms frame period at rate 50
+  PipelineConfig config = base_config(1);
+  config.run.rate = "50";
+  config.run.max_in_flight = 2;
+  const auto out = testing::make_temp_dir("pipeline-rate");
+  const RunResult result = run_pipeline(config, dataset, out);
+  EXPECT_FALSE(result.failed) << result.error;
+  EXPECT_GT(result.frames_dropped, 0u);
+  EXPECT_EQ(result.frames_in, 60u);
+  EXPECT_EQ(result.frames_processed + result.frames_dropped, result.frames_in);
+  EXPECT_GT(result.deadline_misses, 0u);
+  const auto rows = read_csv(out / "frames.csv");
+  ASSERT_EQ(rows.size(), result.frames_processed);
+  for (std::size_t i = 0; i < rows.size(); ++i) EXPECT_EQ(rows[i][0], std::to_string(i));  // contiguous seq
+}
+
+TEST(PipelineGraph, StopRequestDrainsAndWritesOutputs) {
+  FakeDataset dataset(400);
+  dataset.decode_delay_ms = 2;
+  std::atomic<bool> stop{false};
+  std::thread stopper([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(150));
+    stop.store(true);
+  });
+  const auto out = testing::make_temp_dir("pipeline-stop");
+  const RunResult result = run_pipeline(base_config(), dataset, out, &stop);
+  stopper.join();
+  EXPECT_TRUE(result.interrupted);
+  EXPECT_FALSE(result.failed);
+  EXPECT_GT(result.frames_processed, 0u);
+  EXPECT_LT(result.frames_processed, 400u);
+  EXPECT_EQ(result.frames_processed, result.frames_in);
+  EXPECT_EQ(read_csv(out / "frames.csv").size(), result.frames_processed);
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_TRUE(summary["interrupted"].get<bool>());
+}
+
+TEST(PipelineGraph, EscapingExceptionCancelsAndNamesTheFrame) {
+  FakeDataset dataset(100);
+  dataset.crashing_frames = {30};
+  const auto out = testing::make_temp_dir("pipeline-crash");
+  const RunResult result = run_pipeline(base_config(), dataset, out);
+  EXPECT_TRUE(result.failed);
+  EXPECT_NE(result.error.find("stage 'decode'"), std::string::npos) << result.error;
+  EXPECT_NE(result.error.find("frame 30"), std::string::npos) << result.error;
+  EXPECT_NE(result.error.find("decoder crashed"), std::string::npos) << result.error;
+  EXPECT_LE(result.frames_processed, 30u);
+  EXPECT_EQ(read_csv(out / "frames.csv").size(), result.frames_processed);
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_TRUE(summary["failed"].get<bool>());
+}
+
+}  // namespace
+}  // namespace loopgate
