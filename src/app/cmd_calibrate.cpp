@@ -55,7 +55,7 @@ int run_calibrate(const CalibrateOptions& opt) {
   config.flip_vertical = opt.flip_vertical;
   config.metric = opt.metric;
   config.tau1 = opt.tau1;
-  if (config.l2_metric()) {  // placeholders so that the config validates; they are what is calibrated
+  if (config.l2_metric()) {  // scale-only starting values so the config validates; calibration replaces them
     config.mu = kDirdScaleMuL2;
     config.sigma = kDirdScaleSigmaL2;
   }
