@@ -1,0 +1,266 @@
+// Per-frame cost of the ekf source at 752 x 480: the KLT front end on real EuRoC images, the MSCKF on a
+// simulated scene (~150 features, window 11), and optionally a whole rendered EuRoC-layout dataset
+// (LOOPGATE_EKF_DATASET=<dir>, e.g. rendered by `loopgate simulate --preset euroc-mh05`) with the ATE.
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "../tests/ekf_sim_support.hpp"
+#include "io/dataset.hpp"
+#include "stages/ekf/feature_tracker.hpp"
+#include "stages/ekf/msckf.hpp"
+#include "stages/ekf/vio_ekf.hpp"
+
+namespace {
+
+using namespace loopgate;
+
+std::filesystem::path micro_dir() {
+  return std::filesystem::path(LOOPGATE_SHARED_DATA_DIR) / "euroc/V1_01_easy_micro";
+}
+
+void BM_EkfTracking(benchmark::State& state) {
+  if (!std::filesystem::exists(micro_dir())) {
+    state.SkipWithError("shared data absent: euroc/V1_01_easy_micro");
+    return;
+  }
+  const auto dataset = open_dataset(micro_dir());
+  std::vector<cv::Mat> images;
+  for (std::size_t i = 0; i < dataset->frame_count(); ++i) images.push_back(dataset->load_image(i));
+  FeatureTracker tracker(EkfConfig{}, *dataset->camera());
+  std::size_t i = 0;
+  long tracked = 0;
+  for (auto _ : state) {
+    // Forward through the sequence, then restart (a jump the tracker survives by re-detecting).
+    const auto& features = tracker.track(images[i]);
+    benchmark::DoNotOptimize(features.data());
+    tracked += tracker.last_stats().tracked;
+    i = (i + 1) % images.size();
+  }
+  state.counters["tracked_per_frame"] =
+      benchmark::Counter(static_cast<double>(tracked), benchmark::Counter::kAvgIterations);
+}
+BENCHMARK(BM_EkfTracking)->Unit(benchmark::kMillisecond);
+
+// The filter alone: propagation + clone + update + marginalisation per 20 Hz frame on a simulated scene.
+void BM_EkfFilter(benchmark::State& state) {
+  const ekf_test::CircleMotion motion;
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  std::vector<Eigen::Vector3d> landmarks;
+  for (int i = 0; i < 1500; ++i) {
+    const double a = 2.0 * M_PI * u01(rng);
+    const double r = 7.0 + 2.0 * u01(rng);
+    landmarks.emplace_back(r * std::cos(a), r * std::sin(a), -2.5 + 5.5 * u01(rng));
+  }
+  Eigen::Matrix3d R_i_c;
+  R_i_c << 0, 0, 1, -1, 0, 0, 0, -1, 0;
+  Eigen::Isometry3d T_i_c = Eigen::Isometry3d::Identity();
+  T_i_c.linear() = R_i_c;
+  const double focal = 460.0;
+  const double duration_s = 60.0;
+  const double rate_hz = 20.0;
+  const ImuNoise noise{1.6968e-04, 1.9393e-05, 2.0e-3, 3.0e-3};
+  Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ba = Eigen::Vector3d::Zero();
+  const auto imu = ekf_test::make_imu(
+      motion, 0.0, duration_s + 1.0, 200.0,
+      {noise.gyro_noise_density, noise.gyro_random_walk, noise.accel_noise_density, noise.accel_random_walk},
+      &rng, &bg, &ba);
+  // Observations per frame: at most 150 visible landmarks (as the tracker keeps), pixel noise 1 px.
+  const auto frames = static_cast<int>(duration_s * rate_hz);
+  std::vector<std::vector<FeatureObservation>> observations(static_cast<std::size_t>(frames));
+  for (int k = 0; k < frames; ++k) {
+    const Eigen::Isometry3d T_c_w = (motion.pose(k / rate_hz) * T_i_c).inverse();
+    for (std::size_t id = 0; id < landmarks.size() && observations[static_cast<std::size_t>(k)].size() < 150;
+         ++id) {
+      const Eigen::Vector3d p_c = T_c_w * landmarks[id];
+      if (p_c.z() < 0.3) continue;
+      const Eigen::Vector2d xy = p_c.head<2>() / p_c.z();
+      if (std::abs(focal * xy.x()) > 375.0 || std::abs(focal * xy.y()) > 239.0) continue;
+      observations[static_cast<std::size_t>(k)].push_back(
+          FeatureObservation{id, xy + Eigen::Vector2d(n01(rng), n01(rng)) / focal});
+    }
+  }
+  EkfConfig config;
+  config.pixel_sigma_px = 1.0;  // the simulated pixel noise
+  ImuState init;
+  init.q_w_i = Eigen::Quaterniond(motion.rotation(0.0));
+  init.p_w_m = motion.position(0.0);
+  init.v_w_mps = motion.velocity(0.0);
+  const ImuMatrix P0 = ImuMatrix::Identity() * 1e-4;
+  Msckf filter(config, noise, T_i_c, focal);
+  filter.initialize(init, P0);
+  int k = 0;
+  std::size_t imu_begin = 0;
+  long used = 0;
+  for (auto _ : state) {
+    if (k == frames) {
+      state.PauseTiming();
+      filter.initialize(init, P0);
+      k = 0;
+      imu_begin = 0;
+      state.ResumeTiming();
+    }
+    const Timestamp t_ns = s_to_ns(k / rate_hz);
+    std::size_t imu_end = imu_begin;
+    while (imu_end < imu.size() && imu[imu_end].t_ns <= t_ns) ++imu_end;
+    const MsckfUpdateStats stats =
+        filter.process_frame(t_ns, std::span<const ImuSample>(imu.data() + imu_begin, imu_end - imu_begin),
+                             observations[static_cast<std::size_t>(k)]);
+    used += stats.used_features;
+    if (std::getenv("LOOPGATE_EKF_VERBOSE") != nullptr && k % 100 == 0) {
+      std::string reason;
+      std::printf("k %d used %d rej %d/%d healthy %d %s p_err %.3f\n", k, stats.used_features,
+                  stats.rejected_triangulation, stats.rejected_chi2, filter.healthy(&reason) ? 1 : 0,
+                  reason.c_str(), (filter.state().p_w_m - motion.position(k / rate_hz)).norm());
+    }
+    imu_begin = imu_end > 0 ? imu_end - 1 : 0;
+    ++k;
+  }
+  state.counters["features_used_per_frame"] =
+      benchmark::Counter(static_cast<double>(used), benchmark::Counter::kAvgIterations);
+}
+BENCHMARK(BM_EkfFilter)->Unit(benchmark::kMillisecond);
+
+// Position + yaw alignment (4 DoF, as for VIO) of estimate onto truth; returns the RMSE.
+double ate_rmse_position_yaw(const std::vector<Eigen::Vector3d>& est,
+                             const std::vector<Eigen::Vector3d>& truth) {
+  const auto n = static_cast<double>(est.size());
+  Eigen::Vector3d ce = Eigen::Vector3d::Zero();
+  Eigen::Vector3d ct = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < est.size(); ++i) {
+    ce += est[i];
+    ct += truth[i];
+  }
+  ce /= n;
+  ct /= n;
+  double s_cross = 0.0;
+  double s_dot = 0.0;
+  for (std::size_t i = 0; i < est.size(); ++i) {
+    const Eigen::Vector3d e = est[i] - ce;
+    const Eigen::Vector3d t = truth[i] - ct;
+    s_cross += e.x() * t.y() - e.y() * t.x();
+    s_dot += e.x() * t.x() + e.y() * t.y();
+  }
+  const Eigen::Matrix3d Rz =
+      Eigen::AngleAxisd(std::atan2(s_cross, s_dot), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  double sum = 0.0;
+  for (std::size_t i = 0; i < est.size(); ++i) sum += (Rz * (est[i] - ce) + ct - truth[i]).squaredNorm();
+  return std::sqrt(sum / n);
+}
+
+// Config overrides "key=value,key=value" from LOOPGATE_EKF_SET (bench only; the app uses the config system).
+EkfConfig config_from_env() {
+  EkfConfig config;
+  const char* env = std::getenv("LOOPGATE_EKF_SET");
+  if (env == nullptr) return config;
+  std::string list(env);
+  std::size_t start = 0;
+  while (start < list.size()) {
+    const std::size_t end = std::min(list.find(',', start), list.size());
+    const std::string item = list.substr(start, end - start);
+    const std::size_t eq = item.find('=');
+    if (eq != std::string::npos) {
+      const std::string key = item.substr(0, eq);
+      const std::string value = item.substr(eq + 1);
+      config.visit([&](const char* name, auto& field) {
+        using T = std::decay_t<decltype(field)>;
+        if (key != name) return;
+        if constexpr (std::is_same_v<T, bool>) {
+          field = value == "true" || value == "1";
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          field = value;
+        } else if constexpr (std::is_same_v<T, double>) {
+          field = std::stod(value);
+        } else {
+          field = static_cast<T>(std::stoll(value));
+        }
+      });
+    }
+    start = end + 1;
+  }
+  config.validate();
+  return config;
+}
+
+// A whole dataset through the VioEkf (ground-truth initialisation), one iteration = the whole sequence.
+void BM_EkfDataset(benchmark::State& state) {
+  const char* dir = std::getenv("LOOPGATE_EKF_DATASET");
+  if (dir == nullptr) {
+    state.SkipWithError("set LOOPGATE_EKF_DATASET to a rendered EuRoC-layout dataset");
+    return;
+  }
+  const auto dataset = open_dataset(dir);
+  const auto limit_env = std::getenv("LOOPGATE_EKF_FRAMES");
+  const std::size_t frames =
+      limit_env != nullptr
+          ? std::min<std::size_t>(dataset->frame_count(), std::strtoul(limit_env, nullptr, 10))
+          : dataset->frame_count();
+  std::vector<cv::Mat> images(frames);
+  for (std::size_t i = 0; i < frames; ++i) images[i] = dataset->load_image(i);
+  const bool verbose = std::getenv("LOOPGATE_EKF_VERBOSE") != nullptr;
+  const EkfConfig config = config_from_env();
+  for (auto _ : state) {
+    VioEkf vio(config, *dataset->camera(), *dataset->imu_calibration());
+    std::vector<Eigen::Vector3d> est;
+    std::vector<Eigen::Vector3d> truth;
+    double tracking_ms = 0.0;
+    double filter_ms = 0.0;
+    int lost = 0;
+    double path_m = 0.0;
+    for (std::size_t i = 0; i < frames; ++i) {
+      const Timestamp t_ns = dataset->frame_t_ns(i);
+      const Timestamp t_prev_ns = i > 0 ? dataset->frame_t_ns(i - 1) : t_ns;
+      EkfFrameInput in;
+      in.t_ns = t_ns;
+      in.imu = dataset->imu_between(t_prev_ns - 10'000'000, t_ns + 10'000'001);
+      in.image = &images[i];
+      in.ground_truth = ground_truth_state_at(dataset->ground_truth(), t_ns);
+      const EkfFrameOutput out = vio.process(in);
+      tracking_ms += out.tracking_ms;
+      filter_ms += out.filter_ms;
+      if (out.pose.status == OdometryStatus::kLost) ++lost;
+      if (verbose && in.ground_truth.has_value()) {
+        const Eigen::Vector3d e = out.pose.T_w_b.translation() - in.ground_truth->T_w_b.translation();
+        std::printf(
+            "frame %zu status %s tracked %d disp %.2f zupt %d used %d rejtri %d rejchi2 %d err %.3f sigma "
+            "%.3f v %.3f %.3f %.3f\n",
+            i, to_string(out.pose.status), out.tracked_features, out.median_disparity_px,
+            out.zero_velocity ? 1 : 0, out.update.used_features, out.update.rejected_triangulation,
+            out.update.rejected_chi2, e.norm(), out.position_sigma_m, vio.filter().state().v_w_mps.x(),
+            vio.filter().state().v_w_mps.y(), vio.filter().state().v_w_mps.z());
+      }
+      if (out.pose.status == OdometryStatus::kTracking && in.ground_truth.has_value()) {
+        if (!truth.empty()) path_m += (in.ground_truth->T_w_b.translation() - truth.back()).norm();
+        est.push_back(out.pose.T_w_b.translation());
+        truth.push_back(in.ground_truth->T_w_b.translation());
+      }
+    }
+    double sum_raw = 0.0;
+    for (std::size_t i = 0; i < est.size(); ++i) sum_raw += (est[i] - truth[i]).squaredNorm();
+    state.counters["frames"] = static_cast<double>(frames);
+    state.counters["tracking_ms_per_frame"] = tracking_ms / static_cast<double>(frames);
+    state.counters["filter_ms_per_frame"] = filter_ms / static_cast<double>(frames);
+    state.counters["lost_frames"] = lost;
+    // Lengths in centimetres so that the counters print without SI prefixes ("m" would read as milli).
+    state.counters["path_cm"] = 100.0 * path_m;
+    state.counters["ate_rmse_cm_noalign"] =
+        est.empty() ? -1.0 : 100.0 * std::sqrt(sum_raw / static_cast<double>(est.size()));
+    state.counters["ate_rmse_cm_posyaw"] = est.empty() ? -1.0 : 100.0 * ate_rmse_position_yaw(est, truth);
+    state.counters["final_error_cm"] = est.empty() ? -1.0 : 100.0 * (est.back() - truth.back()).norm();
+  }
+}
+BENCHMARK(BM_EkfDataset)->Unit(benchmark::kSecond)->Iterations(1);
+
+}  // namespace
+
+BENCHMARK_MAIN();

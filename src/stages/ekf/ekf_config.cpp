@@ -1,0 +1,76 @@
+#include "stages/ekf/ekf_config.hpp"
+
+#include <cmath>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+namespace {
+
+void require(bool ok, const char* key, const char* what) {
+  if (!ok) throw ConfigError(std::string("ekf.") + key + ": " + what);
+}
+
+bool positive(double x) {
+  return std::isfinite(x) && x > 0.0;
+}
+bool non_negative(double x) {
+  return std::isfinite(x) && x >= 0.0;
+}
+
+}  // namespace
+
+void EkfConfig::validate() const {
+  if (init_mode != "ground_truth" && init_mode != "standstill") {
+    throw ConfigError("ekf.init_mode: '" + init_mode + "' is not one of ground_truth, standstill");
+  }
+  require(window_size >= 3 && window_size <= 50, "window_size", "must be in [3, 50]");
+  require(positive(gravity_mps2), "gravity_mps2", "must be > 0");
+  require(max_features >= 8, "max_features", "must be >= 8");
+  require(grid_cols >= 1, "grid_cols", "must be >= 1");
+  require(grid_rows >= 1, "grid_rows", "must be >= 1");
+  require(positive(min_feature_distance_px), "min_feature_distance_px", "must be > 0");
+  require(shi_tomasi_quality > 0.0 && shi_tomasi_quality < 1.0, "shi_tomasi_quality", "must be in (0, 1)");
+  require(shi_tomasi_block_size >= 3, "shi_tomasi_block_size", "must be >= 3");
+  require(klt_window_px >= 5 && klt_window_px % 2 == 1, "klt_window_px", "must be odd and >= 5");
+  require(klt_pyramid_levels >= 0 && klt_pyramid_levels <= 8, "klt_pyramid_levels", "must be in [0, 8]");
+  require(klt_max_iterations >= 1, "klt_max_iterations", "must be >= 1");
+  require(positive(klt_epsilon), "klt_epsilon", "must be > 0");
+  require(positive(fb_check_max_px), "fb_check_max_px", "must be > 0");
+  require(positive(ransac_threshold_px), "ransac_threshold_px", "must be > 0");
+  require(ransac_confidence > 0.0 && ransac_confidence < 1.0, "ransac_confidence", "must be in (0, 1)");
+  require(border_px >= 0, "border_px", "must be >= 0");
+  require(positive(pixel_sigma_px), "pixel_sigma_px", "must be > 0");
+  require(chi2_quantile > 0.5 && chi2_quantile < 1.0, "chi2_quantile",
+          "must be in (0.5, 1) (the upper quantile, e.g. 0.95)");
+  require(min_track_length >= 2, "min_track_length", "must be >= 2");
+  require(max_update_features >= 0, "max_update_features", "must be >= 0 (0 = no limit)");
+  require(positive(min_depth_m), "min_depth_m", "must be > 0");
+  require(std::isfinite(max_depth_m) && max_depth_m > min_depth_m, "max_depth_m", "must be > min_depth_m");
+  require(max_triangulation_cond > 1.0, "max_triangulation_cond", "must be > 1");
+  require(triangulation_iterations >= 1, "triangulation_iterations", "must be >= 1");
+  require(positive(triangulation_max_reproj_sigma), "triangulation_max_reproj_sigma", "must be > 0");
+  require(positive(zupt_max_disparity_px), "zupt_max_disparity_px", "must be > 0");
+  require(zupt_min_features >= 1, "zupt_min_features", "must be >= 1");
+  require(positive(zupt_sigma_mps), "zupt_sigma_mps", "must be > 0");
+  require(non_negative(gyro_noise_density), "gyro_noise_density", "must be >= 0 (0 = from imu0 sensor.yaml)");
+  require(non_negative(gyro_random_walk), "gyro_random_walk", "must be >= 0 (0 = from imu0 sensor.yaml)");
+  require(non_negative(accel_noise_density), "accel_noise_density",
+          "must be >= 0 (0 = from imu0 sensor.yaml)");
+  require(non_negative(accel_random_walk), "accel_random_walk", "must be >= 0 (0 = from imu0 sensor.yaml)");
+  require(positive(imu_noise_inflation), "imu_noise_inflation", "must be > 0");
+  require(positive(init_sigma_rot_rad), "init_sigma_rot_rad", "must be > 0");
+  require(positive(init_sigma_pos_m), "init_sigma_pos_m", "must be > 0");
+  require(positive(init_sigma_vel_mps), "init_sigma_vel_mps", "must be > 0");
+  require(positive(init_sigma_gyro_bias_radps), "init_sigma_gyro_bias_radps", "must be > 0");
+  require(positive(init_sigma_accel_bias_mps2), "init_sigma_accel_bias_mps2", "must be > 0");
+  require(positive(init_sigma_yaw_rad), "init_sigma_yaw_rad", "must be > 0");
+  require(positive(standstill_duration_s), "standstill_duration_s", "must be > 0");
+  require(positive(standstill_max_accel_std_mps2), "standstill_max_accel_std_mps2", "must be > 0");
+  require(positive(standstill_max_gyro_std_radps), "standstill_max_gyro_std_radps", "must be > 0");
+  require(lost_min_features >= 0, "lost_min_features", "must be >= 0");
+  require(lost_max_frames >= 1, "lost_max_frames", "must be >= 1");
+  require(positive(max_position_sigma_m), "max_position_sigma_m", "must be > 0");
+}
+
+}  // namespace loopgate

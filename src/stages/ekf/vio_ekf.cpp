@@ -1,0 +1,255 @@
+#include "stages/ekf/vio_ekf.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <exception>
+#include <opencv2/core/mat.hpp>
+
+#include "core/error.hpp"
+#include "stages/ekf/so3.hpp"
+
+namespace loopgate {
+namespace {
+
+double pick(double override_value, double calibrated, double inflation, const char* key) {
+  const double value = (override_value > 0.0 ? override_value : calibrated) * inflation;
+  if (!(value > 0.0) || !std::isfinite(value)) {
+    throw ConfigError(std::string("ekf.") + key +
+                      ": the IMU calibration gives no value (imu0 sensor.yaml); set it in the ekf section");
+  }
+  return value;
+}
+
+Eigen::Isometry3d imu_pose_from_body(const Eigen::Isometry3d& T_w_b, const Eigen::Isometry3d& T_b_i) {
+  return T_w_b * T_b_i;
+}
+
+}  // namespace
+
+ImuNoise effective_imu_noise(const EkfConfig& config, const ImuCalibration& imu) {
+  const double k = config.imu_noise_inflation;
+  return ImuNoise{pick(config.gyro_noise_density, imu.gyro_noise_density, k, "gyro_noise_density"),
+                  pick(config.gyro_random_walk, imu.gyro_random_walk, k, "gyro_random_walk"),
+                  pick(config.accel_noise_density, imu.accel_noise_density, k, "accel_noise_density"),
+                  pick(config.accel_random_walk, imu.accel_random_walk, k, "accel_random_walk")};
+}
+
+std::optional<GroundTruthState> ground_truth_state_at(const std::vector<GroundTruthState>& states,
+                                                      Timestamp t_ns) {
+  if (states.size() < 2 || t_ns < states.front().t_ns || t_ns > states.back().t_ns) return std::nullopt;
+  const auto it = std::lower_bound(states.begin(), states.end(), t_ns,
+                                   [](const GroundTruthState& s, Timestamp t) { return s.t_ns < t; });
+  const std::size_t hi = std::max<std::size_t>(1, static_cast<std::size_t>(it - states.begin()));
+  const std::size_t lo = hi - 1;
+  const GroundTruthState& a = states[lo];
+  const GroundTruthState& b = states[hi];
+  const double span = static_cast<double>(b.t_ns - a.t_ns);
+  const double f = span > 0.0 ? static_cast<double>(t_ns - a.t_ns) / span : 0.0;
+  GroundTruthState out;
+  out.t_ns = t_ns;
+  const Eigen::Quaterniond qa(a.T_w_b.rotation());
+  const Eigen::Quaterniond qb(b.T_w_b.rotation());
+  out.T_w_b.linear() = qa.slerp(f, qb).toRotationMatrix();
+  out.T_w_b.translation() = (1.0 - f) * a.T_w_b.translation() + f * b.T_w_b.translation();
+  out.gyro_bias_radps = (1.0 - f) * a.gyro_bias_radps + f * b.gyro_bias_radps;
+  out.accel_bias_mps2 = (1.0 - f) * a.accel_bias_mps2 + f * b.accel_bias_mps2;
+  if (!a.v_w_mps.isZero(0.0) || !b.v_w_mps.isZero(0.0)) {
+    out.v_w_mps = (1.0 - f) * a.v_w_mps + f * b.v_w_mps;
+  } else {
+    const std::size_t i0 = lo > 0 ? lo - 1 : lo;
+    const std::size_t i1 = std::min(hi + 1, states.size() - 1);
+    const double dt_s = ns_to_s(states[i1].t_ns - states[i0].t_ns);
+    if (dt_s > 0.0) out.v_w_mps = (states[i1].T_w_b.translation() - states[i0].T_w_b.translation()) / dt_s;
+  }
+  return out;
+}
+
+VioEkf::VioEkf(const EkfConfig& config, const CameraCalibration& camera, const ImuCalibration& imu)
+    : config_((config.validate(), config)),
+      T_b_i_(imu.T_b_i),
+      focal_px_(0.5 * (camera.fx + camera.fy)),
+      tracker_(config, camera),
+      filter_(config, effective_imu_noise(config, imu), imu.T_b_i.inverse() * camera.T_b_c,
+              0.5 * (camera.fx + camera.fy)) {}
+
+void VioEkf::initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_cov_world) {
+  ImuMatrix P0 = ImuMatrix::Zero();
+  const Eigen::Matrix3d R_w_i = state.q_w_i.toRotationMatrix();
+  // World-frame attitude uncertainty expressed as the right (body) perturbation of the filter.
+  P0.block<3, 3>(ImuErrorIndex::kTheta, ImuErrorIndex::kTheta) = R_w_i.transpose() * rot_cov_world * R_w_i;
+  const Eigen::Matrix3d I3 = Eigen::Matrix3d::Identity();
+  P0.block<3, 3>(ImuErrorIndex::kPos, ImuErrorIndex::kPos) = std::pow(config_.init_sigma_pos_m, 2) * I3;
+  P0.block<3, 3>(ImuErrorIndex::kVel, ImuErrorIndex::kVel) = std::pow(config_.init_sigma_vel_mps, 2) * I3;
+  P0.block<3, 3>(ImuErrorIndex::kGyroBias, ImuErrorIndex::kGyroBias) =
+      std::pow(config_.init_sigma_gyro_bias_radps, 2) * I3;
+  P0.block<3, 3>(ImuErrorIndex::kAccelBias, ImuErrorIndex::kAccelBias) =
+      std::pow(config_.init_sigma_accel_bias_mps2, 2) * I3;
+  filter_.initialize(state, P0);
+  few_feature_frames_ = 0;
+}
+
+bool VioEkf::try_initialize(const EkfFrameInput& input) {
+  if (config_.init_mode == "ground_truth") {
+    if (!input.ground_truth.has_value()) return false;
+    const GroundTruthState& gt = *input.ground_truth;
+    const Eigen::Isometry3d T_w_i = imu_pose_from_body(gt.T_w_b, T_b_i_);
+    ImuState state;
+    state.t_ns = input.t_ns;
+    state.q_w_i = Eigen::Quaterniond(T_w_i.rotation());
+    state.p_w_m = T_w_i.translation();
+    Eigen::Vector3d omega_i = Eigen::Vector3d::Zero();
+    if (!input.imu.empty()) omega_i = input.imu.back().gyro_radps - gt.gyro_bias_radps;
+    // Lever arm: v_i = v_b + R_w_b (w_b x p_b_i), w_b = R_b_i w_i.
+    state.v_w_mps =
+        gt.v_w_mps + gt.T_w_b.rotation() * ((T_b_i_.rotation() * omega_i).cross(T_b_i_.translation()));
+    state.gyro_bias_radps = gt.gyro_bias_radps;
+    state.accel_bias_mps2 = gt.accel_bias_mps2;
+    state.omega_i_radps = omega_i;
+    initialize_from(state, Eigen::Matrix3d::Identity() * std::pow(config_.init_sigma_rot_rad, 2));
+    return true;
+  }
+  // Standstill: gravity from the averaged accelerometer over the last standstill_duration_s.
+  for (const ImuSample& s : input.imu) {
+    if (standstill_buffer_.empty() || s.t_ns > standstill_buffer_.back().t_ns)
+      standstill_buffer_.push_back(s);
+  }
+  const Timestamp window_ns = s_to_ns(config_.standstill_duration_s);
+  while (standstill_buffer_.size() > 2 &&
+         standstill_buffer_.back().t_ns - standstill_buffer_[1].t_ns >= window_ns) {
+    standstill_buffer_.pop_front();
+  }
+  if (standstill_buffer_.size() < 2 ||
+      standstill_buffer_.back().t_ns - standstill_buffer_.front().t_ns < window_ns) {
+    return false;
+  }
+  Eigen::Vector3d accel_mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_mean = Eigen::Vector3d::Zero();
+  for (const ImuSample& s : standstill_buffer_) {
+    accel_mean += s.accel_mps2;
+    gyro_mean += s.gyro_radps;
+  }
+  const auto n = static_cast<double>(standstill_buffer_.size());
+  accel_mean /= n;
+  gyro_mean /= n;
+  double accel_var = 0.0;
+  double gyro_var = 0.0;
+  for (const ImuSample& s : standstill_buffer_) {
+    accel_var += (s.accel_mps2 - accel_mean).squaredNorm();
+    gyro_var += (s.gyro_radps - gyro_mean).squaredNorm();
+  }
+  const double accel_std = std::sqrt(accel_var / (3.0 * n));
+  const double gyro_std = std::sqrt(gyro_var / (3.0 * n));
+  if (accel_std > config_.standstill_max_accel_std_mps2 || gyro_std > config_.standstill_max_gyro_std_radps ||
+      accel_mean.norm() < 0.5 * config_.gravity_mps2) {
+    return false;
+  }
+  // R_w_i maps the measured specific force (up) onto +z; yaw set to zero.
+  Eigen::Matrix3d R_w_i =
+      Eigen::Quaterniond::FromTwoVectors(accel_mean, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const double yaw = std::atan2(R_w_i(1, 0), R_w_i(0, 0));
+  R_w_i = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * R_w_i;
+  ImuState state;
+  state.t_ns = input.t_ns;
+  state.q_w_i = Eigen::Quaterniond(R_w_i);
+  Eigen::Matrix3d rot_cov_world = Eigen::Matrix3d::Zero();
+  rot_cov_world(0, 0) = rot_cov_world(1, 1) = std::pow(config_.init_sigma_rot_rad, 2);
+  rot_cov_world(2, 2) = std::pow(config_.init_sigma_yaw_rad, 2);
+  initialize_from(state, rot_cov_world);
+  standstill_buffer_.clear();
+  return true;
+}
+
+double VioEkf::median_disparity_px(const std::vector<FeatureObservation>& observations) const {
+  std::vector<double> disparities;
+  disparities.reserve(observations.size());
+  for (const FeatureObservation& obs : observations) {
+    const auto it = previous_xy_.find(obs.id);
+    if (it != previous_xy_.end()) disparities.push_back((obs.xy - it->second).norm() * focal_px_);
+  }
+  if (static_cast<int>(disparities.size()) < config_.zupt_min_features) return -1.0;
+  const auto mid = disparities.begin() + static_cast<std::ptrdiff_t>(disparities.size() / 2);
+  std::nth_element(disparities.begin(), mid, disparities.end());
+  return *mid;
+}
+
+EkfFrameOutput VioEkf::lost(std::size_t frame, const std::string& reason) {
+  spdlog::warn("ekf: lost at frame {}: {}; re-initialising", frame, reason);
+  filter_.reset();
+  EkfFrameOutput out;
+  if (last_good_.has_value()) out.pose = *last_good_;
+  out.pose.status = OdometryStatus::kLost;
+  out.reason = reason;
+  return out;
+}
+
+EkfFrameOutput VioEkf::process(const EkfFrameInput& input) {
+  using Clock = std::chrono::steady_clock;
+  const auto t_start = Clock::now();
+  std::vector<FeatureObservation> tracked;
+  if (input.image != nullptr) {
+    tracker_.track(*input.image);
+    tracked = tracker_.observations();
+  } else if (input.observations != nullptr) {
+    tracked = *input.observations;
+  }
+  const auto t_tracked = Clock::now();
+  const std::size_t frame = frame_++;
+  const double disparity_px = median_disparity_px(tracked);
+  previous_xy_.clear();
+  for (const FeatureObservation& o : tracked) previous_xy_.emplace(o.id, o.xy);
+
+  EkfFrameOutput out = update_filter(input, tracked, disparity_px, frame);
+  out.tracked_features = static_cast<int>(tracked.size());
+  out.median_disparity_px = disparity_px;
+  out.tracking_ms = std::chrono::duration<double, std::milli>(t_tracked - t_start).count();
+  out.filter_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_tracked).count();
+  return out;
+}
+
+EkfFrameOutput VioEkf::update_filter(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
+                                     double disparity_px, std::size_t frame) {
+  EkfFrameOutput out;
+  if (!filter_.initialized()) {
+    if (!try_initialize(input)) {
+      out.pose.t_ns = input.t_ns;
+      out.pose.status = OdometryStatus::kInitialising;
+      out.reason = config_.init_mode == "ground_truth" ? "waiting for ground truth to initialise"
+                                                       : "waiting for a standstill to initialise";
+      return out;
+    }
+    // The first frame of the filter: no IMU interval yet, clone and start the tracks.
+    out.update = filter_.process_frame(input.t_ns, {}, obs);
+  } else {
+    try {
+      out.update = filter_.process_frame(input.t_ns, input.imu, obs);
+      out.zero_velocity =
+          config_.zupt_enabled && disparity_px >= 0.0 && disparity_px < config_.zupt_max_disparity_px;
+      if (out.zero_velocity) filter_.zero_velocity_update(config_.zupt_sigma_mps);
+    } catch (const std::exception& e) {
+      return lost(frame, std::string("filter exception: ") + e.what());
+    }
+  }
+  std::string reason;
+  if (!filter_.healthy(&reason)) return lost(frame, reason);
+  out.pose = filter_.pose_estimate(T_b_i_);
+  out.pose.t_ns = input.t_ns;
+  out.position_sigma_m = std::sqrt(std::max(0.0, out.pose.position_cov_m2().trace()));
+  if (!std::isfinite(out.position_sigma_m) || out.position_sigma_m > config_.max_position_sigma_m) {
+    return lost(frame, "position sigma " + std::to_string(out.position_sigma_m) +
+                           " m exceeds ekf.max_position_sigma_m");
+  }
+  const int feature_count = static_cast<int>(obs.size());
+  few_feature_frames_ = feature_count < config_.lost_min_features ? few_feature_frames_ + 1 : 0;
+  if (few_feature_frames_ >= config_.lost_max_frames) {
+    return lost(frame, "only " + std::to_string(feature_count) + " tracked features for " +
+                           std::to_string(few_feature_frames_) + " frames");
+  }
+  out.pose.status = OdometryStatus::kTracking;
+  last_good_ = out.pose;
+  return out;
+}
+
+}  // namespace loopgate

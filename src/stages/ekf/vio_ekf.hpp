@@ -1,0 +1,92 @@
+// The `ekf` odometry source as a plain class (vio-ekf.md): KLT front end + MSCKF, initialisation from
+// ground truth or a standstill, failure detection with re-initialisation. One call per image, in order.
+// To wrap it as an OdometrySource: feed OdometryInput::imu / ::image, and for init_mode ground_truth the
+// state from ground_truth_state_at(dataset.ground_truth(), t_ns).
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "core/types.hpp"
+#include "stages/ekf/ekf_config.hpp"
+#include "stages/ekf/feature_tracker.hpp"
+#include "stages/ekf/msckf.hpp"
+
+namespace cv {
+class Mat;
+}
+
+namespace loopgate {
+
+struct EkfFrameInput {
+  Timestamp t_ns = 0;
+  // IMU samples since the previous image (the sync node interpolates the first and last to the image times).
+  std::span<const ImuSample> imu;
+  const cv::Mat* image = nullptr;  // 8-bit grey image, tracked by the KLT front end
+  // Instead of an image: observations in undistorted normalised coordinates (simulation, tests).
+  const std::vector<FeatureObservation>* observations = nullptr;
+  std::optional<GroundTruthState> ground_truth;  // used by init_mode ground_truth
+};
+
+struct EkfFrameOutput {
+  PoseEstimate pose;
+  int tracked_features = 0;
+  double position_sigma_m = 0;  // sqrt(trace of the position covariance)
+  std::string reason;           // why the status is not tracking (empty when tracking)
+  MsckfUpdateStats update;
+  double median_disparity_px = -1;  // median feature motion since the previous image (-1: unknown)
+  bool zero_velocity = false;       // a zero-velocity update was applied
+  double tracking_ms = 0;           // wall time of the KLT front end for this image
+  double filter_ms = 0;             // wall time of propagation + update
+};
+
+// Noise used by the filter: config overrides (> 0) or the calibration, times config.imu_noise_inflation.
+// Throws ConfigError naming the key when a density ends up zero.
+ImuNoise effective_imu_noise(const EkfConfig& config, const ImuCalibration& imu);
+
+// Ground-truth state at t_ns, interpolated (linear / slerp) between the two nearest states; when those carry
+// no velocity (all zero, e.g. a TUM ground truth) it is taken from the positions by central difference.
+// nullopt outside the time span or with fewer than two states.
+std::optional<GroundTruthState> ground_truth_state_at(const std::vector<GroundTruthState>& states,
+                                                      Timestamp t_ns);
+
+class VioEkf {
+ public:
+  // Throws ConfigError for an invalid config or camera calibration.
+  VioEkf(const EkfConfig& config, const CameraCalibration& camera, const ImuCalibration& imu);
+
+  // Throws DataError for a bad image (see FeatureTracker::track); never for filter trouble (status lost).
+  EkfFrameOutput process(const EkfFrameInput& input);
+
+  const Msckf& filter() const { return filter_; }
+  const FeatureTracker& tracker() const { return tracker_; }
+  std::size_t frames_processed() const { return frame_; }
+
+ private:
+  EkfFrameOutput update_filter(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
+                               double disparity_px, std::size_t frame);
+  bool try_initialize(const EkfFrameInput& input);
+  void initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_cov_world);
+  EkfFrameOutput lost(std::size_t frame, const std::string& reason);
+
+  EkfConfig config_;
+  Eigen::Isometry3d T_b_i_;
+  double focal_px_;
+  FeatureTracker tracker_;
+  Msckf filter_;
+  double median_disparity_px(const std::vector<FeatureObservation>& observations) const;
+
+  std::unordered_map<std::uint64_t, Eigen::Vector2d> previous_xy_;
+  std::deque<ImuSample> standstill_buffer_;
+  std::size_t frame_ = 0;
+  int few_feature_frames_ = 0;
+  std::optional<PoseEstimate> last_good_;
+};
+
+}  // namespace loopgate

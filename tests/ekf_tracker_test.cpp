@@ -1,0 +1,114 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+#include <set>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "stages/ekf/feature_tracker.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+CameraCalibration pinhole(int width, int height) {
+  CameraCalibration c;
+  c.width_px = width;
+  c.height_px = height;
+  c.fx = c.fy = 400.0;
+  c.cx = 0.5 * (width - 1);
+  c.cy = 0.5 * (height - 1);
+  return c;
+}
+
+cv::Mat textured_image(int width, int height) {
+  cv::Mat noise(height, width, CV_8UC1);
+  cv::RNG rng(7);
+  rng.fill(noise, cv::RNG::UNIFORM, 0, 255);
+  cv::Mat image;
+  cv::GaussianBlur(noise, image, cv::Size(0, 0), 2.0);
+  cv::normalize(image, image, 0, 255, cv::NORM_MINMAX);
+  return image;
+}
+
+TEST(EkfTracker, FollowsAKnownImageShift) {
+  const cv::Mat first = textured_image(320, 240);
+  const double dx = 3.5;
+  const double dy = -2.0;
+  cv::Mat second;
+  const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, dy);
+  cv::warpAffine(first, second, shift, first.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+  EkfConfig config;
+  FeatureTracker tracker(config, pinhole(320, 240));
+  const std::vector<TrackedFeature> before = tracker.track(first);
+  ASSERT_GE(static_cast<int>(before.size()), config.max_features * 9 / 10);
+  const std::vector<TrackedFeature> after = tracker.track(second);
+  EXPECT_GE(tracker.last_stats().tracked, static_cast<int>(before.size()) * 8 / 10);
+  int checked = 0;
+  int accurate = 0;
+  for (const TrackedFeature& f : after) {
+    const auto it =
+        std::find_if(before.begin(), before.end(), [&](const TrackedFeature& b) { return b.id == f.id; });
+    if (it == before.end()) continue;  // newly detected
+    EXPECT_EQ(f.track_length, 2);
+    // Away from the borders (where the warp reflects the image) the shift is recovered to sub-pixel accuracy.
+    if (it->uv_px.x < 20 || it->uv_px.y < 20 || it->uv_px.x > 300 || it->uv_px.y > 220) continue;
+    const double err = std::hypot(f.uv_px.x - it->uv_px.x - dx, f.uv_px.y - it->uv_px.y - dy);
+    if (err < 0.1) ++accurate;
+    // Undistorted normalised coordinates of a pinhole camera.
+    EXPECT_NEAR(f.xy.x(), (f.uv_px.x - 159.5) / 400.0, 1e-6);
+    ++checked;
+  }
+  EXPECT_GT(checked, 80);
+  EXPECT_GT(accurate, checked * 9 / 10);
+  // Re-detection tops the set back up to the target.
+  EXPECT_EQ(static_cast<int>(after.size()), config.max_features);
+}
+
+TEST(EkfTracker, RejectsBadImages) {
+  FeatureTracker tracker(EkfConfig{}, pinhole(320, 240));
+  EXPECT_THROW(tracker.track(cv::Mat()), DataError);
+  EXPECT_THROW(tracker.track(cv::Mat(100, 100, CV_8UC1, cv::Scalar(0))), DataError);
+  EXPECT_THROW(tracker.track(cv::Mat(240, 320, CV_8UC3, cv::Scalar(0, 0, 0))), DataError);
+  // A blank image gives no corners but no failure either.
+  EXPECT_TRUE(tracker.track(cv::Mat(240, 320, CV_8UC1, cv::Scalar(128))).empty());
+}
+
+TEST(EkfTracker, TracksRealEurocFrames) {
+  LOOPGATE_REQUIRE_SHARED_DATA("euroc/V1_01_easy_micro");
+  const auto dataset = open_dataset(testing::shared_data_dir() / "euroc/V1_01_easy_micro");
+  ASSERT_TRUE(dataset->has_images());
+  const auto camera = dataset->camera();
+  ASSERT_TRUE(camera.has_value());
+  EkfConfig config;
+  FeatureTracker tracker(config, *camera);
+  const std::size_t frames = std::min<std::size_t>(dataset->frame_count(), 95);
+  ASSERT_GE(frames, 20u);
+  int min_tracked = 1 << 30;
+  long total_tracked = 0;
+  int long_tracks = 0;
+  for (std::size_t i = 0; i < frames; ++i) {
+    const std::vector<TrackedFeature>& features = tracker.track(dataset->load_image(i));
+    std::set<std::uint64_t> ids;
+    for (const TrackedFeature& f : features) {
+      EXPECT_TRUE(ids.insert(f.id).second);
+      EXPECT_GE(f.uv_px.x, 0.0F);
+      EXPECT_LT(f.uv_px.x, static_cast<float>(camera->width_px));
+      if (f.track_length >= 10) ++long_tracks;
+    }
+    if (i == 0) continue;
+    min_tracked = std::min(min_tracked, tracker.last_stats().tracked);
+    total_tracked += tracker.last_stats().tracked;
+  }
+  const double mean_tracked = static_cast<double>(total_tracked) / static_cast<double>(frames - 1);
+  RecordProperty("min_tracked", min_tracked);
+  std::printf("V1_01 micro: %zu frames, tracked between consecutive frames min %d mean %.1f\n", frames,
+              min_tracked, mean_tracked);
+  EXPECT_GE(min_tracked, 100);
+  EXPECT_GT(long_tracks, 1000);
+}
+
+}  // namespace
+}  // namespace loopgate
