@@ -15,6 +15,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "pipeline/pipeline.hpp"
+#include "pipeline/two_sequence.hpp"
 
 namespace loopgate::app {
 
@@ -23,6 +24,9 @@ namespace {
 struct RunOptions {
   std::string config_file;
   std::string dataset;
+  std::string mode;
+  std::string reference;
+  std::string query;
   std::string out_dir;
   std::string rate;
   int threads = 0;
@@ -39,15 +43,39 @@ extern "C" void on_sigint(int) {
   std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
 }
 
+// --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
+int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
+  if (options.reference.empty() || options.query.empty()) {
+    throw ConfigError("two-sequence mode needs both --reference DIR and --query DIR");
+  }
+  if (!options.dataset.empty()) {
+    throw ConfigError("--dataset and --reference/--query exclude each other");
+  }
+  log_config_lines(config_to_lines(config));
+  OpenOptions open_options;
+  open_options.strict = config.run.strict;
+  open_options.camera_index = config.run.camera_index;
+  const auto reference = open_dataset(options.reference, open_options);
+  const auto query = open_dataset(options.query, open_options);
+  const TwoSequenceResult result = run_two_sequences(config, *reference, *query, options.out_dir);
+  std::printf(
+      "two-sequence run: %zu reference x %zu query frames, %zu loop closures in %.2f s; outputs in %s\n",
+      result.reference_frames, result.query_frames, result.loops, result.wall_s, options.out_dir.c_str());
+  std::fflush(stdout);
+  return kExitOk;
+}
+
 int run_command(const RunOptions& options) {
   // YAML, then --set in order, then the dedicated flags.
   std::vector<std::string> overrides = options.overrides;
   if (!options.dataset.empty()) overrides.push_back("run.dataset=" + options.dataset);
+  if (!options.mode.empty()) overrides.push_back("run.mode=" + options.mode);
   if (!options.rate.empty()) overrides.push_back("run.rate=" + options.rate);
   if (options.threads > 0) overrides.push_back("run.threads=" + std::to_string(options.threads));
   if (options.trace) overrides.push_back("output.trace=true");
   if (!options.frames.empty()) overrides.push_back("run.frames=" + options.frames);
   PipelineConfig config = load_config<PipelineConfig>(options.config_file, overrides);
+  if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
   if (config.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(config));
 
@@ -97,6 +125,11 @@ void add_run_command(CLI::App& app, int& exit_code) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--dataset", options->dataset,
                   "dataset folder (EuRoC, KITTI or image folder); overrides run.dataset");
+  cmd->add_option("--mode", options->mode,
+                  "odometry (no loop detection, default) or full (DIRD on every frame); overrides run.mode");
+  cmd->add_option("--reference", options->reference,
+                  "two-sequence mode (with --query): reference dataset folder, e.g. Nordland summer");
+  cmd->add_option("--query", options->query, "two-sequence mode (with --reference): query dataset folder");
   cmd->add_option("--out", options->out_dir,
                   "output folder (frames.csv, trajectory.tum, timing.csv, summary.json)")
       ->required();

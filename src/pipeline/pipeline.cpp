@@ -10,10 +10,12 @@
 #include <unistd.h>
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <deque>
 #include <mutex>
 #include <opencv2/core/mat.hpp>
 #include <thread>
@@ -23,7 +25,12 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
+#include "pipeline/descriptor_store.hpp"
+#include "pipeline/run_metrics.hpp"
 #include "pipeline/stage_profiler.hpp"
+#include "stages/dird/dird_extractor.hpp"
+#include "stages/dird/dird_similarity.hpp"
+#include "stages/match/sequence_matcher.hpp"
 
 #if defined(__SANITIZE_THREAD__)
 // ThreadSanitizer builds: oneTBB comes from an uninstrumented system library, so the synchronisation of
@@ -45,8 +52,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-enum Stage : std::size_t { kSync, kDecode, kOdometry, kSink, kStageCount };
-constexpr std::array<const char*, kStageCount> kStageNames = {"sync", "decode", "odometry", "sink"};
+enum Stage : std::size_t { kSync, kDecode, kOdometry, kDescribe, kMatch, kSink, kStageCount };
+constexpr std::array<const char*, kStageCount> kStageNames = {"sync",     "decode", "odometry",
+                                                              "describe", "match",  "sink"};
 constexpr std::size_t kMaxMessagesPerFrame = 4;  // per-frame reasons kept in frames.csv
 constexpr std::size_t kMaxListedProblems = 200;  // frames / dataset issues listed in summary.json
 constexpr double kProgressPeriodS = 0.25;
@@ -94,6 +102,9 @@ struct FrameRecord {
   cv::Mat image;
   OdometryOutput odometry;
   bool has_pose = false;
+  bool described = false;                   // DIRD descriptor computed for this frame
+  std::vector<SimilarityEntry> similarity;  // S(., seq): describe fills j <= seq - K, match the rest
+  std::size_t similarities_computed = 0;    // descriptor comparisons made for this frame
   std::vector<std::string> warnings;
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
@@ -173,7 +184,24 @@ class PipelineRun {
     }
     if (dataset_.has_imu())
       synchronizer_ = std::make_unique<ImuSynchronizer>(dataset_.imu_samples(), config_.sync);
-    odometry_ = make_odometry_source(config_.odometry, dataset_);
+    odometry_ = make_odometry_source(config_.odometry, config_.ekf, dataset_);
+    full_ = config_.run.mode == "full";
+    if (full_) {
+      if (!dataset_.has_images()) {
+        throw DataError(dataset_.root(), "run.mode full needs images, and this dataset has none");
+      }
+      extractor_ = std::make_unique<DirdExtractor>(config_.dird);
+      similarity_ = std::make_unique<DirdSimilarity>(config_.dird);
+      store_ = std::make_unique<DescriptorStore>(last_frame_ - first_frame_);
+      matcher_ = std::make_unique<SequenceMatcher>(config_.match, SequenceMatcher::Mode::kSingleSequence, 0);
+      if (config_.run.max_in_flight > config_.match.margin) {
+        spdlog::info(
+            "run: match.margin {} < run.max_in_flight {}: the similarities against the last {} frames "
+            "before the margin are computed in the (serial) match node",
+            config_.match.margin, config_.run.max_in_flight,
+            config_.run.max_in_flight - config_.match.margin);
+      }
+    }
     const std::string progress = config_.output.progress;
     show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
   }
@@ -208,7 +236,17 @@ class PipelineRun {
   void stage_sync(FrameRecord& r);
   void stage_decode(FrameRecord& r) const;
   void stage_odometry(FrameRecord& r);
+  void stage_describe(FrameRecord& r);
+  void stage_match(FrameRecord& r);
   void stage_sink(FrameRecord& r);
+  // Appends to `out` the similarities of frame `seq` against the earlier frames [j_begin, j_end) of the
+  // store (each must be published), skipping frames without a descriptor; returns the comparisons made.
+  std::size_t similarity_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
+                               std::vector<SimilarityEntry>& out) const;
+  void handle_match_output(MatchOutput& output);  // match node or, after the drain, run()
+  void write_finished_rows(bool end_of_stream);   // sink or, after the drain, run()
+  std::vector<std::string> detection_cells(const FrameMatchStatus& status, bool described,
+                                           std::size_t seq) const;
   void record_failure(std::size_t stage, const FrameRecord& r, const std::string& what);
   void produce(tbb::flow::queue_node<FramePtr>& queue, RunResult& result);
   void open_outputs();
@@ -236,11 +274,33 @@ class PipelineRun {
   std::mutex odometry_mutex_;
   std::unique_ptr<OdometrySource> odometry_;
 
+  // full mode: describe (parallel; stateless extractor, store entries written once per seq) and match
+  bool full_ = false;
+  std::unique_ptr<DirdExtractor> extractor_;
+  std::unique_ptr<DirdSimilarity> similarity_;
+  std::unique_ptr<DescriptorStore> store_;
+  std::atomic<std::size_t> descriptors_computed_{0};
+  std::atomic<std::size_t> similarities_computed_{0};
+  std::mutex match_mutex_;  // match node state
+  std::unique_ptr<SequenceMatcher> matcher_;
+  CsvWriter loops_csv_;
+  std::size_t loops_ = 0, loops_with_truth_ = 0, loops_within_radius_ = 0;
+  // per query frame, its best-scoring loop closure (evaluation.md: each query counts at most once)
+  std::int64_t best_loop_i_ = -1;
+  double best_loop_score_ = 0.0;
+  bool best_loop_within_ = false;
+  std::size_t loop_queries_ = 0, loop_queries_within_ = 0;
+  std::array<std::size_t, 4> outcome_counts_{};
+  // frame statuses finalised by the matcher (NMS delay), waiting for their frames.csv row
+  std::mutex finished_mutex_;
+  std::deque<FrameMatchStatus> finished_statuses_;
+
   // sink node state (everything below is touched by the sink only, and by run() after the drain)
   std::mutex sink_mutex_;
   CsvWriter frames_csv_;
   CsvWriter timing_csv_;
   TumWriter trajectory_;
+  std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
   TraceWriter trace_;
   StageProfiler profiler_;
   std::uint64_t next_sink_seq_ = 0;
@@ -252,6 +312,12 @@ class PipelineRun {
   nlohmann::json problem_frames_ = nlohmann::json::array();
   std::size_t problem_frame_count_ = 0;
   std::int64_t last_progress_ns_ = 0;
+  struct PendingRow {  // full mode: a frames.csv row waiting for its detection status
+    std::size_t seq = 0;
+    bool described = false;
+    std::vector<std::string> cells;
+  };
+  std::deque<PendingRow> pending_rows_;
 
   // frames inside the graph, by seq
   std::mutex live_mutex_;
@@ -282,7 +348,8 @@ void PipelineRun::record_failure(std::size_t stage, const FrameRecord& r, const 
 
 void PipelineRun::stage_sync(FrameRecord& r) {
   std::lock_guard lock(sync_mutex_);
-  r.needs_pixels = decode_all_ || odometry_->needs_images();
+  // Lazy decode: pixels are needed now by a visual odometry source, and in full mode by describe.
+  r.needs_pixels = decode_all_ || odometry_->needs_images() || full_;
   if (!synchronizer_) return;
   if (have_last_sync_t_ && r.t_ns <= last_sync_t_ns_) {
     add_message(r.errors,
@@ -327,6 +394,178 @@ void PipelineRun::stage_odometry(FrameRecord& r) {
   }
 }
 
+std::size_t PipelineRun::similarity_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
+                                          std::vector<SimilarityEntry>& out) const {
+  if (j_begin >= j_end) return 0;
+  bool any_missing = false;
+  for (std::size_t j = j_begin; j < j_end; ++j) {
+    const auto state = store_->state(j);
+    if (state == DescriptorStore::State::kEmpty) {
+      throw std::logic_error(fmt::format("similarity of seq {}: earlier seq {} not described yet", seq, j));
+    }
+    any_missing = any_missing || state == DescriptorStore::State::kNoDescriptor;
+  }
+  const std::size_t first_new = out.size();
+  similarity_->sparse_row(store_->descriptor(seq), store_->data() + j_begin, j_end - j_begin,
+                          static_cast<std::int64_t>(j_begin), out);
+  if (any_missing) {
+    const auto is_missing = [this](const SimilarityEntry& e) {
+      return store_->state(static_cast<std::size_t>(e.j)) != DescriptorStore::State::kValid;
+    };
+    out.erase(std::remove_if(out.begin() + static_cast<std::ptrdiff_t>(first_new), out.end(), is_missing),
+              out.end());
+    std::size_t compared = 0;
+    for (std::size_t j = j_begin; j < j_end; ++j)
+      compared += store_->state(j) == DescriptorStore::State::kValid ? 1 : 0;
+    return compared;
+  }
+  return j_end - j_begin;
+}
+
+// describe (parallel): the frame's DIRD descriptor, and its similarities against the earlier frames
+// that are certainly through the graph: the producer releases seq i only when at most K - 1 frames are
+// in flight, and the sink retires frames in order, so every seq <= i - K has left the sink (and
+// describe). The rest of the row (i - K < j <= i - margin, only when margin < K) is done by match,
+// after the sequencer. Either way the row is the same set of pairs whatever the thread timing.
+void PipelineRun::stage_describe(FrameRecord& r) {
+  if (!full_) return;
+  const std::size_t seq = static_cast<std::size_t>(r.seq);
+  if (r.decoded) {
+    extractor_->extract(r.image, store_->slot(seq));
+    r.described = true;
+    descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
+  }
+  store_->publish(seq, r.frame, r.t_ns, r.described);
+  if (!r.described) return;
+  const std::size_t margin = static_cast<std::size_t>(config_.match.margin);
+  const std::size_t limit = std::max(margin, static_cast<std::size_t>(config_.run.max_in_flight));
+  if (seq >= limit) {
+    r.similarities_computed += similarity_range(seq, 0, seq - limit + 1, r.similarity);
+  }
+}
+
+// match (serial, in order): completes the similarity row, feeds the streaming sequence matcher and
+// writes the loop closures that became final (NMS delay 2 W frames).
+void PipelineRun::stage_match(FrameRecord& r) {
+  if (!full_) return;
+  std::lock_guard lock(match_mutex_);
+  const std::size_t seq = static_cast<std::size_t>(r.seq);
+  const std::size_t margin = static_cast<std::size_t>(config_.match.margin);
+  const std::size_t in_flight = static_cast<std::size_t>(config_.run.max_in_flight);
+  if (r.described && margin < in_flight && seq >= margin) {
+    const std::size_t j_begin = seq + 1 >= in_flight ? seq + 1 - in_flight : 0;
+    r.similarities_computed += similarity_range(seq, j_begin, seq - margin + 1, r.similarity);
+  }
+  similarities_computed_.fetch_add(r.similarities_computed, std::memory_order_relaxed);
+  MatchOutput output;
+  matcher_->push(static_cast<std::int64_t>(seq), r.similarity, output);
+  r.similarity.clear();
+  r.similarity.shrink_to_fit();
+  handle_match_output(output);
+}
+
+void PipelineRun::handle_match_output(MatchOutput& output) {
+  for (const LoopClosure& loop : output.loops) {
+    const auto i = static_cast<std::size_t>(loop.i);
+    const auto j = static_cast<std::size_t>(loop.j);
+    const std::size_t frame_i = store_->frame(i), frame_j = store_->frame(j);
+    loops_csv_.write_row({std::to_string(frame_i), std::to_string(frame_j),
+                          format_fixed(ns_to_s(store_->t_ns(i)), 9),
+                          format_fixed(ns_to_s(store_->t_ns(j)), 9), format_fixed(loop.score, 6)});
+    ++loops_;
+    bool within = false;
+    if (dataset_.has_ground_truth()) {
+      const auto T_i = dataset_.ground_truth_T_w_b(frame_i);
+      const auto T_j = dataset_.ground_truth_T_w_b(frame_j);
+      if (T_i && T_j) {
+        ++loops_with_truth_;
+        within = (T_i->translation() - T_j->translation()).norm() <= config_.eval.accept_radius_m;
+        if (within) ++loops_within_radius_;
+      }
+    }
+    // Loops come in ascending i: the best-scoring one of each query frame (first on ties).
+    if (loop.i != best_loop_i_) {
+      ++loop_queries_;
+      best_loop_i_ = loop.i;
+      best_loop_score_ = loop.score;
+      best_loop_within_ = within;
+      if (within) ++loop_queries_within_;
+    } else if (loop.score > best_loop_score_) {
+      if (best_loop_within_ != within) {
+        if (within) {
+          ++loop_queries_within_;
+        } else {
+          --loop_queries_within_;
+        }
+      }
+      best_loop_score_ = loop.score;
+      best_loop_within_ = within;
+    }
+  }
+  if (!output.loops.empty()) loops_csv_.flush();
+  if (output.frames.empty()) return;
+  std::lock_guard lock(finished_mutex_);
+  for (const FrameMatchStatus& status : output.frames) finished_statuses_.push_back(status);
+}
+
+std::vector<std::string> PipelineRun::detection_cells(const FrameMatchStatus& status, bool described,
+                                                      std::size_t seq) const {
+  std::string reason;
+  const double threshold = config_.match.dp_threshold();
+  switch (status.outcome) {
+    case FrameOutcome::kNoCandidate:
+      if (!described) {
+        reason = "no descriptor (image not decoded)";
+      } else if (seq < static_cast<std::size_t>(config_.match.margin)) {
+        reason = fmt::format("no earlier frame beyond the margin of {}", config_.match.margin);
+      } else {
+        reason = fmt::format("no similarity above tau1 = {}", config_.dird.tau1);
+      }
+      break;
+    case FrameOutcome::kBelowThreshold:
+      reason = fmt::format("{} candidates, best similarity {:.4f}; best DP {:.4f} <= {:.4f}",
+                           status.candidates, status.best_similarity, status.best_score, threshold);
+      break;
+    case FrameOutcome::kSuppressed:
+      reason =
+          fmt::format("{} DP values above {:.4f}, all suppressed by NMS", status.above_threshold, threshold);
+      break;
+    case FrameOutcome::kLoop:
+      reason = fmt::format("{} loop closure(s) of {} DP values above {:.4f}", status.loops,
+                           status.above_threshold, threshold);
+      break;
+  }
+  const bool has_best = status.best_j >= 0;
+  return {described ? "y" : "n", to_string(status.outcome),
+          has_best ? std::to_string(store_->frame(static_cast<std::size_t>(status.best_j))) : "",
+          has_best ? format_fixed(status.best_score, 6) : "", reason};
+}
+
+// Writes the pending frames.csv rows whose detection status is final, in order. At the end of the stream
+// (after the matcher's flush), a row without a status (a failed run) is written with empty cells.
+void PipelineRun::write_finished_rows(bool end_of_stream) {
+  std::lock_guard lock(finished_mutex_);
+  while (!pending_rows_.empty()) {
+    PendingRow& row = pending_rows_.front();
+    while (!finished_statuses_.empty() && static_cast<std::size_t>(finished_statuses_.front().i) < row.seq)
+      finished_statuses_.pop_front();
+    if (finished_statuses_.empty()) {
+      if (!end_of_stream) return;
+      for (int k = 0; k < 5; ++k) row.cells.emplace_back("");
+    } else {
+      const FrameMatchStatus& status = finished_statuses_.front();
+      if (static_cast<std::size_t>(status.i) != row.seq) {
+        throw std::logic_error(fmt::format("match status of seq {} while seq {} waits", status.i, row.seq));
+      }
+      for (auto& cell : detection_cells(status, row.described, row.seq)) row.cells.push_back(std::move(cell));
+      ++outcome_counts_[static_cast<std::size_t>(status.outcome)];
+      finished_statuses_.pop_front();
+    }
+    frames_csv_.write_row(row.cells);
+    pending_rows_.pop_front();
+  }
+}
+
 void PipelineRun::stage_sink(FrameRecord& r) {
   std::lock_guard lock(sink_mutex_);
   if (r.seq != next_sink_seq_) {
@@ -353,6 +592,7 @@ void PipelineRun::stage_sink(FrameRecord& r) {
     row.push_back(format_fixed(sigma_m, 9));
     row.emplace_back(to_string(pose.status));
     if (pose.status != OdometryStatus::kLost) trajectory_.write(r.t_ns, pose.T_w_b);
+    if (pose.status == OdometryStatus::kTracking) tracked_poses_.push_back({r.t_ns, pose.T_w_b});
   } else {
     for (int i = 0; i < 8; ++i) row.emplace_back("");
     row.emplace_back("none");
@@ -361,7 +601,14 @@ void PipelineRun::stage_sink(FrameRecord& r) {
   row.emplace_back(r.decoded ? "y" : "n");
   row.push_back(status);
   row.push_back(reason);
-  frames_csv_.write_row(row);
+  if (odometry_->needs_images())  // visual sources (ekf): features tracked in this image
+    row.push_back(r.has_pose ? std::to_string(std::max(0, r.odometry.tracked_features)) : "");
+  if (full_) {
+    pending_rows_.push_back(PendingRow{static_cast<std::size_t>(r.seq), r.described, std::move(row)});
+    write_finished_rows(false);
+  } else {
+    frames_csv_.write_row(row);
+  }
 
   ++processed_;
   (status == "ok" ? frames_ok_ : status == "warning" ? frames_warning_ : frames_error_)++;
@@ -444,9 +691,18 @@ void PipelineRun::show_progress(bool final) {
 
 void PipelineRun::open_outputs() {
   std::filesystem::create_directories(out_dir_);
-  frames_csv_.open(out_dir_ / "frames.csv",
-                   {"seq", "frame", "t_ns", "t_s", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw", "sigma_m",
-                    "odom_status", "imu_samples", "decoded", "status", "reason"});
+  std::vector<std::string> frame_columns = {
+      "seq", "frame", "t_ns",    "t_s",         "x_m",         "y_m",     "z_m",    "qx",    "qy",
+      "qz",  "qw",    "sigma_m", "odom_status", "imu_samples", "decoded", "status", "reason"};
+  if (odometry_->needs_images()) frame_columns.emplace_back("tracked_features");
+  if (full_) {
+    // descriptor computed (y/n); detection: no candidate | below threshold | suppressed | loop; the best
+    // DP value of the frame and its earlier frame (accepted or not); why.
+    for (const char* column : {"descriptor", "detection", "match_frame", "match_score", "detection_reason"})
+      frame_columns.emplace_back(column);
+    loops_csv_.open(out_dir_ / "loops.csv", {"i", "j", "t_i", "t_j", "score"});
+  }
+  frames_csv_.open(out_dir_ / "frames.csv", frame_columns);
   std::vector<std::string> timing_columns = {"seq", "frame"};
   for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
   timing_columns.emplace_back("latency_ms");
@@ -540,8 +796,8 @@ RunResult PipelineRun::run() {
   std::unique_ptr<queue_node<FramePtr>> queue;
   std::unique_ptr<limiter_node<FramePtr, int>> limiter;
   const auto seq_of = [](const FramePtr& message) { return static_cast<std::size_t>(message.seq); };
-  std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_out;
-  std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry;
+  std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_described, seq_out;
+  std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry, describe, match;
   std::unique_ptr<function_node<FramePtr, int>> sink;
   arena.execute([&] {
     g = std::make_unique<graph>();
@@ -550,6 +806,7 @@ RunResult PipelineRun::run() {
         *g, static_cast<std::size_t>(config_.run.max_in_flight));
     seq_in = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     seq_decoded = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
+    seq_described = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     seq_out = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     sync = std::make_unique<function_node<FramePtr, FramePtr>>(
         *g, serial, node_body(kSync, [this](FrameRecord& r) { stage_sync(r); }));
@@ -557,6 +814,10 @@ RunResult PipelineRun::run() {
         *g, unlimited, node_body(kDecode, [this](FrameRecord& r) { stage_decode(r); }));
     odometry = std::make_unique<function_node<FramePtr, FramePtr>>(
         *g, serial, node_body(kOdometry, [this](FrameRecord& r) { stage_odometry(r); }));
+    describe = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, unlimited, node_body(kDescribe, [this](FrameRecord& r) { stage_describe(r); }));
+    match = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, serial, node_body(kMatch, [this](FrameRecord& r) { stage_match(r); }));
     sink = std::make_unique<function_node<FramePtr, int>>(*g, serial, [this](FramePtr message) -> int {
       FrameRecord& r = *message.record;
       r.acquire();
@@ -578,7 +839,10 @@ RunResult PipelineRun::run() {
     make_edge(*sync, *decode);
     make_edge(*decode, *seq_decoded);
     make_edge(*seq_decoded, *odometry);
-    make_edge(*odometry, *seq_out);
+    make_edge(*odometry, *describe);
+    make_edge(*describe, *seq_described);
+    make_edge(*seq_described, *match);
+    make_edge(*match, *seq_out);
     make_edge(*seq_out, *sink);
     make_edge(*sink, limiter->decrementer());
   });
@@ -608,6 +872,25 @@ RunResult PipelineRun::run() {
   }
 
   std::lock_guard lock(sink_mutex_);
+  if (full_) {
+    // End of stream: the matcher finalises its last 2 W frames; their rows follow.
+    std::lock_guard match_lock(match_mutex_);
+    try {
+      MatchOutput output;
+      matcher_->flush(output);
+      handle_match_output(output);
+      write_finished_rows(true);
+    } catch (const std::exception& e) {
+      std::lock_guard failure_lock(failure_mutex_);
+      if (!failed_.load()) {
+        failure_ = std::string("match flush at the end of the stream: ") + e.what();
+        failed_.store(true);
+      }
+      result.failed = true;
+      result.error = failure_;
+    }
+    loops_csv_.close();
+  }
   if (show_progress_) show_progress(true);
   frames_csv_.close();
   timing_csv_.close();
@@ -681,6 +964,25 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
         {"frames_error", result.frames_error},
         {"decoded", decoded_},
         {"odometry_lost", odometry_lost_}}},
+      {"images_decoded", decoded_},
+      {"descriptors_computed", descriptors_computed_.load()},
+      {"similarities_computed", similarities_computed_.load()},
+      {"loops", loops_},
+      {"detection",
+       {{"no_candidate", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kNoCandidate)]},
+        {"below_threshold", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kBelowThreshold)]},
+        {"suppressed", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kSuppressed)]},
+        {"loop", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kLoop)]},
+        {"nms_delay_frames", full_ ? matcher_->emission_delay() : 0}}},
+      {"loop_truth",
+       {{"accept_radius_m", config_.eval.accept_radius_m},
+        {"loops_with_ground_truth", loops_with_truth_},
+        {"loops_within_accept_radius", loops_within_radius_},
+        {"loops_beyond_accept_radius", loops_with_truth_ - loops_within_radius_},
+        {"query_frames_with_loops", loop_queries_},
+        {"query_best_loop_within_accept_radius", loop_queries_within_},
+        {"query_best_loop_beyond_accept_radius", loop_queries_ - loop_queries_within_}}},
+      {"trajectory_accuracy", trajectory_accuracy_json(tracked_poses_, dataset_)},
       {"stages", profiler_.to_json()},
       {"data_issues",
        {{"dataset_issue_count", dataset_.issues().size()},

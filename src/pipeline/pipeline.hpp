@@ -1,9 +1,10 @@
 // `loopgate run`: the oneTBB flow graph (architecture.md § The graph) over one dataset.
 //
-//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► sink
-//   (replay clock,          (K in flight)       (serial) (parallel)          (serial)            (serial)
-//    main thread)              ▲                                                                    │
-//                              └──────────────── integer decrement (1 per frame) ◄─────────────────┘
+//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► describe* ──► seq
+//   (replay clock,          (K in flight)       (serial) (parallel)          (serial)     (parallel)
+//    main thread)              ▲                                                                     │
+//                              │                         sink ◄── seq ◄── match (serial) ◄───────────┘
+//                              └──── integer decrement (1 per frame) ◄── (serial)
 //
 // - The producer runs on the calling thread, outside the worker arena. `rate: max` waits for a free slot
 //   (back-pressure, no drops); `rate: R` releases frame i at start + (t_i - t_first) / R on a steady
@@ -11,9 +12,18 @@
 // - Every released frame gets the next contiguous sequence number and passes every node, whatever
 //   happens to it; sequencers restore the order after the parallel node (and guard the serial ones).
 // - decode is lazy: it decodes only when a later stage needs the pixels of this frame now (run.decode
-//   = all forces it; a visual odometry source needs every frame). The gate / describe / match nodes of
-//   the DIRD issues go between odometry and sink; describe reads the images it needs itself through the
-//   dataset's random access.
+//   = all forces it; a visual odometry source needs every frame, and so does describe in full mode).
+// - run.mode = odometry: describe and match pass frames through. run.mode = full (the pure-DIRD
+//   baseline): describe extracts the frame's DIRD descriptor into a store owned by the run (3456 bytes
+//   per frame, DescriptorStore) and computes its similarities against the frames j <= i - max(margin, K)
+//   (certainly through the sink: the producer releases seq i only when at most K - 1 frames are in
+//   flight); match, in order, adds the pairs i - K < j <= i - margin (only when margin < K), feeds the
+//   streaming SequenceMatcher and writes loops.csv (i,j,t_i,t_j,score; dataset frame indices, times in
+//   s). The sink holds each frames.csv row until the matcher has finalised the frame (NMS delay 2 W
+//   frames); the matcher is flushed at the end of the stream. frames.csv then gains the columns
+//   descriptor (y/n), detection (no candidate | below threshold | suppressed | loop), match_frame and
+//   match_score (the frame's largest DP value, accepted or not) and detection_reason. The matcher indexes
+//   frames by sequence number (contiguous also when rate mode drops frames; match.margin counts them).
 // - Bad data in one frame (image that fails to decode, IMU gap/out-of-order/duplicates, odometry lost)
 //   is recorded in that frame's status and in the summary; the run goes on. Any other exception escaping
 //   a node cancels the graph; it is reported once with its stage and frame, the outputs of the frames
@@ -48,7 +58,10 @@ struct RunResult {
 };
 
 // Runs the graph over `dataset` and writes frames.csv, trajectory.tum, timing.csv, summary.json (and
-// trace.json when output.trace) into `out_dir`. `config` must be validated. `stop` (may be null) is
+// trace.json when output.trace; loops.csv in full mode) into `out_dir`. summary.json has
+// images_decoded, descriptors_computed, similarities_computed, loops, detection (frames per outcome) and
+// loop_truth (with ground truth: loops within / beyond eval.accept_radius_m, per detection and per query
+// frame's best-scoring detection). `config` must be validated. `stop` (may be null) is
 // polled by the producer. Throws ConfigError/DataError for problems found before the graph starts.
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop = nullptr);

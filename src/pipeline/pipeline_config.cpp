@@ -54,6 +54,7 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 }
 
 void RunConfig::validate() const {
+  require_one_of("run.mode", mode, {"odometry", "full"});
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
   require(max_in_flight >= 1, "run.max_in_flight", ">= 1", std::to_string(max_in_flight));
@@ -61,6 +62,13 @@ void RunConfig::validate() const {
   require(camera_index == 0 || camera_index == 1, "run.camera_index", "0 or 1", std::to_string(camera_index));
   require(deadline_ms >= 0, "run.deadline_ms", ">= 0", std::to_string(deadline_ms));
   if (!frames.empty()) frame_range(static_cast<std::size_t>(-1));
+}
+
+void EvalConfig::validate() const {
+  require(std::isfinite(accept_radius_m) && accept_radius_m > 0, "eval.accept_radius_m", "> 0",
+          std::to_string(accept_radius_m));
+  require(aligned_tolerance_frames >= -1, "eval.aligned_tolerance_frames", ">= 0, or -1 (not aligned)",
+          std::to_string(aligned_tolerance_frames));
 }
 
 void OutputConfig::validate() const {

@@ -8,13 +8,19 @@
 #include <string>
 #include <utility>
 
+#include "stages/dird/dird_config.hpp"
+#include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
 #include "stages/sync/imu_sync.hpp"
 
 namespace loopgate {
 
 struct RunConfig {
-  std::string dataset;          // dataset folder (the --dataset flag overrides it)
+  std::string dataset;  // dataset folder (the --dataset flag overrides it)
+  // "odometry": sync, decode, odometry only (no loop detection); "full": DIRD on every frame and its
+  // similarity against every earlier frame beyond match.margin, sequence match, NMS (the paper's
+  // pure-DIRD baseline). The gated mode comes with its own issue.
+  std::string mode = "odometry";
   std::string rate = "max";     // "max" (as fast as the graph drains) or R > 0 (R x real time)
   int threads = 2;              // worker threads of the graph
   int max_in_flight = 8;        // limiter: frames inside the graph at once
@@ -27,6 +33,7 @@ struct RunConfig {
   template <class V>
   void visit(V&& v) {
     v("dataset", dataset);
+    v("mode", mode);
     v("rate", rate);
     v("threads", threads);
     v("max_in_flight", max_in_flight);
@@ -38,6 +45,7 @@ struct RunConfig {
   }
   void validate() const;
 
+  bool detects_loops() const { return mode == "full"; }
   // nullopt for "max", else the rate factor R.
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
@@ -58,10 +66,31 @@ struct OutputConfig {
   void validate() const;
 };
 
+// Evaluation of the detections against the dataset's ground truth (when it has one).
+struct EvalConfig {
+  // A loop closure (i, j) counts as "within" when the ground-truth positions of i and j are at most this
+  // far apart (3-D distance, metres).
+  double accept_radius_m = 10.0;
+  // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
+  // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
+  int aligned_tolerance_frames = -1;
+
+  template <class V>
+  void visit(V&& v) {
+    v("accept_radius_m", accept_radius_m);
+    v("aligned_tolerance_frames", aligned_tolerance_frames);
+  }
+  void validate() const;
+};
+
 struct PipelineConfig {
   RunConfig run;
   SyncConfig sync;
   OdometryConfig odometry;
+  EkfConfig ekf;  // the `ekf` odometry source (stages/ekf/ekf_config.hpp)
+  DirdConfig dird;
+  MatchConfig match;
+  EvalConfig eval;
   OutputConfig output;
 
   template <class V>
@@ -69,12 +98,20 @@ struct PipelineConfig {
     v("run", run);
     v("sync", sync);
     v("odometry", odometry);
+    v("ekf", ekf);
+    v("dird", dird);
+    v("match", match);
+    v("eval", eval);
     v("output", output);
   }
   void validate() const {
     run.validate();
     sync.validate();
     odometry.validate();
+    ekf.validate();
+    dird.validate();
+    match.validate();
+    eval.validate();
     output.validate();
   }
 };

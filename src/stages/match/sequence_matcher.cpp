@@ -127,7 +127,10 @@ void SequenceMatcher::push(std::int64_t i, std::span<const SimilarityEntry> entr
       double best = 0.0;
       for (std::size_t t = lo; t < hi; ++t) best = std::max(best, prev[t].second);
       const double dp = s_value + best;
-      column.status.best_score = std::max(column.status.best_score, dp);
+      if (column.status.best_j < 0 || dp > column.status.best_score) {
+        column.status.best_score = dp;
+        column.status.best_j = r;
+      }
       if (dp > threshold) column.entries.push_back({r, dp, dp});
     }
   }

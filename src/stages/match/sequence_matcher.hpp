@@ -60,6 +60,7 @@ struct FrameMatchStatus {
   std::size_t candidates = 0;       // stored similarity entries S(., i)
   double best_similarity = 0.0;     // max S(., i), 0 if none
   double best_score = 0.0;          // max DP(., i) over the stored entries, 0 if none
+  std::int64_t best_j = -1;         // row j of best_score (the smallest j on ties), -1 if none
   std::size_t above_threshold = 0;  // DP entries > tau3 * L
   std::size_t loops = 0;            // NMS survivors (emitted loop closures)
 };

@@ -1,8 +1,11 @@
 // Odometry sources (vio-ekf.md § Odometry sources): one interface, chosen by `odometry.source`.
 //   drift: ground truth corrupted by a seeded random walk in position, heading and scale, with the
 //          covariance of that drift model (for datasets without IMU and controlled experiments);
-//   file:  an external TUM trajectory, covariance from the growth model sigma^2 = a + b * distance.
-// (The `ekf` source comes with its own issue.) Every source emits one PoseEstimate per image.
+//   file:  an external TUM trajectory, covariance from the growth model sigma^2 = a + b * distance;
+//   ekf:   the MSCKF visual-inertial filter of src/stages/ekf on the images and IMU (ekf_odometry.hpp);
+//   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth unless
+//          ekf.init_mode is standstill), else drift. The default: EuRoC-layout data with IMU gets the ekf.
+// Every source emits one PoseEstimate per image.
 #pragma once
 
 #include <cstddef>
@@ -13,6 +16,7 @@
 #include <vector>
 
 #include "core/types.hpp"
+#include "stages/ekf/ekf_config.hpp"
 
 namespace cv {
 class Mat;
@@ -23,7 +27,7 @@ namespace loopgate {
 class Dataset;
 
 struct OdometryConfig {
-  std::string source = "drift";  // drift | file
+  std::string source = "auto";  // drift | file | ekf | auto (see above)
   std::int64_t seed = 1;
   // drift: random walks driven by the distance travelled (per sqrt of metres).
   double drift_position_sigma_m_per_sqrt_m = 0.005;
@@ -41,6 +45,10 @@ struct OdometryConfig {
   double file_rot_sigma2_a_rad2 = 1e-4;
   double file_rot_sigma2_b_rad2_per_m = 1e-5;
   double file_max_gap_s = 0.5;  // a frame farther than this from any trajectory pose is reported lost
+  // ekf: the dataset world's up axis (the filter's gravity is along -up): auto | x | -x | y | -y | z | -z.
+  // auto: the world axis nearest the mean specific force of the IMU rotated into the world by the ground
+  // truth (z for EuRoC, -y for KITTI camera-frame worlds); z without ground truth.
+  std::string ekf_up_axis = "auto";
 
   template <class V>
   void visit(V&& v) {
@@ -58,6 +66,7 @@ struct OdometryConfig {
     v("file_rot_sigma2_a_rad2", file_rot_sigma2_a_rad2);
     v("file_rot_sigma2_b_rad2_per_m", file_rot_sigma2_b_rad2_per_m);
     v("file_max_gap_s", file_max_gap_s);
+    v("ekf_up_axis", ekf_up_axis);
   }
   void validate() const;
 };
@@ -73,7 +82,8 @@ struct OdometryInput {
 
 struct OdometryOutput {
   PoseEstimate pose;
-  std::string reason;  // why the status is not tracking (empty when tracking)
+  std::string reason;         // why the status is not tracking (empty when tracking)
+  int tracked_features = -1;  // visual sources: features tracked in this image; -1 = not a visual source
 };
 
 class OdometrySource {
@@ -88,7 +98,19 @@ class OdometrySource {
 };
 
 // Builds the configured source. `dataset` supplies ground truth (drift: required, and the heading axis
-// when "auto"); throws ConfigError / DataError naming what is missing.
+// when "auto"; ekf: the initial state with ekf.init_mode ground_truth) and the camera and IMU calibration
+// (ekf); `ekf` configures the ekf source. Throws ConfigError / DataError naming what is missing.
+std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                                     const Dataset& dataset);
+// Same with the default EkfConfig.
 std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const Dataset& dataset);
+
+// The world axis (+-x, +-y or +-z) nearest the up direction: the mean specific force of the IMU over the
+// sequence, rotated into the world by the ground truth. nullopt without IMU or ground truth.
+std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset);
+
+// The source `config.source` resolves to for `dataset`: "auto" becomes "ekf" or "drift" (see above).
+std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                    const Dataset& dataset);
 
 }  // namespace loopgate

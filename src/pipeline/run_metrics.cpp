@@ -1,0 +1,71 @@
+#include "pipeline/run_metrics.hpp"
+
+#include <cmath>
+#include <exception>
+#include <string>
+
+#include "eval/trajectory_metrics.hpp"
+#include "io/dataset.hpp"
+#include "stages/ekf/vio_ekf.hpp"
+#include "stages/odometry/drift_odometry.hpp"
+#include "stages/odometry/odometry_source.hpp"
+
+namespace loopgate {
+
+namespace {
+constexpr std::size_t kMinPairs = 3;  // alignment needs three non-collinear pairs
+
+// The gravity axis of the world: from the IMU and the ground truth when there is an IMU (z for EuRoC,
+// y for KITTI camera-frame worlds), else the world axis nearest the normal of the best-fit plane of the
+// ground-truth positions (real KITTI).
+std::string gravity_axis(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_gt) {
+  const auto up_w = world_up_axis_from_imu(dataset);
+  Eigen::Vector3d::Index axis = 2;
+  (up_w ? *up_w : plane_normal(p_gt)).cwiseAbs().maxCoeff(&axis);
+  return axis == 0 ? "x" : axis == 1 ? "y" : "z";
+}
+}  // namespace
+
+nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_poses,
+                                        const Dataset& dataset) {
+  if (!dataset.has_ground_truth()) return {{"available", false}, {"why", "the dataset has no ground truth"}};
+  std::vector<Eigen::Vector3d> p_est;
+  std::vector<Eigen::Vector3d> p_gt;
+  for (const StampedPose& pose : tracked_poses) {
+    const auto gt = ground_truth_state_at(dataset.ground_truth(), pose.t_ns);
+    if (!gt) continue;
+    p_est.push_back(pose.T_w_b.translation());
+    p_gt.push_back(gt->T_w_b.translation());
+  }
+  if (p_est.size() < kMinPairs) {
+    return {{"available", false},
+            {"why", std::to_string(p_est.size()) + " tracking poses inside the ground-truth time span"}};
+  }
+  AteConfig posyaw;
+  posyaw.alignment = "posyaw";
+  AteConfig se3;
+  se3.alignment = "se3";
+  AteResult ate;
+  AteResult ate_se3;
+  try {
+    posyaw.up_axis = gravity_axis(dataset, p_gt);
+    ate = compute_ate(p_est, p_gt, posyaw);
+    ate_se3 = compute_ate(p_est, p_gt, se3);
+  } catch (const std::exception& e) {
+    return {{"available", false}, {"why", std::string("alignment failed: ") + e.what()}};
+  }
+  return {{"available", true},
+          {"poses", "odometry poses with status tracking"},
+          {"alignment", "posyaw"},
+          {"up_axis", posyaw.up_axis},
+          {"pairs", ate.count},
+          {"rmse_m", ate.rmse_m},
+          {"mean_m", ate.mean_m},
+          {"max_m", ate.max_m},
+          {"path_length_m", ate.path_length_m},
+          {"final_error_m", ate.final_error_m},
+          {"drift_per_100m", ate.drift_per_100m},
+          {"se3_rmse_m", ate_se3.rmse_m}};
+}
+
+}  // namespace loopgate

@@ -1,0 +1,38 @@
+// Two-sequence mode (docs: ../shared/docs/dird.md §5): a reference sequence against a query sequence
+// (e.g. Nordland summer vs winter), appearance only. Every image of both is described (in parallel,
+// `run.threads` workers), S is computed for every (reference r, query q) pair with no safety margin, and
+// the query rows feed the streaming SequenceMatcher in its two-sequence mode (same DP and NMS as the
+// single-sequence run; i = query frame, j = reference frame).
+//
+// Outputs in `out_dir`:
+//   frames.csv  one row per query frame: its best reference match (the largest DP value of the frame)
+//               and score, accepted or not, and the detection status and reason;
+//   loops.csv   i,j,t_i,t_j,score (i query frame, j reference frame);
+//   summary.json configuration echo, counts, stage times, peak RSS, and with eval.aligned_tolerance_frames
+//               >= 0 the share of loops / best matches within that many frames of the same index.
+// run.frames (A:B) selects the same index range of both sequences. Images that fail to decode are
+// recorded (frame status "error") and take part in no pair.
+#pragma once
+
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "pipeline/pipeline_config.hpp"
+
+namespace loopgate {
+
+class Dataset;
+
+struct TwoSequenceResult {
+  std::size_t reference_frames = 0, query_frames = 0;
+  std::size_t loops = 0;
+  double wall_s = 0;
+  nlohmann::json summary;
+};
+
+// `config` must be valid (run.mode is not used). Throws ConfigError/DataError for bad input found before
+// the run (no frames, no images, an empty frame range).
+TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
+                                    const Dataset& query, const std::filesystem::path& out_dir);
+
+}  // namespace loopgate

@@ -1,0 +1,97 @@
+#include "stages/odometry/ekf_odometry.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <Eigen/Geometry>
+#include <exception>
+#include <opencv2/core/mat.hpp>
+#include <span>
+#include <utility>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+EkfOdometry::EkfOdometry(const EkfConfig& config, const CameraCalibration& camera, const ImuCalibration& imu,
+                         std::vector<GroundTruthState> ground_truth, const Eigen::Vector3d& up_w)
+    : config_(config),
+      ekf_(config, camera, imu),
+      ground_truth_(std::move(ground_truth)),
+      R_f_w_(Eigen::Quaterniond::FromTwoVectors(up_w.normalized(), Eigen::Vector3d::UnitZ())
+                 .toRotationMatrix()) {
+  for (GroundTruthState& s : ground_truth_) {
+    s.T_w_b.linear() = R_f_w_ * s.T_w_b.linear();
+    s.T_w_b.translation() = R_f_w_ * s.T_w_b.translation();
+    s.v_w_mps = R_f_w_ * s.v_w_mps;
+  }
+  if (config_.init_mode == "ground_truth" && ground_truth_.size() < 2) {
+    throw ConfigError(
+        "ekf.init_mode: 'ground_truth' needs a dataset with ground truth (at least two states); "
+        "use 'standstill'");
+  }
+}
+
+OdometryOutput EkfOdometry::lost(const OdometryInput& input, const std::string& reason) {
+  OdometryOutput out;
+  if (last_pose_.has_value()) out.pose = *last_pose_;
+  out.pose.t_ns = input.t_ns;
+  out.pose.status = OdometryStatus::kLost;
+  out.reason = reason;
+  out.tracked_features = 0;
+  return out;
+}
+
+OdometryOutput EkfOdometry::process(const OdometryInput& input) {
+  // IMU of this frame, after the samples of earlier frames that did not reach the filter.
+  std::vector<ImuSample> imu = pending_imu_;
+  if (input.imu != nullptr) {
+    for (const ImuSample& s : *input.imu) {
+      if (imu.empty() || s.t_ns > imu.back().t_ns) imu.push_back(s);
+    }
+  }
+  if (input.image == nullptr) {
+    pending_imu_ = std::move(imu);
+    return lost(input, "no image for this frame (the ekf source tracks images)");
+  }
+  EkfFrameInput in;
+  in.t_ns = input.t_ns;
+  in.imu = std::span<const ImuSample>(imu);
+  in.image = input.image;
+  if (config_.init_mode == "ground_truth") in.ground_truth = ground_truth_state_at(ground_truth_, input.t_ns);
+  EkfFrameOutput result;
+  try {
+    result = ekf_.process(in);
+  } catch (const std::exception& e) {
+    // A bad image (wrong size, empty) or anything the filter did not catch: this frame is lost.
+    spdlog::warn("ekf: frame {} lost: {}", input.frame, e.what());
+    pending_imu_ = std::move(imu);
+    return lost(input, e.what());
+  }
+  pending_imu_.clear();
+  spdlog::debug(
+      "ekf: frame {} {} features {} disparity {:.2f} px zupt {} update: candidates {} used {} rejected "
+      "triangulation {} chi2 {}; sigma {:.3f} m; track {:.2f} ms filter {:.2f} ms",
+      input.frame, to_string(result.pose.status), result.tracked_features, result.median_disparity_px,
+      result.zero_velocity, result.update.candidate_features, result.update.used_features,
+      result.update.rejected_triangulation, result.update.rejected_chi2, result.position_sigma_m,
+      result.tracking_ms, result.filter_ms);
+  OdometryOutput out;
+  out.pose = result.pose;
+  // Back to the dataset world: position and velocity rotate, the attitude error (right perturbation, in
+  // the body frame) does not.
+  const Eigen::Matrix3d R_w_f = R_f_w_.transpose();
+  out.pose.T_w_b.linear() = R_w_f * result.pose.T_w_b.linear();
+  out.pose.T_w_b.translation() = R_w_f * result.pose.T_w_b.translation();
+  out.pose.v_w_mps = R_w_f * result.pose.v_w_mps;
+  out.pose.cov.topLeftCorner<3, 3>() = R_w_f * result.pose.cov.topLeftCorner<3, 3>() * R_f_w_;
+  out.pose.cov.topRightCorner<3, 3>() = R_w_f * result.pose.cov.topRightCorner<3, 3>();
+  out.pose.cov.bottomLeftCorner<3, 3>() = result.pose.cov.bottomLeftCorner<3, 3>() * R_f_w_;
+  out.pose.t_ns = input.t_ns;  // a lost frame carries the last good pose: stamp it with this frame
+  out.reason = result.reason;
+  out.tracked_features = result.tracked_features;
+  if (out.pose.status == OdometryStatus::kTracking) last_pose_ = out.pose;
+  last_ = std::move(result);
+  return out;
+}
+
+}  // namespace loopgate

@@ -1,0 +1,301 @@
+// Full mode (run.mode = full) of the pipeline: DIRD on every frame, similarities against every earlier frame
+// beyond the margin, streaming sequence match and NMS; and the two-sequence mode (dird.md §5).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <set>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "io/config.hpp"
+#include "pipeline/pipeline.hpp"
+#include "pipeline/two_sequence.hpp"
+#include "pipeline_fake_dataset.hpp"
+#include "stages/dird/dird_similarity.hpp"
+#include "stages/match/sequence_matcher.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A drive around a circle of `period` frames, `laps` times: frame k shows place k % period (a random
+// texture seeded by the place) with a little noise that differs per lap, and sits on the circle at the
+// place's position; so frame i revisits frame i - period. `noise_seed` changes the per-lap noise only.
+class RevisitDataset : public testing::FakeDataset {
+ public:
+  RevisitDataset(std::size_t period, std::size_t laps, int noise_seed = 0)
+      : FakeDataset(period * laps), period_(period), noise_seed_(noise_seed) {}
+
+  cv::Mat load_image(std::size_t frame) const override {
+    if (corrupt_frames.count(frame))
+      throw DataError(image_path(frame), "frame " + std::to_string(frame) + ": corrupt PNG");
+    const std::size_t place = frame % period_;
+    const std::size_t lap = frame / period_;
+    cv::Mat small(8, 16, CV_8UC1);
+    cv::RNG place_rng(0x9e3779b9u + static_cast<std::uint64_t>(place));
+    place_rng.fill(small, cv::RNG::UNIFORM, 0, 256);
+    cv::Mat image;
+    cv::resize(small, image, cv::Size(64, 32), 0, 0, cv::INTER_LINEAR);
+    cv::Mat noise(image.size(), CV_16SC1);
+    cv::RNG noise_rng(static_cast<std::uint64_t>(1000003 * (lap + 1) + 7919 * frame) +
+                      static_cast<std::uint64_t>(noise_seed_));
+    noise_rng.fill(noise, cv::RNG::UNIFORM, -6, 7);
+    cv::Mat noisy;
+    image.convertTo(noisy, CV_16SC1);
+    noisy += noise;
+    noisy.convertTo(image, CV_8UC1);  // saturating
+    return image;
+  }
+  std::optional<Eigen::Isometry3d> ground_truth_T_w_b(std::size_t frame) const override {
+    const double theta = 2.0 * M_PI * static_cast<double>(frame % period_) / static_cast<double>(period_);
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.translation() = Eigen::Vector3d(30 * std::sin(theta), 30 * (1 - std::cos(theta)), 0);
+    T.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    return T;
+  }
+
+ private:
+  std::size_t period_;
+  int noise_seed_;
+};
+
+std::string read_file(const fs::path& file) {
+  std::ifstream in(file);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+std::vector<std::vector<std::string>> read_csv(const fs::path& file,
+                                               std::vector<std::string>* header = nullptr) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(read_file(file));
+  std::string line;
+  bool first = true;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells(1);
+    bool quoted = false;
+    for (const char c : line) {
+      if (c == '"') {
+        quoted = !quoted;
+      } else if (c == ',' && !quoted) {
+        cells.emplace_back();
+      } else {
+        cells.back() += c;
+      }
+    }
+    if (first) {
+      first = false;
+      if (header) *header = cells;
+      continue;
+    }
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+std::size_t column(const std::vector<std::string>& header, const std::string& name) {
+  const auto it = std::find(header.begin(), header.end(), name);
+  if (it == header.end()) throw std::runtime_error("no column " + name);
+  return static_cast<std::size_t>(it - header.begin());
+}
+
+constexpr std::size_t kPeriod = 120;
+
+PipelineConfig full_config(int threads = 2, int margin = 30) {
+  PipelineConfig config;
+  config.run.mode = "full";
+  config.run.threads = threads;
+  config.output.progress = "off";
+  config.match.margin = margin;
+  config.match.sequence_length = 10;
+  config.match.tau3 = 0.05;
+  config.match.nms_half_window = 20;
+  return config;
+}
+
+// The loops the batch reference gives for the same images: DirdExtractor + sparse_columns + match_batch.
+std::vector<LoopClosure> reference_loops(const Dataset& dataset, const PipelineConfig& config) {
+  const DirdExtractor extractor(config.dird);
+  const DirdSimilarity similarity(config.dird);
+  std::vector<Descriptor> descriptors;
+  for (std::size_t k = 0; k < dataset.frame_count(); ++k)
+    descriptors.push_back(extractor.extract(dataset.load_image(k)));
+  std::vector<std::vector<SimilarityEntry>> columns(descriptors.size());
+  similarity.sparse_columns(descriptors, config.match.margin, 0, descriptors.size(), columns);
+  return match_batch(columns, config.match);
+}
+
+TEST(PipelineFullMode, FindsTheRevisitsAndEqualsTheBatchReference) {
+  const RevisitDataset dataset(kPeriod, 3);
+  const auto out = testing::make_temp_dir("pipeline-full");
+  const PipelineConfig config = full_config();
+  const RunResult result = run_pipeline(config, dataset, out);
+  ASSERT_FALSE(result.failed) << result.error;
+  ASSERT_EQ(result.frames_processed, 3 * kPeriod);
+
+  const auto loops = read_csv(out / "loops.csv");
+  const auto expected = reference_loops(dataset, config);
+  ASSERT_FALSE(expected.empty());
+  ASSERT_EQ(loops.size(), expected.size());
+  std::size_t on_revisit = 0;
+  for (std::size_t k = 0; k < loops.size(); ++k) {
+    ASSERT_EQ(loops[k].size(), 5u);
+    EXPECT_EQ(std::stoll(loops[k][0]), expected[k].i);
+    EXPECT_EQ(std::stoll(loops[k][1]), expected[k].j);
+    EXPECT_NEAR(std::stod(loops[k][4]), expected[k].score, 1e-6);
+    EXPECT_NEAR(std::stod(loops[k][2]), 1.0 + 0.1 * static_cast<double>(expected[k].i), 1e-6);  // t_i
+    const std::int64_t lag = expected[k].i - expected[k].j;
+    if (lag % static_cast<std::int64_t>(kPeriod) <= 2 ||
+        lag % static_cast<std::int64_t>(kPeriod) >= static_cast<std::int64_t>(kPeriod) - 2)
+      ++on_revisit;
+  }
+  // Loops only where the drive revisits (second and third lap), and a good part of those frames.
+  EXPECT_EQ(on_revisit, loops.size());
+  EXPECT_GE(loops.size(), 2 * kPeriod / 4);
+  for (const auto& row : loops) EXPECT_GE(std::stoul(row[0]), kPeriod);
+
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["descriptors_computed"].get<std::size_t>(), 3 * kPeriod);
+  EXPECT_EQ(summary["images_decoded"].get<std::size_t>(), 3 * kPeriod);
+  std::size_t pairs = 0;
+  for (std::size_t i = 30; i < 3 * kPeriod; ++i) pairs += i - 30 + 1;
+  EXPECT_EQ(summary["similarities_computed"].get<std::size_t>(), pairs);
+  EXPECT_EQ(summary["loops"].get<std::size_t>(), loops.size());
+  EXPECT_EQ(summary["loop_truth"]["loops_within_accept_radius"].get<std::size_t>(), loops.size());
+  EXPECT_EQ(summary["loop_truth"]["loops_beyond_accept_radius"].get<std::size_t>(), 0u);
+  EXPECT_EQ(summary["detection"]["loop"].get<std::size_t>() +
+                summary["detection"]["suppressed"].get<std::size_t>() +
+                summary["detection"]["below_threshold"].get<std::size_t>() +
+                summary["detection"]["no_candidate"].get<std::size_t>(),
+            3 * kPeriod);
+  EXPECT_EQ(summary["config"]["match"]["margin"].get<int>(), 30);
+  EXPECT_EQ(summary["config"]["dird"]["normalization"].get<std::string>(), "libdird");
+  EXPECT_TRUE(summary["stages"].contains("describe"));
+  EXPECT_TRUE(summary["stages"].contains("match"));
+  EXPECT_EQ(summary["stages"]["describe"]["calls"].get<std::size_t>(), 3 * kPeriod);
+}
+
+TEST(PipelineFullMode, EveryFrameOnceWithExactlyOneStatus) {
+  RevisitDataset dataset(kPeriod, 2);
+  dataset.corrupt_frames = {7, 200};
+  const auto out = testing::make_temp_dir("pipeline-full-status");
+  const RunResult result = run_pipeline(full_config(), dataset, out);
+  ASSERT_FALSE(result.failed) << result.error;
+  std::vector<std::string> header;
+  const auto rows = read_csv(out / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), 2 * kPeriod);
+  const std::size_t detection = column(header, "detection");
+  const std::size_t descriptor = column(header, "descriptor");
+  const std::size_t reason = column(header, "detection_reason");
+  const std::set<std::string> outcomes = {"no candidate", "below threshold", "suppressed", "loop"};
+  std::set<std::string> seen;
+  std::set<std::size_t> loop_frames;
+  for (const auto& row : read_csv(out / "loops.csv")) loop_frames.insert(std::stoul(row[0]));
+  for (std::size_t k = 0; k < rows.size(); ++k) {
+    ASSERT_EQ(rows[k].size(), header.size());
+    EXPECT_EQ(rows[k][0], std::to_string(k));
+    EXPECT_EQ(outcomes.count(rows[k][detection]), 1u) << rows[k][detection];
+    seen.insert(rows[k][detection]);
+    EXPECT_EQ(rows[k][detection] == "loop", loop_frames.count(k) == 1) << k;
+    const bool corrupt = k == 7 || k == 200;
+    EXPECT_EQ(rows[k][descriptor], corrupt ? "n" : "y");
+    if (corrupt) {
+      EXPECT_EQ(rows[k][detection], "no candidate");
+      EXPECT_NE(rows[k][reason].find("no descriptor"), std::string::npos);
+      EXPECT_EQ(rows[k][15], "error");
+    }
+    if (k < 30) {
+      EXPECT_EQ(rows[k][detection], "no candidate");
+    }
+  }
+  EXPECT_EQ(seen.count("loop"), 1u);
+  EXPECT_EQ(seen.count("no candidate"), 1u);
+  for (const auto& row : read_csv(out / "loops.csv")) {
+    EXPECT_NE(std::stoul(row[1]), 7u);  // no pair with a frame without descriptor
+    EXPECT_NE(std::stoul(row[0]), 200u);
+  }
+}
+
+TEST(PipelineFullMode, OneAndTwoThreadsIdenticalAlsoWithMarginBelowInFlight) {
+  const RevisitDataset dataset(kPeriod, 3);
+  for (const int margin : {30, 5}) {
+    PipelineConfig config1 = full_config(1, margin);
+    PipelineConfig config2 = full_config(2, margin);
+    config2.run.max_in_flight = 16;  // different split between describe and match
+    const auto out1 = testing::make_temp_dir("pipeline-full-t1");
+    const auto out2 = testing::make_temp_dir("pipeline-full-t2");
+    ASSERT_FALSE(run_pipeline(config1, dataset, out1).failed);
+    ASSERT_FALSE(run_pipeline(config2, dataset, out2).failed);
+    EXPECT_EQ(read_file(out1 / "loops.csv"), read_file(out2 / "loops.csv")) << "margin " << margin;
+    EXPECT_EQ(read_file(out1 / "frames.csv"), read_file(out2 / "frames.csv")) << "margin " << margin;
+    const auto s1 = nlohmann::json::parse(read_file(out1 / "summary.json"));
+    const auto s2 = nlohmann::json::parse(read_file(out2 / "summary.json"));
+    EXPECT_EQ(s1["similarities_computed"], s2["similarities_computed"]);
+    EXPECT_GT(s1["loops"].get<std::size_t>(), 0u);
+  }
+}
+
+TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
+  RawConfig raw;
+  raw.apply_override("run.mode=gated");
+  PipelineConfig config;
+  try {
+    apply_config(raw, config);
+    FAIL() << "run.mode=gated accepted";
+  } catch (const ConfigError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("run.mode"), std::string::npos) << what;
+    EXPECT_NE(what.find("odometry|full"), std::string::npos) << what;
+  }
+  PipelineConfig odometry_only;
+  odometry_only.output.progress = "off";
+  const RevisitDataset dataset(kPeriod, 1);
+  const auto out = testing::make_temp_dir("pipeline-odometry-mode");
+  const RunResult result = run_pipeline(odometry_only, dataset, out);
+  ASSERT_FALSE(result.failed);
+  EXPECT_FALSE(fs::exists(out / "loops.csv"));
+  EXPECT_EQ(result.summary["descriptors_computed"].get<std::size_t>(), 0u);
+  EXPECT_EQ(result.summary["images_decoded"].get<std::size_t>(), 0u);  // lazy decode: nobody needs pixels
+}
+
+TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
+  const RevisitDataset reference(kPeriod, 1, 0);
+  RevisitDataset query(kPeriod, 1, 12345);  // same places, other noise
+  query.corrupt_frames = {50};
+  PipelineConfig config = full_config();
+  config.eval.aligned_tolerance_frames = 1;
+  const auto out = testing::make_temp_dir("pipeline-two-seq");
+  const TwoSequenceResult result = run_two_sequences(config, reference, query, out);
+  EXPECT_EQ(result.reference_frames, kPeriod);
+  EXPECT_EQ(result.query_frames, kPeriod);
+  ASSERT_GT(result.loops, 0u);
+  const auto loops = read_csv(out / "loops.csv");
+  ASSERT_EQ(loops.size(), result.loops);
+  for (const auto& row : loops) EXPECT_LE(std::abs(std::stol(row[0]) - std::stol(row[1])), 1) << row[0];
+  std::vector<std::string> header;
+  const auto rows = read_csv(out / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), kPeriod);
+  const std::size_t match = column(header, "match_frame");
+  std::size_t best_aligned = 0;
+  for (std::size_t q = 0; q < rows.size(); ++q) {
+    EXPECT_EQ(rows[q][0], std::to_string(q));
+    if (!rows[q][match].empty() && std::abs(std::stol(rows[q][match]) - static_cast<long>(q)) <= 1) {
+      ++best_aligned;
+    }
+  }
+  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
+  EXPECT_EQ(rows[50][column(header, "status")], "error");
+  EXPECT_GE(best_aligned, kPeriod * 8 / 10);
+  EXPECT_EQ(result.summary["aligned"]["loops_within_tolerance"].get<std::size_t>(), result.loops);
+  EXPECT_EQ(result.summary["similarities_computed"].get<std::size_t>(), kPeriod * (kPeriod - 1));
+}
+
+}  // namespace
+}  // namespace loopgate
