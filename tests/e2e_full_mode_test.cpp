@@ -18,40 +18,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-std::string read_file(const fs::path& file) {
-  std::ifstream in(file);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
-
-std::vector<std::vector<std::string>> read_csv(const fs::path& file,
-                                               std::vector<std::string>* header = nullptr) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(read_file(file));
-  std::string line;
-  bool first = true;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells(1);
-    bool quoted = false;
-    for (const char c : line) {
-      if (c == '"') {
-        quoted = !quoted;
-      } else if (c == ',' && !quoted) {
-        cells.emplace_back();
-      } else {
-        cells.back() += c;
-      }
-    }
-    if (first) {
-      first = false;
-      if (header) *header = cells;
-      continue;
-    }
-    rows.push_back(cells);
-  }
-  return rows;
-}
+using testing::read_csv;
+using testing::read_file;
 
 // KITTI layout, `laps` x `period` frames at 10 Hz around a circle of radius 30 m in the x-z plane: frame k
 // shows place k % period (a smooth random texture seeded by the place) plus per-frame noise (`noise_seed`).

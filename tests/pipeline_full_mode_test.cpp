@@ -65,40 +65,8 @@ class RevisitDataset : public testing::FakeDataset {
   int noise_seed_;
 };
 
-std::string read_file(const fs::path& file) {
-  std::ifstream in(file);
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
-}
-
-std::vector<std::vector<std::string>> read_csv(const fs::path& file,
-                                               std::vector<std::string>* header = nullptr) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(read_file(file));
-  std::string line;
-  bool first = true;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells(1);
-    bool quoted = false;
-    for (const char c : line) {
-      if (c == '"') {
-        quoted = !quoted;
-      } else if (c == ',' && !quoted) {
-        cells.emplace_back();
-      } else {
-        cells.back() += c;
-      }
-    }
-    if (first) {
-      first = false;
-      if (header) *header = cells;
-      continue;
-    }
-    rows.push_back(cells);
-  }
-  return rows;
-}
+using testing::read_csv;
+using testing::read_file;
 
 std::size_t column(const std::vector<std::string>& header, const std::string& name) {
   const auto it = std::find(header.begin(), header.end(), name);

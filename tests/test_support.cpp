@@ -1,12 +1,15 @@
 #include "test_support.hpp"
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <array>
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <mutex>
 #include <random>
-#include <sys/wait.h>
-#include <unistd.h>
+#include <sstream>
 #include <vector>
 
 namespace loopgate::testing {
@@ -42,7 +45,9 @@ std::filesystem::path make_temp_dir(const std::string& tag) {
   return dir;
 }
 
-std::filesystem::path loopgate_binary() { return LOOPGATE_BINARY; }
+std::filesystem::path loopgate_binary() {
+  return LOOPGATE_BINARY;
+}
 
 int run_command(const std::string& command, std::string* output) {
   const std::string full = command + " 2>&1";
@@ -54,6 +59,41 @@ int run_command(const std::string& command, std::string* output) {
   const int status = ::pclose(pipe);
   if (output) *output = captured;
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string read_file(const std::filesystem::path& file) {
+  std::ifstream in(file);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file,
+                                               std::vector<std::string>* header) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(read_file(file));
+  std::string line;
+  bool first = true;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells(1);
+    bool quoted = false;
+    for (const char c : line) {
+      if (c == '"') {
+        quoted = !quoted;
+      } else if (c == ',' && !quoted) {
+        cells.emplace_back();
+      } else {
+        cells.back() += c;
+      }
+    }
+    if (first) {
+      first = false;
+      if (header) *header = cells;
+      continue;
+    }
+    rows.push_back(cells);
+  }
+  return rows;
 }
 
 }  // namespace loopgate::testing

@@ -3,6 +3,7 @@
 
 #include <filesystem>
 #include <string>
+#include <vector>
 
 namespace loopgate::testing {
 
@@ -15,12 +16,19 @@ std::filesystem::path loopgate_binary();
 // Runs a shell command, returns its exit status; stdout+stderr captured into *output if given.
 int run_command(const std::string& command, std::string* output = nullptr);
 
+// Whole file as text (empty when it cannot be read).
+std::string read_file(const std::filesystem::path& file);
+// Rows of a CSV file as written by loopgate (double-quoted fields may hold commas), without the header
+// row, which goes to *header when given.
+std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file,
+                                               std::vector<std::string>* header = nullptr);
+
 }  // namespace loopgate::testing
 
-#define LOOPGATE_REQUIRE_SHARED_DATA(rel)                                                   \
-  do {                                                                                      \
-    if (::loopgate::testing::shared_data_dir().empty() ||                                   \
-        !std::filesystem::exists(::loopgate::testing::shared_data_dir() / (rel))) {         \
+#define LOOPGATE_REQUIRE_SHARED_DATA(rel)                                                    \
+  do {                                                                                       \
+    if (::loopgate::testing::shared_data_dir().empty() ||                                    \
+        !std::filesystem::exists(::loopgate::testing::shared_data_dir() / (rel))) {          \
       GTEST_SKIP() << "shared data absent: " << (rel) << " (expected under ../shared/data)"; \
-    }                                                                                       \
+    }                                                                                        \
   } while (0)
