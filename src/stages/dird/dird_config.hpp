@@ -31,23 +31,26 @@ struct DirdConfig {
 
   template <class V>
   void visit(V&& v) {
-    v("normalization", normalization);
-    v("flip_vertical", flip_vertical);
-    v("metric", metric);
-    v("mu", mu);
-    v("sigma", sigma);
-    v("tau1", tau1);
+    visit_fields(*this, v);
   }
   template <class V>
   void visit(V&& v) const {
-    v("normalization", normalization);
-    v("flip_vertical", flip_vertical);
-    v("metric", metric);
-    v("mu", mu);
-    v("sigma", sigma);
-    v("tau1", tau1);
+    visit_fields(*this, v);
   }
 
+ private:
+  // One list of keys for both visits (Self is DirdConfig or const DirdConfig).
+  template <class Self, class V>
+  static void visit_fields(Self& self, V& v) {
+    v("normalization", self.normalization);
+    v("flip_vertical", self.flip_vertical);
+    v("metric", self.metric);
+    v("mu", self.mu);
+    v("sigma", self.sigma);
+    v("tau1", self.tau1);
+  }
+
+ public:
   // Throws ConfigError naming the key: normalization in {libdird, l2}, metric in {l1, l2}, sigma > 0,
   // finite mu, 0 < tau1 < 1, and with metric l2 mu/sigma must not be the L1 reference values.
   void validate() const;

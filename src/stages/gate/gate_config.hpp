@@ -35,33 +35,31 @@ struct GateConfig {
 
   template <class V>
   void visit(V&& v) {
-    v("gap_frames", gap_frames);
-    v("beta_m", beta_m);
-    v("sigma_norm", sigma_norm);
-    v("confidence_scale", confidence_scale);
-    v("covariance_tolerance_m2", covariance_tolerance_m2);
-    v("kdtree_leaf_size", kdtree_leaf_size);
-    v("kdtree_seed_neighbours", kdtree_seed_neighbours);
-    v("area_max_hole_frames", area_max_hole_frames);
-    v("area_j_tolerance_frames", area_j_tolerance_frames);
-    v("area_margin_query_frames", area_margin_query_frames);
-    v("area_margin_reference_frames", area_margin_reference_frames);
+    visit_fields(*this, v);
   }
   template <class V>
   void visit(V&& v) const {
-    v("gap_frames", gap_frames);
-    v("beta_m", beta_m);
-    v("sigma_norm", sigma_norm);
-    v("confidence_scale", confidence_scale);
-    v("covariance_tolerance_m2", covariance_tolerance_m2);
-    v("kdtree_leaf_size", kdtree_leaf_size);
-    v("kdtree_seed_neighbours", kdtree_seed_neighbours);
-    v("area_max_hole_frames", area_max_hole_frames);
-    v("area_j_tolerance_frames", area_j_tolerance_frames);
-    v("area_margin_query_frames", area_margin_query_frames);
-    v("area_margin_reference_frames", area_margin_reference_frames);
+    visit_fields(*this, v);
   }
 
+ private:
+  // One list of keys for both visits (Self is GateConfig or const GateConfig).
+  template <class Self, class V>
+  static void visit_fields(Self& self, V& v) {
+    v("gap_frames", self.gap_frames);
+    v("beta_m", self.beta_m);
+    v("sigma_norm", self.sigma_norm);
+    v("confidence_scale", self.confidence_scale);
+    v("covariance_tolerance_m2", self.covariance_tolerance_m2);
+    v("kdtree_leaf_size", self.kdtree_leaf_size);
+    v("kdtree_seed_neighbours", self.kdtree_seed_neighbours);
+    v("area_max_hole_frames", self.area_max_hole_frames);
+    v("area_j_tolerance_frames", self.area_j_tolerance_frames);
+    v("area_margin_query_frames", self.area_margin_query_frames);
+    v("area_margin_reference_frames", self.area_margin_reference_frames);
+  }
+
+ public:
   // Throws ConfigError naming the key: gap_frames >= 1, beta_m >= 0 (finite), sigma_norm in {max_eigen,
   // trace}, confidence_scale >= 0 (finite),
   // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size >= 1, kdtree_seed_neighbours >= 1, area_* >= 0.
