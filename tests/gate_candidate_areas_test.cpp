@@ -205,60 +205,82 @@ TEST(CandidateAreas, NonIncreasingFramesAreDataError) {
   EXPECT_THROW(tracker.update(not_gated(3)), DataError);
 }
 
-// Random streams: the new cells of all updates are disjoint and their union is exactly the union of the
-// final rectangles (clamped per row); descriptors are requested once each, exactly for the frames those
-// cells touch.
-TEST(CandidateAreas, NewCellsAndDescriptorRequestsOnRandomStreams) {
-  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
-    std::mt19937_64 rng(seed);
-    GateConfig c;
-    c.area_max_hole_frames = static_cast<int>(rng() % 4);
-    c.area_j_tolerance_frames = static_cast<int>(rng() % 10);
-    c.area_margin_query_frames = 3 + static_cast<int>(rng() % 10);
-    c.area_margin_reference_frames = static_cast<int>(rng() % 8);
-    const int pair_margin = static_cast<int>(rng() % 30);
-    CandidateAreaTracker tracker(c, 3, pair_margin);
-    std::set<Cell> reported;
-    std::set<std::int64_t> requested;
-    std::int64_t j = 0;
-    for (std::int64_t i = 0; i < 600; ++i) {
-      GateDecision d = not_gated(i);
-      if (i > 50 && rng() % 3 != 0) {
-        j = (rng() % 10 == 0)
-                ? static_cast<std::int64_t>(rng() % static_cast<std::uint64_t>(i - 40))
-                : std::min<std::int64_t>(i - 40,
-                                         std::max<std::int64_t>(0, j + 1 + static_cast<int>(rng() % 3) - 1));
-        d = gated(i, j);
-      }
-      const AreaUpdate u = tracker.update(d);
-      for (const CellSpan& s : u.new_cells) {
-        ASSERT_LE(s.j0, s.j1);
-        ASSERT_LE(s.j1, s.i - pair_margin);
-        ASSERT_GE(s.j0, 0);
-        ASSERT_LE(s.i, i);
-        for (std::int64_t jj = s.j0; jj <= s.j1; ++jj)
-          ASSERT_TRUE(reported.insert({s.i, jj}).second) << "cell twice";
-      }
-      for (const std::int64_t f : u.new_descriptor_frames)
-        ASSERT_TRUE(requested.insert(f).second) << "frame twice";
+// Random streams: the new cells of all updates are disjoint; descriptors are requested once each, exactly
+// for the frames those cells touch. Without a horizon (row_horizon_frames beyond the stream) the cells'
+// union is exactly the union of the final rectangles (clamped per row); with a horizon H it is the subset
+// whose cells arrived while their row was at most H frames old, and no row older than that gets a cell.
+void check_random_stream(std::uint64_t seed, bool with_horizon) {
+  std::mt19937_64 rng(seed);
+  GateConfig c;
+  c.area_max_hole_frames = static_cast<int>(rng() % 4);
+  c.area_j_tolerance_frames = static_cast<int>(rng() % 10);
+  c.area_margin_query_frames = 3 + static_cast<int>(rng() % 10);
+  c.area_margin_reference_frames = static_cast<int>(rng() % 8);
+  c.row_horizon_frames = with_horizon ? std::max(c.area_margin_query_frames, c.area_max_hole_frames + 1) +
+                                            static_cast<int>(rng() % 20)
+                                      : 100000;
+  const int pair_margin = static_cast<int>(rng() % 30);
+  CandidateAreaTracker tracker(c, 3, pair_margin);
+  std::set<Cell> reported;
+  std::set<std::int64_t> requested;
+  std::int64_t j = 0;
+  for (std::int64_t i = 0; i < 600; ++i) {
+    GateDecision d = not_gated(i);
+    if (i > 50 && rng() % 3 != 0) {
+      j = (rng() % 10 == 0) ? static_cast<std::int64_t>(rng() % static_cast<std::uint64_t>(i - 40))
+                            : std::min<std::int64_t>(
+                                  i - 40, std::max<std::int64_t>(0, j + 1 + static_cast<int>(rng() % 3) - 1));
+      d = gated(i, j);
     }
-    std::set<Cell> expected;
-    std::set<std::int64_t> touched;
-    for (const CandidateArea& a : tracker.areas()) {
-      for (std::int64_t i = a.row_begin; i <= a.row_end; ++i) {
-        for (std::int64_t jj = a.col_begin; jj <= std::min(a.col_end, i - pair_margin); ++jj) {
-          expected.insert({i, jj});
-          touched.insert(i);
-          touched.insert(jj);
-          EXPECT_TRUE(tracker.covers(i, jj));
-        }
-      }
+    const AreaUpdate u = tracker.update(d);
+    for (const CellSpan& s : u.new_cells) {
+      ASSERT_LE(s.j0, s.j1);
+      ASSERT_LE(s.j1, s.i - pair_margin);
+      ASSERT_GE(s.j0, 0);
+      ASSERT_LE(s.i, i);
+      ASSERT_GE(s.i, i - c.row_horizon_frames) << "cell in a final row";
+      for (std::int64_t jj = s.j0; jj <= s.j1; ++jj)
+        ASSERT_TRUE(reported.insert({s.i, jj}).second) << "cell twice";
     }
-    EXPECT_EQ(reported, expected) << "seed " << seed;
-    EXPECT_EQ(requested, touched) << "seed " << seed;
-    EXPECT_EQ(tracker.descriptor_requests().count(), touched.size());
-    EXPECT_GT(tracker.areas().size(), 1u);
+    for (const std::int64_t f : u.new_descriptor_frames)
+      ASSERT_TRUE(requested.insert(f).second) << "frame twice";
   }
+  std::set<Cell> expected;
+  for (const CandidateArea& a : tracker.areas()) {
+    for (std::int64_t i = a.row_begin; i <= a.row_end; ++i) {
+      for (std::int64_t jj = a.col_begin; jj <= std::min(a.col_end, i - pair_margin); ++jj)
+        expected.insert({i, jj});
+    }
+  }
+  std::set<std::int64_t> touched;
+  for (const auto& [i, jj] : reported) {
+    touched.insert(i);
+    touched.insert(jj);
+    EXPECT_TRUE(expected.count({i, jj})) << "cell outside every rectangle";
+  }
+  for (const auto& [i, jj] : expected) EXPECT_EQ(tracker.covers(i, jj), reported.count({i, jj}) == 1);
+  if (with_horizon) {
+    EXPECT_LE(reported.size(), expected.size()) << "seed " << seed;
+  } else {
+    EXPECT_EQ(reported, expected) << "seed " << seed;
+  }
+  EXPECT_EQ(requested, touched) << "seed " << seed;
+  EXPECT_EQ(tracker.descriptor_requests().count(), touched.size());
+  EXPECT_GT(tracker.areas().size(), 1u);
+}
+
+TEST(CandidateAreas, NewCellsAndDescriptorRequestsOnRandomStreams) {
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) check_random_stream(seed, false);
+}
+
+TEST(CandidateAreas, RowHorizonFreezesOldRows) {
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) check_random_stream(seed, true);
+  GateConfig c = small_config();
+  c.row_horizon_frames = 3;  // < area_margin_query_frames = 4
+  EXPECT_THROW(CandidateAreaTracker(c, 4, 10), ConfigError);
+  c.row_horizon_frames = 4;
+  c.area_max_hole_frames = 4;  // the horizon must exceed the hole
+  EXPECT_THROW(CandidateAreaTracker(c, 4, 10), ConfigError);
 }
 
 TEST(DescriptorRequests, AtMostOnce) {

@@ -88,7 +88,7 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   EXPECT_NO_THROW(config.validate());
   int keys = 0;
   config.visit([&](const char*, auto&) { ++keys; });
-  EXPECT_EQ(keys, 11);
+  EXPECT_EQ(keys, 12);
   EXPECT_EQ(config.gap_frames, 30);
   EXPECT_EQ(config.sigma_norm, "max_eigen");
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);

@@ -62,7 +62,7 @@ TEST(PipelineConfig, BadValuesNameTheKey) {
   EXPECT_NE(error_of({"odometry.source=ekf2"}).find("odometry.source: 'ekf2' is not one of drift|file"),
             std::string::npos);
   EXPECT_NE(error_of({"odometry.sorce=drift"}).find("unknown key 'odometry.sorce'"), std::string::npos);
-  EXPECT_NE(error_of({"gate.radius=1"}).find("unknown section 'gate'"), std::string::npos);
+  EXPECT_NE(error_of({"bogus.radius=1"}).find("unknown section 'bogus'"), std::string::npos);
   EXPECT_NE(error_of({"output.progress=maybe"}).find("output.progress"), std::string::npos);
 }
 

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <set>
 #include <stdexcept>
 #include <thread>
@@ -40,12 +41,13 @@ class FakeDataset : public Dataset {
   std::set<std::size_t> corrupt_frames;   // load_image throws DataError
   std::set<std::size_t> crashing_frames;  // load_image throws std::runtime_error (escapes: cancels the graph)
   int decode_delay_ms = 0;
+  bool images = true;  // false: a dataset without images (trajectory and IMU only)
 
   std::string layout() const override { return "fake"; }
   const std::filesystem::path& root() const override { return root_; }
   std::size_t frame_count() const override { return times_.size(); }
   Timestamp frame_t_ns(std::size_t frame) const override { return times_.at(frame); }
-  bool has_images() const override { return true; }
+  bool has_images() const override { return images; }
   std::filesystem::path image_path(std::size_t frame) const override {
     return root_ / ("image_" + std::to_string(frame) + ".png");
   }
@@ -82,6 +84,52 @@ class FakeDataset : public Dataset {
   std::vector<ImuSample> imu_;
   std::vector<GroundTruthState> ground_truth_;
   std::vector<DataIssue> issues_;
+};
+
+// A drive around a circle of `period` frames, `laps` times: frame k shows place k % period (a random
+// texture seeded by the place) with a little noise that differs per lap, and sits on the circle at the
+// place's position; so frame i revisits frame i - period. `noise_seed` changes the per-lap noise only.
+// Frames in [detour_begin, detour_end) keep their images but are 500 m away (ground truth and hence
+// odometry): perceptual aliasing, the same views in a far place.
+class RevisitDataset : public FakeDataset {
+ public:
+  RevisitDataset(std::size_t period, std::size_t laps, int noise_seed = 0)
+      : FakeDataset(period * laps), period_(period), noise_seed_(noise_seed) {}
+
+  cv::Mat load_image(std::size_t frame) const override {
+    if (corrupt_frames.count(frame))
+      throw DataError(image_path(frame), "frame " + std::to_string(frame) + ": corrupt PNG");
+    const std::size_t place = frame % period_;
+    const std::size_t lap = frame / period_;
+    cv::Mat small(8, 16, CV_8UC1);
+    cv::RNG place_rng(0x9e3779b9u + static_cast<std::uint64_t>(place));
+    place_rng.fill(small, cv::RNG::UNIFORM, 0, 256);
+    cv::Mat image;
+    cv::resize(small, image, cv::Size(64, 32), 0, 0, cv::INTER_LINEAR);
+    cv::Mat noise(image.size(), CV_16SC1);
+    cv::RNG noise_rng(static_cast<std::uint64_t>(1000003 * (lap + 1) + 7919 * frame) +
+                      static_cast<std::uint64_t>(noise_seed_));
+    noise_rng.fill(noise, cv::RNG::UNIFORM, -6, 7);
+    cv::Mat noisy;
+    image.convertTo(noisy, CV_16SC1);
+    noisy += noise;
+    noisy.convertTo(image, CV_8UC1);  // saturating
+    return image;
+  }
+  std::optional<Eigen::Isometry3d> ground_truth_T_w_b(std::size_t frame) const override {
+    const double theta = 2.0 * M_PI * static_cast<double>(frame % period_) / static_cast<double>(period_);
+    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+    T.translation() = Eigen::Vector3d(30 * std::sin(theta), 30 * (1 - std::cos(theta)), 0);
+    if (frame >= detour_begin && frame < detour_end) T.translation().x() += 500.0;
+    T.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    return T;
+  }
+
+  std::size_t detour_begin = 0, detour_end = 0;
+
+ private:
+  std::size_t period_;
+  int noise_seed_;
 };
 
 }  // namespace loopgate::testing

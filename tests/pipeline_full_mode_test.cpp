@@ -24,49 +24,9 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A drive around a circle of `period` frames, `laps` times: frame k shows place k % period (a random
-// texture seeded by the place) with a little noise that differs per lap, and sits on the circle at the
-// place's position; so frame i revisits frame i - period. `noise_seed` changes the per-lap noise only.
-class RevisitDataset : public testing::FakeDataset {
- public:
-  RevisitDataset(std::size_t period, std::size_t laps, int noise_seed = 0)
-      : FakeDataset(period * laps), period_(period), noise_seed_(noise_seed) {}
-
-  cv::Mat load_image(std::size_t frame) const override {
-    if (corrupt_frames.count(frame))
-      throw DataError(image_path(frame), "frame " + std::to_string(frame) + ": corrupt PNG");
-    const std::size_t place = frame % period_;
-    const std::size_t lap = frame / period_;
-    cv::Mat small(8, 16, CV_8UC1);
-    cv::RNG place_rng(0x9e3779b9u + static_cast<std::uint64_t>(place));
-    place_rng.fill(small, cv::RNG::UNIFORM, 0, 256);
-    cv::Mat image;
-    cv::resize(small, image, cv::Size(64, 32), 0, 0, cv::INTER_LINEAR);
-    cv::Mat noise(image.size(), CV_16SC1);
-    cv::RNG noise_rng(static_cast<std::uint64_t>(1000003 * (lap + 1) + 7919 * frame) +
-                      static_cast<std::uint64_t>(noise_seed_));
-    noise_rng.fill(noise, cv::RNG::UNIFORM, -6, 7);
-    cv::Mat noisy;
-    image.convertTo(noisy, CV_16SC1);
-    noisy += noise;
-    noisy.convertTo(image, CV_8UC1);  // saturating
-    return image;
-  }
-  std::optional<Eigen::Isometry3d> ground_truth_T_w_b(std::size_t frame) const override {
-    const double theta = 2.0 * M_PI * static_cast<double>(frame % period_) / static_cast<double>(period_);
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    T.translation() = Eigen::Vector3d(30 * std::sin(theta), 30 * (1 - std::cos(theta)), 0);
-    T.linear() = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    return T;
-  }
-
- private:
-  std::size_t period_;
-  int noise_seed_;
-};
-
 using testing::read_csv;
 using testing::read_file;
+using testing::RevisitDataset;
 
 std::size_t column(const std::vector<std::string>& header, const std::string& name) {
   const auto it = std::find(header.begin(), header.end(), name);
@@ -136,8 +96,8 @@ TEST(PipelineFullMode, FindsTheRevisitsAndEqualsTheBatchReference) {
   for (std::size_t i = 30; i < 3 * kPeriod; ++i) pairs += i - 30 + 1;
   EXPECT_EQ(summary["similarities_computed"].get<std::size_t>(), pairs);
   EXPECT_EQ(summary["loops"].get<std::size_t>(), loops.size());
-  EXPECT_EQ(summary["loop_truth"]["loops_within_accept_radius"].get<std::size_t>(), loops.size());
-  EXPECT_EQ(summary["loop_truth"]["loops_beyond_accept_radius"].get<std::size_t>(), 0u);
+  EXPECT_EQ(summary["evaluation"]["loop_truth"]["loops_true"].get<std::size_t>(), loops.size());
+  EXPECT_EQ(summary["evaluation"]["loop_truth"]["loops_false"].get<std::size_t>(), 0u);
   EXPECT_EQ(summary["detection"]["loop"].get<std::size_t>() +
                 summary["detection"]["suppressed"].get<std::size_t>() +
                 summary["detection"]["below_threshold"].get<std::size_t>() +
@@ -212,17 +172,18 @@ TEST(PipelineFullMode, OneAndTwoThreadsIdenticalAlsoWithMarginBelowInFlight) {
 
 TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
   RawConfig raw;
-  raw.apply_override("run.mode=gated");
+  raw.apply_override("run.mode=bogus");
   PipelineConfig config;
   try {
     apply_config(raw, config);
-    FAIL() << "run.mode=gated accepted";
+    FAIL() << "run.mode=bogus accepted";
   } catch (const ConfigError& e) {
     const std::string what = e.what();
     EXPECT_NE(what.find("run.mode"), std::string::npos) << what;
-    EXPECT_NE(what.find("odometry|full"), std::string::npos) << what;
+    EXPECT_NE(what.find("gated|full|odometry"), std::string::npos) << what;
   }
   PipelineConfig odometry_only;
+  odometry_only.run.mode = "odometry";
   odometry_only.output.progress = "off";
   const RevisitDataset dataset(kPeriod, 1);
   const auto out = testing::make_temp_dir("pipeline-odometry-mode");

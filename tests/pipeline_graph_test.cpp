@@ -51,6 +51,7 @@ std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file
 PipelineConfig base_config(int threads = 2) {
   PipelineConfig config;
   config.run.threads = threads;
+  config.run.mode = "odometry";  // the graph itself; detection modes have their own tests
   config.run.decode = "all";
   config.output.progress = "off";
   return config;

@@ -5,6 +5,7 @@
 #include <sys/resource.h>
 #include <tbb/flow_graph.h>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_scheduler_observer.h>
 #include <unistd.h>
@@ -16,12 +17,16 @@
 #include <condition_variable>
 #include <cstdio>
 #include <deque>
+#include <limits>
+#include <map>
 #include <mutex>
 #include <opencv2/core/mat.hpp>
 #include <thread>
 #include <unordered_map>
 
 #include "core/error.hpp"
+#include "eval/ground_truth.hpp"
+#include "eval/precision_recall.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
@@ -30,6 +35,8 @@
 #include "pipeline/stage_profiler.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_similarity.hpp"
+#include "stages/gate/candidate_areas.hpp"
+#include "stages/gate/pose_gate.hpp"
 #include "stages/match/sequence_matcher.hpp"
 
 #if defined(__SANITIZE_THREAD__)
@@ -52,8 +59,8 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-enum Stage : std::size_t { kSync, kDecode, kOdometry, kDescribe, kMatch, kSink, kStageCount };
-constexpr std::array<const char*, kStageCount> kStageNames = {"sync",     "decode", "odometry",
+enum Stage : std::size_t { kSync, kDecode, kOdometry, kGate, kDescribe, kMatch, kSink, kStageCount };
+constexpr std::array<const char*, kStageCount> kStageNames = {"sync",     "decode", "odometry", "gate",
                                                               "describe", "match",  "sink"};
 constexpr std::size_t kMaxMessagesPerFrame = 4;  // per-frame reasons kept in frames.csv
 constexpr std::size_t kMaxListedProblems = 200;  // frames / dataset issues listed in summary.json
@@ -105,6 +112,13 @@ struct FrameRecord {
   bool described = false;                   // DIRD descriptor computed for this frame
   std::vector<SimilarityEntry> similarity;  // S(., seq): describe fills j <= seq - K, match the rest
   std::size_t similarities_computed = 0;    // descriptor comparisons made for this frame
+  // gated mode: the gate's decision, the area the frame joined (-1: none), the frames (seqs) whose
+  // descriptors this frame's describe computes, and the cells its match computes.
+  bool gate_ran = false;
+  GateDecision gate;
+  int area_id = -1;
+  std::vector<std::int64_t> describe_seqs;
+  std::vector<CellSpan> new_cells;
   std::vector<std::string> warnings;
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
@@ -186,14 +200,28 @@ class PipelineRun {
       synchronizer_ = std::make_unique<ImuSynchronizer>(dataset_.imu_samples(), config_.sync);
     odometry_ = make_odometry_source(config_.odometry, config_.ekf, dataset_);
     full_ = config_.run.mode == "full";
-    if (full_) {
+    gated_ = config_.run.mode == "gated";
+    const std::size_t capacity = last_frame_ - first_frame_;
+    seq_frame_.resize(capacity);
+    seq_t_ns_.resize(capacity);
+    if (full_ || gated_) {
       if (!dataset_.has_images()) {
-        throw DataError(dataset_.root(), "run.mode full needs images, and this dataset has none");
+        throw DataError(dataset_.root(),
+                        "run.mode " + config_.run.mode +
+                            " needs images, and this dataset has none (use --mode odometry)");
       }
       extractor_ = std::make_unique<DirdExtractor>(config_.dird);
       similarity_ = std::make_unique<DirdSimilarity>(config_.dird);
-      store_ = std::make_unique<DescriptorStore>(last_frame_ - first_frame_);
+      store_ = std::make_unique<DescriptorStore>(capacity);
       matcher_ = std::make_unique<SequenceMatcher>(config_.match, SequenceMatcher::Mode::kSingleSequence, 0);
+    }
+    if (gated_) {
+      pose_gate_ = std::make_unique<PoseGate>(config_.gate, "odometry (gate)");
+      tracker_ = std::make_unique<CandidateAreaTracker>(config_.gate, config_.match.sequence_length,
+                                                        config_.match.margin);
+      row_cells_.assign(capacity, 0);
+    }
+    if (full_) {
       if (config_.run.max_in_flight > config_.match.margin) {
         spdlog::info(
             "run: match.margin {} < run.max_in_flight {}: the similarities against the last {} frames "
@@ -236,7 +264,10 @@ class PipelineRun {
   void stage_sync(FrameRecord& r);
   void stage_decode(FrameRecord& r) const;
   void stage_odometry(FrameRecord& r);
+  void stage_gate(FrameRecord& r);
   void stage_describe(FrameRecord& r);
+  void describe_requested(FrameRecord& r);
+  void push_final_rows(std::size_t end_seq, MatchOutput& output);  // gated: rows [next_push_seq_, end_seq)
   void stage_match(FrameRecord& r);
   void stage_sink(FrameRecord& r);
   // Appends to `out` the similarities of frame `seq` against the earlier frames [j_begin, j_end) of the
@@ -245,8 +276,9 @@ class PipelineRun {
                                std::vector<SimilarityEntry>& out) const;
   void handle_match_output(MatchOutput& output);  // match node or, after the drain, run()
   void write_finished_rows(bool end_of_stream);   // sink or, after the drain, run()
-  std::vector<std::string> detection_cells(const FrameMatchStatus& status, bool described,
-                                           std::size_t seq) const;
+  std::vector<std::string> detection_cells(const FrameMatchStatus& status, std::size_t seq) const;
+  void write_area_files();          // gated: candidate_areas.csv and candidate_cells.csv
+  nlohmann::json evaluate_loops();  // with ground truth: loop_truth, precision_recall, gate coverage
   void record_failure(std::size_t stage, const FrameRecord& r, const std::string& what);
   void produce(tbb::flow::queue_node<FramePtr>& queue, RunResult& result);
   void open_outputs();
@@ -274,7 +306,26 @@ class PipelineRun {
   std::mutex odometry_mutex_;
   std::unique_ptr<OdometrySource> odometry_;
 
-  // full mode: describe (parallel; stateless extractor, store entries written once per seq) and match
+  // seq -> dataset frame and time, written by the producer before the frame is released (preallocated)
+  std::vector<std::size_t> seq_frame_;
+  std::vector<Timestamp> seq_t_ns_;
+  std::size_t frame_of(std::int64_t seq) const { return seq_frame_.at(static_cast<std::size_t>(seq)); }
+
+  // gated mode: gate node state (serial)
+  bool gated_ = false;
+  std::mutex gate_mutex_;
+  std::unique_ptr<PoseGate> pose_gate_;
+  std::unique_ptr<CandidateAreaTracker> tracker_;
+  std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
+  // match node state: similarity rows still open to new cells, cells per row, next row for the matcher
+  std::map<std::int64_t, std::vector<SimilarityEntry>> open_rows_;
+  std::vector<std::uint32_t> row_cells_;
+  std::size_t next_push_seq_ = 0, match_end_seq_ = 0;
+  std::atomic<std::size_t> images_read_for_description_{0};
+
+  // full and gated mode: describe (parallel; stateless extractor, store entries written once per seq)
+  // and match
   bool full_ = false;
   std::unique_ptr<DirdExtractor> extractor_;
   std::unique_ptr<DirdSimilarity> similarity_;
@@ -284,12 +335,8 @@ class PipelineRun {
   std::mutex match_mutex_;  // match node state
   std::unique_ptr<SequenceMatcher> matcher_;
   CsvWriter loops_csv_;
-  std::size_t loops_ = 0, loops_with_truth_ = 0, loops_within_radius_ = 0;
-  // per query frame, its best-scoring loop closure (evaluation.md: each query counts at most once)
-  std::int64_t best_loop_i_ = -1;
-  double best_loop_score_ = 0.0;
-  bool best_loop_within_ = false;
-  std::size_t loop_queries_ = 0, loop_queries_within_ = 0;
+  std::size_t loops_ = 0;
+  std::vector<Detection> detections_;  // every loop closure, dataset frame indices (evaluation)
   std::array<std::size_t, 4> outcome_counts_{};
   // frame statuses finalised by the matcher (NMS delay), waiting for their frames.csv row
   std::mutex finished_mutex_;
@@ -312,9 +359,8 @@ class PipelineRun {
   nlohmann::json problem_frames_ = nlohmann::json::array();
   std::size_t problem_frame_count_ = 0;
   std::int64_t last_progress_ns_ = 0;
-  struct PendingRow {  // full mode: a frames.csv row waiting for its detection status
+  struct PendingRow {  // full/gated mode: a frames.csv row waiting for its detection status
     std::size_t seq = 0;
-    bool described = false;
     std::vector<std::string> cells;
   };
   std::deque<PendingRow> pending_rows_;
@@ -348,7 +394,8 @@ void PipelineRun::record_failure(std::size_t stage, const FrameRecord& r, const 
 
 void PipelineRun::stage_sync(FrameRecord& r) {
   std::lock_guard lock(sync_mutex_);
-  // Lazy decode: pixels are needed now by a visual odometry source, and in full mode by describe.
+  // Lazy decode: pixels are needed now by a visual odometry source, and in full mode by describe (gated
+  // mode: describe reads the images the candidate areas need itself, current frame included).
   r.needs_pixels = decode_all_ || odometry_->needs_images() || full_;
   if (!synchronizer_) return;
   if (have_last_sync_t_ && r.t_ns <= last_sync_t_ns_) {
@@ -422,12 +469,86 @@ std::size_t PipelineRun::similarity_range(std::size_t seq, std::size_t j_begin, 
   return j_end - j_begin;
 }
 
+// gate (serial, in order; gated mode): the pose gate's decision for this frame (frames without a usable
+// pose are not gated and not stored) and the candidate-area update: the cells that became covered and the
+// frames that newly need a descriptor. All indices are sequence numbers.
+void PipelineRun::stage_gate(FrameRecord& r) {
+  if (!gated_) return;
+  std::lock_guard lock(gate_mutex_);
+  const auto seq = static_cast<std::int64_t>(r.seq);
+  GateDecision decision;
+  decision.frame = seq;
+  if (r.has_pose && r.odometry.pose.status != OdometryStatus::kLost) {
+    try {
+      decision = pose_gate_->process(seq, r.odometry.pose);
+      r.gate_ran = true;
+      ++frames_gate_ran_;
+      if (decision.gated) ++frames_gated_;
+    } catch (const DataError& e) {
+      add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
+      ++gate_errors_;
+      decision = GateDecision{};
+      decision.frame = seq;
+    }
+  }
+  r.gate = decision;
+  AreaUpdate update = tracker_->update(decision);
+  r.area_id = update.joined_area;
+  r.new_cells = std::move(update.new_cells);
+  r.describe_seqs = std::move(update.new_descriptor_frames);
+  for (const std::int64_t k : r.describe_seqs) describe_requests_.emplace_back(k, seq);
+}
+
+// describe, gated mode: the descriptors the gate asked for, each computed once: the current frame's from
+// its decoded image when decode already has it, every other (past, or this frame's when not decoded) read
+// again through the dataset's random access. Several requests are described in parallel.
+void PipelineRun::describe_requested(FrameRecord& r) {
+  const std::vector<std::int64_t>& seqs = r.describe_seqs;
+  std::vector<std::string> problems(seqs.size());
+  const auto describe_one = [&](std::size_t index) {
+    const auto k = static_cast<std::size_t>(seqs[index]);
+    const std::size_t frame = seq_frame_[k];
+    cv::Mat image;
+    bool ok = false;
+    if (k == r.seq && r.decoded) {
+      image = r.image;
+      ok = true;
+    } else {
+      try {
+        image = dataset_.load_image(frame);
+        images_read_for_description_.fetch_add(1, std::memory_order_relaxed);
+        ok = true;
+      } catch (const DataError& e) {
+        problems[index] = fmt::format("describe: frame {} could not be read: {}", frame, e.what());
+      }
+    }
+    if (ok) {
+      extractor_->extract(image, store_->slot(k));
+      descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
+    }
+    store_->publish(k, frame, seq_t_ns_[k], ok);
+  };
+  if (seqs.size() > 1) {
+    tbb::parallel_for(std::size_t{0}, seqs.size(), describe_one);
+  } else if (seqs.size() == 1) {
+    describe_one(0);
+  }
+  for (auto& problem : problems) {
+    if (!problem.empty()) add_message(r.warnings, std::move(problem));
+  }
+  r.described = store_->state(r.seq) == DescriptorStore::State::kValid;
+}
+
 // describe (parallel): the frame's DIRD descriptor, and its similarities against the earlier frames
 // that are certainly through the graph: the producer releases seq i only when at most K - 1 frames are
 // in flight, and the sink retires frames in order, so every seq <= i - K has left the sink (and
 // describe). The rest of the row (i - K < j <= i - margin, only when margin < K) is done by match,
 // after the sequencer. Either way the row is the same set of pairs whatever the thread timing.
 void PipelineRun::stage_describe(FrameRecord& r) {
+  if (gated_) {
+    describe_requested(r);
+    return;
+  }
   if (!full_) return;
   const std::size_t seq = static_cast<std::size_t>(r.seq);
   if (r.decoded) {
@@ -447,6 +568,29 @@ void PipelineRun::stage_describe(FrameRecord& r) {
 // match (serial, in order): completes the similarity row, feeds the streaming sequence matcher and
 // writes the loop closures that became final (NMS delay 2 W frames).
 void PipelineRun::stage_match(FrameRecord& r) {
+  if (gated_) {
+    // The similarities of the cells this frame's gate update covered (every descriptor they need was
+    // requested at this frame or earlier, so it has passed describe), into rows still open; rows older
+    // than the gate's horizon are final and go to the matcher.
+    std::lock_guard lock(match_mutex_);
+    for (const CellSpan& span : r.new_cells) {
+      if (static_cast<std::size_t>(span.i) < next_push_seq_) {
+        throw std::logic_error(fmt::format("cells for row {} after it went to the matcher", span.i));
+      }
+      row_cells_[static_cast<std::size_t>(span.i)] += static_cast<std::uint32_t>(span.j1 - span.j0 + 1);
+      if (store_->state(static_cast<std::size_t>(span.i)) != DescriptorStore::State::kValid) continue;
+      r.similarities_computed +=
+          similarity_range(static_cast<std::size_t>(span.i), static_cast<std::size_t>(span.j0),
+                           static_cast<std::size_t>(span.j1) + 1, open_rows_[span.i]);
+    }
+    similarities_computed_.fetch_add(r.similarities_computed, std::memory_order_relaxed);
+    match_end_seq_ = r.seq + 1;
+    const auto horizon = static_cast<std::size_t>(config_.gate.row_horizon_frames);
+    MatchOutput output;
+    if (r.seq >= horizon) push_final_rows(r.seq - horizon + 1, output);
+    handle_match_output(output);
+    return;
+  }
   if (!full_) return;
   std::lock_guard lock(match_mutex_);
   const std::size_t seq = static_cast<std::size_t>(r.seq);
@@ -464,43 +608,29 @@ void PipelineRun::stage_match(FrameRecord& r) {
   handle_match_output(output);
 }
 
+// Pushes rows [next_push_seq_, end_seq) to the matcher, in order (rows without cells pushed empty).
+void PipelineRun::push_final_rows(std::size_t end_seq, MatchOutput& output) {
+  for (; next_push_seq_ < end_seq; ++next_push_seq_) {
+    const auto i = static_cast<std::int64_t>(next_push_seq_);
+    const auto it = open_rows_.find(i);
+    if (it == open_rows_.end()) {
+      matcher_->push(i, {}, output);
+    } else {
+      matcher_->push(i, it->second, output);
+      open_rows_.erase(it);
+    }
+  }
+}
+
 void PipelineRun::handle_match_output(MatchOutput& output) {
   for (const LoopClosure& loop : output.loops) {
-    const auto i = static_cast<std::size_t>(loop.i);
-    const auto j = static_cast<std::size_t>(loop.j);
-    const std::size_t frame_i = store_->frame(i), frame_j = store_->frame(j);
+    const std::size_t frame_i = frame_of(loop.i), frame_j = frame_of(loop.j);
     loops_csv_.write_row({std::to_string(frame_i), std::to_string(frame_j),
-                          format_fixed(ns_to_s(store_->t_ns(i)), 9),
-                          format_fixed(ns_to_s(store_->t_ns(j)), 9), format_fixed(loop.score, 6)});
+                          format_fixed(ns_to_s(seq_t_ns_[static_cast<std::size_t>(loop.i)]), 9),
+                          format_fixed(ns_to_s(seq_t_ns_[static_cast<std::size_t>(loop.j)]), 9),
+                          format_fixed(loop.score, 6)});
     ++loops_;
-    bool within = false;
-    if (dataset_.has_ground_truth()) {
-      const auto T_i = dataset_.ground_truth_T_w_b(frame_i);
-      const auto T_j = dataset_.ground_truth_T_w_b(frame_j);
-      if (T_i && T_j) {
-        ++loops_with_truth_;
-        within = (T_i->translation() - T_j->translation()).norm() <= config_.eval.accept_radius_m;
-        if (within) ++loops_within_radius_;
-      }
-    }
-    // Loops come in ascending i: the best-scoring one of each query frame (first on ties).
-    if (loop.i != best_loop_i_) {
-      ++loop_queries_;
-      best_loop_i_ = loop.i;
-      best_loop_score_ = loop.score;
-      best_loop_within_ = within;
-      if (within) ++loop_queries_within_;
-    } else if (loop.score > best_loop_score_) {
-      if (best_loop_within_ != within) {
-        if (within) {
-          ++loop_queries_within_;
-        } else {
-          --loop_queries_within_;
-        }
-      }
-      best_loop_score_ = loop.score;
-      best_loop_within_ = within;
-    }
+    detections_.push_back(Detection{frame_i, frame_j, loop.score});
   }
   if (!output.loops.empty()) loops_csv_.flush();
   if (output.frames.empty()) return;
@@ -508,13 +638,15 @@ void PipelineRun::handle_match_output(MatchOutput& output) {
   for (const FrameMatchStatus& status : output.frames) finished_statuses_.push_back(status);
 }
 
-std::vector<std::string> PipelineRun::detection_cells(const FrameMatchStatus& status, bool described,
-                                                      std::size_t seq) const {
+std::vector<std::string> PipelineRun::detection_cells(const FrameMatchStatus& status, std::size_t seq) const {
   std::string reason;
   const double threshold = config_.match.dp_threshold();
+  const bool described = store_->state(seq) == DescriptorStore::State::kValid;
   switch (status.outcome) {
     case FrameOutcome::kNoCandidate:
-      if (!described) {
+      if (gated_ && row_cells_[seq] == 0) {
+        reason = "outside every candidate area";
+      } else if (!described) {
         reason = "no descriptor (image not decoded)";
       } else if (seq < static_cast<std::size_t>(config_.match.margin)) {
         reason = fmt::format("no earlier frame beyond the margin of {}", config_.match.margin);
@@ -537,7 +669,7 @@ std::vector<std::string> PipelineRun::detection_cells(const FrameMatchStatus& st
   }
   const bool has_best = status.best_j >= 0;
   return {described ? "y" : "n", to_string(status.outcome),
-          has_best ? std::to_string(store_->frame(static_cast<std::size_t>(status.best_j))) : "",
+          has_best ? std::to_string(frame_of(status.best_j)) : "",
           has_best ? format_fixed(status.best_score, 6) : "", reason};
 }
 
@@ -557,7 +689,7 @@ void PipelineRun::write_finished_rows(bool end_of_stream) {
       if (static_cast<std::size_t>(status.i) != row.seq) {
         throw std::logic_error(fmt::format("match status of seq {} while seq {} waits", status.i, row.seq));
       }
-      for (auto& cell : detection_cells(status, row.described, row.seq)) row.cells.push_back(std::move(cell));
+      for (auto& cell : detection_cells(status, row.seq)) row.cells.push_back(std::move(cell));
       ++outcome_counts_[static_cast<std::size_t>(status.outcome)];
       finished_statuses_.pop_front();
     }
@@ -603,8 +735,17 @@ void PipelineRun::stage_sink(FrameRecord& r) {
   row.push_back(reason);
   if (odometry_->needs_images())  // visual sources (ekf): features tracked in this image
     row.push_back(r.has_pose ? std::to_string(std::max(0, r.odometry.tracked_features)) : "");
-  if (full_) {
-    pending_rows_.push_back(PendingRow{static_cast<std::size_t>(r.seq), r.described, std::move(row)});
+  if (gated_) {
+    const GateDecision& g = r.gate;
+    const bool has_nearest = r.gate_ran && g.has_nearest;
+    row.push_back(has_nearest ? std::to_string(frame_of(g.nearest_frame)) : "");
+    row.push_back(has_nearest ? format_fixed(g.distance_m, 6) : "");
+    row.push_back(r.gate_ran ? format_fixed(g.threshold_m, 6) : "");
+    row.emplace_back(g.gated ? "y" : "n");
+    row.push_back(std::to_string(r.area_id));
+  }
+  if (full_ || gated_) {
+    pending_rows_.push_back(PendingRow{static_cast<std::size_t>(r.seq), std::move(row)});
     write_finished_rows(false);
   } else {
     frames_csv_.write_row(row);
@@ -695,7 +836,12 @@ void PipelineRun::open_outputs() {
       "seq", "frame", "t_ns",    "t_s",         "x_m",         "y_m",     "z_m",    "qx",    "qy",
       "qz",  "qw",    "sigma_m", "odom_status", "imu_samples", "decoded", "status", "reason"};
   if (odometry_->needs_images()) frame_columns.emplace_back("tracked_features");
-  if (full_) {
+  if (gated_) {
+    // the gate: nearest past frame under the combined distance, d, threshold, decision, area joined
+    for (const char* column : {"nearest_frame", "gate_d_m", "gate_threshold_m", "gated", "area_id"})
+      frame_columns.emplace_back(column);
+  }
+  if (full_ || gated_) {
     // descriptor computed (y/n); detection: no candidate | below threshold | suppressed | loop; the best
     // DP value of the frame and its earlier frame (accepted or not); why.
     for (const char* column : {"descriptor", "detection", "match_frame", "match_score", "detection_reason"})
@@ -761,6 +907,8 @@ void PipelineRun::produce(tbb::flow::queue_node<FramePtr>& queue, RunResult& res
       std::lock_guard lock(live_mutex_);
       live_.emplace(next_seq, std::move(owned));
     }
+    seq_frame_[next_seq] = frame;
+    seq_t_ns_[next_seq] = t_ns;
     record->seq = next_seq++;
     record->frame = frame;
     record->t_ns = t_ns;
@@ -797,7 +945,7 @@ RunResult PipelineRun::run() {
   std::unique_ptr<limiter_node<FramePtr, int>> limiter;
   const auto seq_of = [](const FramePtr& message) { return static_cast<std::size_t>(message.seq); };
   std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_described, seq_out;
-  std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry, describe, match;
+  std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry, gate, describe, match;
   std::unique_ptr<function_node<FramePtr, int>> sink;
   arena.execute([&] {
     g = std::make_unique<graph>();
@@ -814,6 +962,8 @@ RunResult PipelineRun::run() {
         *g, unlimited, node_body(kDecode, [this](FrameRecord& r) { stage_decode(r); }));
     odometry = std::make_unique<function_node<FramePtr, FramePtr>>(
         *g, serial, node_body(kOdometry, [this](FrameRecord& r) { stage_odometry(r); }));
+    gate = std::make_unique<function_node<FramePtr, FramePtr>>(
+        *g, serial, node_body(kGate, [this](FrameRecord& r) { stage_gate(r); }));
     describe = std::make_unique<function_node<FramePtr, FramePtr>>(
         *g, unlimited, node_body(kDescribe, [this](FrameRecord& r) { stage_describe(r); }));
     match = std::make_unique<function_node<FramePtr, FramePtr>>(
@@ -839,7 +989,8 @@ RunResult PipelineRun::run() {
     make_edge(*sync, *decode);
     make_edge(*decode, *seq_decoded);
     make_edge(*seq_decoded, *odometry);
-    make_edge(*odometry, *describe);
+    make_edge(*odometry, *gate);
+    make_edge(*gate, *describe);
     make_edge(*describe, *seq_described);
     make_edge(*seq_described, *match);
     make_edge(*match, *seq_out);
@@ -872,11 +1023,17 @@ RunResult PipelineRun::run() {
   }
 
   std::lock_guard lock(sink_mutex_);
-  if (full_) {
-    // End of stream: the matcher finalises its last 2 W frames; their rows follow.
+  if (full_ || gated_) {
+    // End of stream: (gated) the rows still open go to the matcher; the matcher finalises its last 2 W
+    // frames; their rows follow.
     std::lock_guard match_lock(match_mutex_);
     try {
       MatchOutput output;
+      if (gated_) {
+        tracker_->finish();
+        push_final_rows(match_end_seq_, output);
+        write_area_files();
+      }
       matcher_->flush(output);
       handle_match_output(output);
       write_finished_rows(true);
@@ -921,6 +1078,146 @@ RunResult PipelineRun::run() {
   return result;
 }
 
+// candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
+// columns = reference frames j, inclusive), candidate_cells.csv: the cells actually compared, per row as
+// disjoint column intervals, and descriptors.csv: every frame described, with the frame whose gate update
+// asked for it (a frame's frames.csv row may be written before it is described as a later reference).
+// Dataset frame indices.
+void PipelineRun::write_area_files() {
+  if (match_end_seq_ == 0) return;
+  const auto last_seq = static_cast<std::int64_t>(match_end_seq_) - 1;
+  const auto frame = [&](std::int64_t seq) { return std::to_string(frame_of(std::min(seq, last_seq))); };
+  CsvWriter areas;
+  areas.open(out_dir_ / "candidate_areas.csv", {"id", "row_begin", "row_end", "col_begin", "col_end",
+                                                "i_first", "i_last", "j_min", "j_max", "gated_frames"});
+  for (const CandidateArea& a : tracker_->areas()) {
+    areas.write_row({std::to_string(a.id), frame(a.row_begin), frame(a.row_end), frame(a.col_begin),
+                     frame(a.col_end), frame(a.i_first), frame(a.i_last), frame(a.j_min), frame(a.j_max),
+                     std::to_string(a.gated_frames)});
+  }
+  areas.close();
+  CsvWriter cells;
+  cells.open(out_dir_ / "candidate_cells.csv", {"i", "j_first", "j_last"});
+  for (std::int64_t i = 0; i <= last_seq; ++i) {
+    for (const RowColumns& span : tracker_->covered_columns(i))
+      cells.write_row({frame(i), frame(span.j0), frame(span.j1)});
+  }
+  cells.close();
+  CsvWriter described;
+  described.open(out_dir_ / "descriptors.csv", {"frame", "requested_by_frame", "computed"});
+  for (const auto& [k, by] : describe_requests_) {
+    const bool valid = store_->state(static_cast<std::size_t>(k)) == DescriptorStore::State::kValid;
+    described.write_row({frame(k), frame(by), valid ? "y" : "n"});
+  }
+  described.close();
+}
+
+// The detections against the dataset's ground truth (evaluation.md): positives from positions (r_true,
+// gap, plane), each query's best detection scored within r_accept, the PR curve; in gated mode the share
+// of positive query frames whose true loop lies inside a candidate area. Also writes ground_truth.tum and
+// truth_loops.csv for the plots.
+nlohmann::json PipelineRun::evaluate_loops() {
+  if (!dataset_.has_ground_truth()) return {{"available", false}};
+  const std::size_t n = last_frame_ - first_frame_;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<Eigen::Vector3d> p_w(n, Eigen::Vector3d::Constant(nan));
+  TumWriter truth_tum;
+  truth_tum.open(out_dir_ / "ground_truth.tum");
+  for (std::size_t k = 0; k < n; ++k) {
+    if (const auto T_w_b = dataset_.ground_truth_T_w_b(first_frame_ + k)) {
+      p_w[k] = T_w_b->translation();
+      truth_tum.write(dataset_.frame_t_ns(first_frame_ + k), *T_w_b);
+    }
+  }
+  truth_tum.close();
+  GroundTruthConfig truth_config;
+  truth_config.radius_m = config_.eval.truth_radius_m;
+  truth_config.gap_frames = config_.eval.truth_gap_frames;
+  truth_config.plane = config_.eval.plane != "auto"   ? config_.eval.plane
+                       : dataset_.layout() == "kitti" ? "xz"
+                                                      : "xyz";
+  truth_config.accept_radius_m = config_.eval.effective_accept_radius_m();
+  const LoopGroundTruth truth = LoopGroundTruth::from_positions(p_w, truth_config);
+  CsvWriter truth_loops;
+  truth_loops.open(out_dir_ / "truth_loops.csv", {"i", "j"});
+  for (const auto& [q, r] : truth.pairs())
+    truth_loops.write_row({std::to_string(first_frame_ + q), std::to_string(first_frame_ + r)});
+  truth_loops.close();
+
+  std::vector<Detection> detections;
+  detections.reserve(detections_.size());
+  std::size_t within = 0;
+  for (const Detection& d : detections_) {
+    detections.push_back({d.query - first_frame_, d.reference - first_frame_, d.score});
+    if (truth.is_true_match(detections.back().query, detections.back().reference)) ++within;
+  }
+  PrConfig pr_config;
+  pr_config.score_order = "higher_is_better";
+  const PrResult pr = evaluate_precision_recall(detections, truth, pr_config);
+  std::size_t best_within = 0;
+  const auto best = best_detection_per_query(detections, false);
+  for (const Detection& d : best) best_within += truth.is_true_match(d.query, d.reference) ? 1 : 0;
+  nlohmann::json curve = nlohmann::json::array();
+  for (const PrPoint& point : pr.curve) {
+    curve.push_back({{"threshold", point.threshold},
+                     {"precision", point.precision},
+                     {"recall", point.recall},
+                     {"detections", point.detections},
+                     {"true_positives", point.true_positives}});
+  }
+  nlohmann::json out = {
+      {"available", true},
+      {"truth",
+       {{"radius_m", truth_config.radius_m},
+        {"gap_frames", truth_config.gap_frames},
+        {"plane", truth_config.plane},
+        {"accept_radius_m", truth_config.effective_accept_radius_m()},
+        {"positives", truth.positive_count()}}},
+      {"loop_truth",
+       {{"loops", detections.size()},
+        {"loops_true", within},
+        {"loops_false", detections.size() - within},
+        {"query_frames_with_loops", best.size()},
+        {"query_best_loop_true", best_within},
+        {"query_best_loop_false", best.size() - best_within}}},
+      {"precision_recall",
+       {{"score_order", pr_config.score_order},
+        {"positives", pr.positives},
+        {"queries_with_detection", pr.queries_with_detection},
+        {"average_precision", pr.average_precision},
+        {"recall_at_100", pr.recall_at_100},
+        {"recall_at_99", pr.recall_at_99},
+        {"recall_at_95", pr.recall_at_95},
+        {"curve", curve}}},
+  };
+  if (gated_ && tracker_) {
+    // Positives the matcher could find (true reference at least match.margin frames back), and whether a
+    // candidate area covers one of their true pairs.
+    GroundTruthConfig reachable_config = truth_config;
+    reachable_config.gap_frames = std::max(truth_config.gap_frames, config_.match.margin);
+    const LoopGroundTruth reachable = LoopGroundTruth::from_positions(p_w, reachable_config);
+    std::vector<std::int64_t> seq_of_index(n, -1);
+    for (std::size_t seq = 0; seq < match_end_seq_; ++seq)
+      seq_of_index[seq_frame_[seq] - first_frame_] = static_cast<std::int64_t>(seq);
+    std::size_t positives = 0, covered = 0;
+    for (std::size_t q = 0; q < n; ++q) {
+      if (!reachable.is_positive(q) || seq_of_index[q] < 0) continue;
+      ++positives;
+      for (const std::size_t r : reachable.true_references(q)) {
+        if (seq_of_index[r] >= 0 && tracker_->covers(seq_of_index[q], seq_of_index[r])) {
+          ++covered;
+          break;
+        }
+      }
+    }
+    out["gate_coverage"] = {{"gap_frames", reachable_config.gap_frames},
+                            {"positive_query_frames", positives},
+                            {"covered_query_frames", covered},
+                            {"covered_fraction", positives ? static_cast<double>(covered) / positives : 0.0}};
+  }
+  return out;
+}
+
 nlohmann::json PipelineRun::make_summary(const RunResult& result) {
   PipelineConfig echo = config_;
   nlohmann::json issues = nlohmann::json::array();
@@ -931,6 +1228,24 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
   }
   std::size_t imu_anomalies_total = 0;
   if (synchronizer_) imu_anomalies_total = synchronizer_->anomalies().size();
+  const bool detects = full_ || gated_;
+  nlohmann::json gate_json = {{"enabled", gated_}};
+  if (gated_) {
+    std::size_t cells = 0, rows = 0;
+    for (std::size_t seq = 0; seq < match_end_seq_; ++seq) {
+      cells += row_cells_[seq];
+      rows += row_cells_[seq] > 0 ? 1 : 0;
+    }
+    gate_json.update(
+        {{"frames_with_pose", frames_gate_ran_},
+         {"frames_gated", frames_gated_},
+         {"pass_rate", frames_gate_ran_ ? static_cast<double>(frames_gated_) / frames_gate_ran_ : 0.0},
+         {"pose_errors", gate_errors_},
+         {"candidate_areas", tracker_->areas().size()},
+         {"cells", cells},
+         {"rows_with_cells", rows},
+         {"kdtree_frames", pose_gate_->frames_in_tree()}});
+  }
   return {
       {"config", config_to_json(echo)},
       {"dataset",
@@ -964,7 +1279,12 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
         {"frames_error", result.frames_error},
         {"decoded", decoded_},
         {"odometry_lost", odometry_lost_}}},
-      {"images_decoded", decoded_},
+      {"mode", config_.run.mode},
+      {"method", "dird"},
+      {"score_order", "higher_is_better"},
+      {"images_decoded", decoded_ + images_read_for_description_.load()},
+      {"images_read_for_description", images_read_for_description_.load()},
+      {"candidate_areas", gated_ ? tracker_->areas().size() : 0},
       {"descriptors_computed", descriptors_computed_.load()},
       {"similarities_computed", similarities_computed_.load()},
       {"loops", loops_},
@@ -974,14 +1294,8 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
         {"suppressed", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kSuppressed)]},
         {"loop", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kLoop)]},
         {"nms_delay_frames", full_ ? matcher_->emission_delay() : 0}}},
-      {"loop_truth",
-       {{"accept_radius_m", config_.eval.accept_radius_m},
-        {"loops_with_ground_truth", loops_with_truth_},
-        {"loops_within_accept_radius", loops_within_radius_},
-        {"loops_beyond_accept_radius", loops_with_truth_ - loops_within_radius_},
-        {"query_frames_with_loops", loop_queries_},
-        {"query_best_loop_within_accept_radius", loop_queries_within_},
-        {"query_best_loop_beyond_accept_radius", loop_queries_ - loop_queries_within_}}},
+      {"evaluation", detects ? evaluate_loops() : nlohmann::json{{"available", false}}},
+      {"gate", gate_json},
       {"trajectory_accuracy", trajectory_accuracy_json(tracked_poses_, dataset_)},
       {"stages", profiler_.to_json()},
       {"data_issues",

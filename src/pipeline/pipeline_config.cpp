@@ -54,7 +54,7 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 }
 
 void RunConfig::validate() const {
-  require_one_of("run.mode", mode, {"odometry", "full"});
+  require_one_of("run.mode", mode, {"gated", "full", "odometry"});
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
   require(max_in_flight >= 1, "run.max_in_flight", ">= 1", std::to_string(max_in_flight));
@@ -65,8 +65,12 @@ void RunConfig::validate() const {
 }
 
 void EvalConfig::validate() const {
-  require(std::isfinite(accept_radius_m) && accept_radius_m > 0, "eval.accept_radius_m", "> 0",
-          std::to_string(accept_radius_m));
+  require(std::isfinite(truth_radius_m) && truth_radius_m > 0, "eval.truth_radius_m", "> 0",
+          std::to_string(truth_radius_m));
+  require(truth_gap_frames >= 0, "eval.truth_gap_frames", ">= 0", std::to_string(truth_gap_frames));
+  require_one_of("eval.plane", plane, {"auto", "xz", "xy", "xyz"});
+  require(std::isfinite(accept_radius_m) && accept_radius_m >= 0, "eval.accept_radius_m",
+          ">= 0 (0 = eval.truth_radius_m)", std::to_string(accept_radius_m));
   require(aligned_tolerance_frames >= -1, "eval.aligned_tolerance_frames", ">= 0, or -1 (not aligned)",
           std::to_string(aligned_tolerance_frames));
 }

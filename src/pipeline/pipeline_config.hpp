@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "stages/dird/dird_config.hpp"
+#include "stages/gate/gate_config.hpp"
 #include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
 #include "stages/sync/imu_sync.hpp"
@@ -17,10 +18,12 @@ namespace loopgate {
 
 struct RunConfig {
   std::string dataset;  // dataset folder (the --dataset flag overrides it)
-  // "odometry": sync, decode, odometry only (no loop detection); "full": DIRD on every frame and its
-  // similarity against every earlier frame beyond match.margin, sequence match, NMS (the paper's
-  // pure-DIRD baseline). The gated mode comes with its own issue.
-  std::string mode = "odometry";
+  // "gated" (the paper's method): the pose gate finds candidate areas and DIRD descriptors and
+  // similarities are computed only inside them (past frames re-read on demand), then sequence match and
+  // NMS; "full": DIRD on every frame and its similarity against every earlier frame beyond match.margin,
+  // same sequence match and NMS (the paper's pure-DIRD baseline); "odometry": sync, decode, odometry only
+  // (no loop detection).
+  std::string mode = "gated";
   std::string rate = "max";     // "max" (as fast as the graph drains) or R > 0 (R x real time)
   int threads = 2;              // worker threads of the graph
   int max_in_flight = 8;        // limiter: frames inside the graph at once
@@ -45,7 +48,7 @@ struct RunConfig {
   }
   void validate() const;
 
-  bool detects_loops() const { return mode == "full"; }
+  bool detects_loops() const { return mode == "full" || mode == "gated"; }
   // nullopt for "max", else the rate factor R.
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
@@ -66,21 +69,31 @@ struct OutputConfig {
   void validate() const;
 };
 
-// Evaluation of the detections against the dataset's ground truth (when it has one).
+// Evaluation of the detections against the dataset's ground truth (when it has one), evaluation.md.
 struct EvalConfig {
-  // A loop closure (i, j) counts as "within" when the ground-truth positions of i and j are at most this
-  // far apart (3-D distance, metres).
-  double accept_radius_m = 10.0;
+  // Ground-truth loops: query i is positive when some j <= i - truth_gap_frames lies within
+  // truth_radius_m of it (r_true), distances in `plane`: "xz" (KITTI camera frame), "xy", "xyz", or
+  // "auto" (xz for the KITTI layout, xyz otherwise).
+  double truth_radius_m = 2.0;
+  int truth_gap_frames = 20;
+  std::string plane = "auto";
+  // r_accept: a detection (i, j) is a true positive when the ground-truth positions of i and j are at
+  // most this far apart (in `plane`); 0 = truth_radius_m.
+  double accept_radius_m = 0.0;
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
 
   template <class V>
   void visit(V&& v) {
+    v("truth_radius_m", truth_radius_m);
+    v("truth_gap_frames", truth_gap_frames);
+    v("plane", plane);
     v("accept_radius_m", accept_radius_m);
     v("aligned_tolerance_frames", aligned_tolerance_frames);
   }
   void validate() const;
+  double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
 };
 
 struct PipelineConfig {
@@ -88,6 +101,7 @@ struct PipelineConfig {
   SyncConfig sync;
   OdometryConfig odometry;
   EkfConfig ekf;  // the `ekf` odometry source (stages/ekf/ekf_config.hpp)
+  GateConfig gate;
   DirdConfig dird;
   MatchConfig match;
   EvalConfig eval;
@@ -99,6 +113,7 @@ struct PipelineConfig {
     v("sync", sync);
     v("odometry", odometry);
     v("ekf", ekf);
+    v("gate", gate);
     v("dird", dird);
     v("match", match);
     v("eval", eval);
@@ -109,8 +124,10 @@ struct PipelineConfig {
     sync.validate();
     odometry.validate();
     ekf.validate();
+    gate.validate();
     dird.validate();
     match.validate();
+    if (run.mode == "gated") gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
     output.validate();
   }

@@ -24,6 +24,7 @@ void CandidateAreaTracker::set_rectangle(CandidateArea& area) const {
 }
 
 void CandidateAreaTracker::cover_row(std::int64_t i, std::int64_t lo, std::int64_t hi, AreaUpdate& out) {
+  if (i < last_frame_ - static_cast<std::int64_t>(config_.row_horizon_frames)) return;  // final row
   hi = std::min(hi, i - static_cast<std::int64_t>(pair_margin_frames_));
   lo = std::max<std::int64_t>(lo, 0);
   if (hi < lo) return;

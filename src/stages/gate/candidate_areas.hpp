@@ -9,9 +9,10 @@
 // area is the rectangle
 //   rows (query i)      [max(0, i_first - m_i), i_last]
 //   columns (reference) [max(0, j_min - m_j), j_max + m_j], and per row i also j <= i - pair_margin
-// which grows as frames join. Every update reports the cells (row, column interval) that became covered
-// for the first time by any area, and the frames that newly need a descriptor (rows and columns of those
-// cells), each frame at most once over the whole run.
+// which grows as frames join. Rows older than the current frame minus row_horizon_frames are final and
+// take no new cells (a streaming consumer can finish them). Every update reports the cells (row, column
+// interval) that became covered for the first time by any area, and the frames that newly need a descriptor
+// (rows and columns of those cells), each frame at most once over the whole run.
 #pragma once
 
 #include <cstdint>
@@ -70,7 +71,8 @@ class CandidateAreaTracker {
   // pair_margin_frames: only cells with i - j >= pair_margin_frames exist (match.margin, >= 0).
   CandidateAreaTracker(const GateConfig& config, int sequence_length, int pair_margin_frames);
 
-  // Frames strictly increasing (DataError otherwise, source "gate").
+  // Frames strictly increasing (DataError otherwise, source "gate"). After update(i), rows <= i -
+  // row_horizon_frames never get another cell.
   AreaUpdate update(const GateDecision& decision);
   // Closes every open area (end of stream).
   std::vector<int> finish();

@@ -37,6 +37,12 @@ void GateConfig::validate_for_sequence_length(int sequence_length) const {
                       " must be >= the sequence length L = " + std::to_string(sequence_length) +
                       " (match.sequence_length) so the DP has its history when an area opens");
   }
+  if (row_horizon_frames < area_margin_query_frames || row_horizon_frames < area_max_hole_frames + 1) {
+    throw ConfigError("gate.row_horizon_frames: " + std::to_string(row_horizon_frames) +
+                      " must be >= gate.area_margin_query_frames (" +
+                      std::to_string(area_margin_query_frames) + ") and > gate.area_max_hole_frames (" +
+                      std::to_string(area_max_hole_frames) + "): rows older than the horizon are final");
+  }
 }
 
 }  // namespace loopgate

@@ -32,6 +32,12 @@ struct GateConfig {
   // sequence length L of the DP (checked by CandidateAreaTracker against the L it is given).
   int area_margin_query_frames = 20;
   int area_margin_reference_frames = 20;
+  // Streaming horizon: at frame i, rows (query frames) older than i - row_horizon_frames take no new
+  // cells, so the matcher can consume a row once it is that old. Must be >= area_margin_query_frames (an
+  // area opening at i has its history rows) and > area_max_hole_frames (an area resuming after a hole
+  // covers the rows of the hole). Cells an area would add later to a frozen row (when its column range
+  // widens long after the row) are not computed; the rectangle is then the bounding box of what was.
+  int row_horizon_frames = 40;
 
   template <class V>
   void visit(V&& v) {
@@ -57,6 +63,7 @@ struct GateConfig {
     v("area_j_tolerance_frames", self.area_j_tolerance_frames);
     v("area_margin_query_frames", self.area_margin_query_frames);
     v("area_margin_reference_frames", self.area_margin_reference_frames);
+    v("row_horizon_frames", self.row_horizon_frames);
   }
 
  public:
@@ -64,7 +71,8 @@ struct GateConfig {
   // trace}, confidence_scale >= 0 (finite),
   // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size >= 1, kdtree_seed_neighbours >= 1, area_* >= 0.
   void validate() const;
-  // Throws ConfigError unless area_margin_query_frames >= sequence_length (the DP's L).
+  // Throws ConfigError unless area_margin_query_frames >= sequence_length (the DP's L) and
+  // row_horizon_frames >= max(area_margin_query_frames, area_max_hole_frames + 1).
   void validate_for_sequence_length(int sequence_length) const;
 };
 
