@@ -73,7 +73,7 @@ TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
 }
 
 TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
-  ASSERT_EQ(preset_names(), (std::vector<std::string>{"demo", "kitti00", "euroc-mh05"}));
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"demo", "kitti00", "euroc-mh05", "aliasing"}));
   for (const std::string& name : preset_names()) {
     SimulationConfig c = make_preset(name, "/nonexistent");
     EXPECT_EQ(c.simulation.preset, name);
@@ -104,6 +104,103 @@ TEST(SimulatorPresets, KittiAndEurocPresetParameters) {
   EXPECT_EQ(e.simulation.imu_source, "file");
   EXPECT_EQ(e.world.kind, "hall");
   EXPECT_EQ(e.camera.distortion_model, "radtan");
+}
+
+// Frames (of the first `frames`) whose camera is within radius_m (horizontally) of c, as [first, last] runs.
+std::vector<std::pair<std::size_t, std::size_t>> passes_near(const std::vector<Eigen::Isometry3d>& T_w_c,
+                                                             std::size_t frames, const Eigen::Vector2d& c,
+                                                             double radius_m) {
+  std::vector<std::pair<std::size_t, std::size_t>> runs;
+  for (std::size_t f = 0; f < frames; ++f) {
+    if ((T_w_c[f].translation().head<2>() - c).norm() > radius_m) continue;
+    if (!runs.empty() && runs.back().second + 1 == f) {
+      runs.back().second = f;
+    } else {
+      runs.emplace_back(f, f);
+    }
+  }
+  return runs;
+}
+
+TEST(SimulatorPresets, AliasingPresetCopiesOnePlaceOntoAFarPlaceDrivenOnce) {
+  SimulationConfig config = make_preset("aliasing", "");
+  const SimulationPlan plan = plan_simulation(config);
+  ASSERT_EQ(plan.frames_used, 490u);
+  EXPECT_EQ(plan.camera.width_px, 320);
+  EXPECT_EQ(plan.camera.height_px, 100);
+  EXPECT_EQ(config.world.aliasing_fraction, 0.0);  // only the deterministic copy aliases
+  std::vector<Eigen::Vector3d> path_w;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path_w.push_back(T.translation());
+  const World world = build_world(config.world, path_w, plan.up_w);
+
+  // Every aliased structure is a copied facade whose source shares its texture seed, style and texture
+  // and stands more than 50 m away (around place A, while the copy stands around place B).
+  const Eigen::Vector2d place_a(config.world.alias_copy_source_x_m, config.world.alias_copy_source_y_m);
+  const Eigen::Vector2d place_b(config.world.alias_copy_target_x_m, config.world.alias_copy_target_y_m);
+  EXPECT_GT((place_a - place_b).norm(), 50.0);
+  const auto centre = [&](int structure) {
+    for (const Quad& q : world.quads) {
+      if (q.structure == structure)
+        return Eigen::Vector2d((q.origin_w + 0.5f * q.width_m * q.axis_u_w).head<2>().cast<double>());
+    }
+    return Eigen::Vector2d(NAN, NAN);
+  };
+  std::vector<Eigen::Vector2d> copies, sources;
+  for (std::size_t k = 0; k < world.structures.size(); ++k) {
+    const Structure& s = world.structures[k];
+    if (s.aliased_from < 0) continue;
+    EXPECT_TRUE(s.copied) << k;
+    EXPECT_EQ(s.kind, "facade");
+    const Structure& src = world.structures[static_cast<std::size_t>(s.aliased_from)];
+    EXPECT_EQ(s.texture_seed, src.texture_seed);
+    EXPECT_EQ(s.style, src.style);
+    EXPECT_EQ(s.texture, src.texture);
+    const Eigen::Vector2d c = centre(static_cast<int>(k));
+    const Eigen::Vector2d c_src = centre(s.aliased_from);
+    EXPECT_LE((c - place_b).norm(), config.world.alias_copy_radius_m);
+    EXPECT_GT((c - c_src).norm(), 50.0) << "structure " << k;
+    // Rotated by 180 degrees about the place centres: the mirror position, within the facade pitch phase.
+    EXPECT_LE((c_src - (place_a - (c - place_b))).norm(), config.world.alias_copy_tolerance_m);
+    copies.push_back(c);
+    sources.push_back(c_src);
+  }
+  EXPECT_EQ(world.copied_structure_count(), 10);  // both sides of ~50 m of street
+  EXPECT_EQ(world.aliased_structure_count(), 10);
+
+  // Each place is driven once (one pass of the rendered frames near every copy and every source), and the
+  // pass by each source comes more than 150 frames (configs/aliasing.yaml match.margin) after the pass by its
+  // copy, so that full DIRD compares the two.
+  std::size_t b_first = plan.frames_used, b_last = 0, a_first = plan.frames_used, a_last = 0;
+  for (std::size_t k = 0; k < copies.size(); ++k) {
+    const auto at_b = passes_near(plan.T_w_c, plan.frames_used, copies[k], 12.0);
+    const auto at_a = passes_near(plan.T_w_c, plan.frames_used, sources[k], 12.0);
+    ASSERT_EQ(at_b.size(), 1u) << "copy " << k << " at " << copies[k].transpose();
+    ASSERT_EQ(at_a.size(), 1u) << "source " << k << " at " << sources[k].transpose();
+    EXPECT_GT(at_a[0].first, at_b[0].second + 150) << "copy " << k;
+    b_first = std::min(b_first, at_b[0].first);
+    b_last = std::max(b_last, at_b[0].second);
+    a_first = std::min(a_first, at_a[0].first);
+    a_last = std::max(a_last, at_a[0].second);
+  }
+  std::printf("aliasing preset: place B driven at frames %zu-%zu, place A at %zu-%zu\n", b_first, b_last,
+              a_first, a_last);
+  EXPECT_GT(a_first, b_last);
+  // Nowhere along the passes are the cameras at A and B closer than 50 m.
+  for (std::size_t i = a_first; i <= a_last; ++i) {
+    for (std::size_t j = b_first; j <= b_last; ++j) {
+      ASSERT_GT((plan.T_w_c[i].translation() - plan.T_w_c[j].translation()).norm(), 50.0) << i << " " << j;
+    }
+  }
+
+  // The genuine loop: ground-truth revisits exist, all of them after the first lap and none near A or B.
+  const std::vector<LoopInterval> loops = find_loop_truth(
+      std::vector<Eigen::Isometry3d>(plan.T_w_c.begin(), plan.T_w_c.begin() + 490), plan.up_w, config.loops);
+  ASSERT_FALSE(loops.empty());
+  for (const LoopInterval& loop : loops) {
+    EXPECT_GT(static_cast<std::size_t>(loop.query), a_last) << loop.query;
+    EXPECT_LT(static_cast<std::size_t>(loop.last), b_first) << loop.last;
+  }
+  EXPECT_GE(loops.back().query - loops.front().query, 50);  // a revisit of 50+ frames
 }
 
 TEST(LoopTruth, OutAndBackAlongALine) {

@@ -124,6 +124,74 @@ TEST(World, AliasingKnobReusesTheRequestedFractionOfSeeds) {
   }
 }
 
+// Horizontal centre of a structure's first quad (EuRoC up = +z: x, y).
+Eigen::Vector2d structure_centre_xy(const World& world, int structure) {
+  for (const Quad& q : world.quads) {
+    if (q.structure != structure) continue;
+    const Eigen::Vector3f c = q.origin_w + 0.5f * q.width_m * q.axis_u_w + 0.5f * q.height_m * q.axis_v_w;
+    return Eigen::Vector2d(c.x(), c.y());
+  }
+  return Eigen::Vector2d(NAN, NAN);
+}
+
+// Height of the (vertical) facade quad of a structure.
+float facade_height(const World& world, int structure) {
+  for (const Quad& q : world.quads) {
+    if (q.structure == structure) return q.height_m;
+  }
+  return -1.0f;
+}
+
+TEST(World, PlaceCopyGivesTheTargetPlaceTheSourcePlaceTextures) {
+  // A straight street along +x (EuRoC up), 300 m, one point per metre. Copy the place around x = 60 to the
+  // place around x = 220, rotated by 0 (rotation 180 is what the aliasing preset uses: see
+  // sim_simulator_test).
+  std::vector<Eigen::Vector3d> path;
+  for (int k = 0; k <= 300; ++k) path.emplace_back(k, 0.0, 1.65);
+  WorldConfig config;
+  config.street_facade_offset_jitter_m = 0.0;
+  const World plain = build_world(config, path, kEurocUp);
+  EXPECT_EQ(plain.aliased_structure_count(), 0);
+  EXPECT_EQ(plain.copied_structure_count(), 0);
+  config.alias_copy_radius_m = 25.0;
+  config.alias_copy_source_x_m = 60.0;
+  config.alias_copy_target_x_m = 220.0;
+  const World world = build_world(config, path, kEurocUp);
+  ASSERT_EQ(world.structures.size(), plain.structures.size());
+  int in_target = 0;
+  for (std::size_t k = 0; k < world.structures.size(); ++k) {
+    const Structure& s = world.structures[k];
+    const Eigen::Vector2d c = structure_centre_xy(world, static_cast<int>(k));
+    const bool target = s.kind == "facade" && (c - Eigen::Vector2d(220.0, 0.0)).norm() <= 25.0;
+    in_target += target ? 1 : 0;
+    EXPECT_EQ(s.copied, target) << "structure " << k << " at " << c.transpose();
+    if (!s.copied) {
+      // Everything else is untouched.
+      EXPECT_EQ(s.texture_seed, plain.structures[k].texture_seed);
+      continue;
+    }
+    ASSERT_GE(s.aliased_from, 0);
+    const Structure& src = world.structures[static_cast<std::size_t>(s.aliased_from)];
+    EXPECT_FALSE(src.copied);
+    EXPECT_EQ(s.texture_seed, src.texture_seed);
+    EXPECT_EQ(s.style, src.style);
+    EXPECT_EQ(s.texture, src.texture);
+    EXPECT_EQ(facade_height(world, static_cast<int>(k)), facade_height(world, s.aliased_from));
+    // The source stands where the target stands, 160 m back (within the facade pitch's phase).
+    const Eigen::Vector2d src_c = structure_centre_xy(world, s.aliased_from);
+    EXPECT_LE((src_c + Eigen::Vector2d(160.0, 0.0) - c).norm(), config.alias_copy_tolerance_m);
+  }
+  EXPECT_GE(in_target, 6);  // ~50 m of street, both sides
+  EXPECT_EQ(world.copied_structure_count(), in_target);
+  EXPECT_EQ(world.aliased_structure_count(), in_target);
+
+  config.alias_copy_radius_m = -1.0;
+  EXPECT_THROW(config.validate(), ConfigError);
+  config.alias_copy_radius_m = 25.0;
+  config.alias_copy_tolerance_m = 0.0;
+  EXPECT_THROW(config.validate(), ConfigError);
+}
+
 TEST(World, BuildIsDeterministicAndSeedDependent) {
   const auto path = block_route(100.0, 60.0, 1);
   WorldConfig config;

@@ -179,7 +179,7 @@ void SimulationConfig::validate() const {
 // Presets
 
 std::vector<std::string> preset_names() {
-  return {"demo", "kitti00", "euroc-mh05"};
+  return {"demo", "kitti00", "euroc-mh05", "aliasing"};
 }
 
 std::filesystem::path default_shared_data_dir() {
@@ -217,8 +217,8 @@ SimulationConfig make_preset(const std::string& name, const std::filesystem::pat
     c.world.aliasing_fraction = 0.1;
     c.world.street_camera_height_m = c.route.camera_height_m;
     // Lap 2 at dusk, not full night: with the full-night sensor noise (sigma 9) DIRD at 640 x 200 does not
-    // separate revisits from unrelated places (median L1 88 332 vs 88 512, libdird); at dusk (noise 3) it does
-    // (l2 mode: 42 018 vs 54 260), so the demo can show the detector across a change of light.
+    // separate revisits from unrelated places (median L1 88 332 vs 88 512, libdird); at dusk (noise 3) it
+    // does (l2 mode: 42 018 vs 54 260), so the demo can show the detector across a change of light.
     c.illumination.kind = "day-to-night";
     c.illumination.transition_start = 0.42;
     c.illumination.transition_end = 0.58;
@@ -258,6 +258,76 @@ SimulationConfig make_preset(const std::string& name, const std::filesystem::pat
     c.loops.radius_m = 2.0;  // as the paper's KITTI 00 truth: 2 m horizontally, >= 20 frames apart
     c.loops.min_gap_frames = 20;
     c.loops.min_travel_m = 10.0;  // a stop at a light is not a revisit
+    c.loops.horizontal_only = true;
+  } else if (name == "aliasing") {
+    // Perceptual aliasing (issue 5): 1.2 laps of a 200 x 60 m circuit (counter-clockwise, starting mid-way
+    // along the bottom straight) at 10 Hz, ~1.2 m per frame, 320 x 100 images under constant overcast
+    // light. Place B (top straight, facades between x = 26 and 77, driven westwards at frames ~136-185) is a
+    // copy of place A (bottom straight, x = -71 to -20, driven eastwards at frames ~341-388): the same
+    // facade texture seeds, styles and heights at the positions rotated by 180 degrees, so the camera sees
+    // the same street at both. A and B are 80-170 m apart and each is driven once; the genuine loop is
+    // the end of the run, which drives the first ~95 m again (frames ~412-489 revisit frames 0-78).
+    c.simulation.trajectory_format = "procedural";
+    c.simulation.imu_source = "synthesised";
+    c.simulation.up_x = 0.0;
+    c.simulation.up_y = 0.0;
+    c.simulation.up_z = 1.0;
+    c.route.length_x_m = 200.0;
+    c.route.length_y_m = 60.0;
+    c.route.corner_radius_m = 15.0;
+    // A two-lap route (988 m in 824 frames) of which the first 490 frames (1.2 laps) are rendered.
+    c.route.laps = 2;
+    c.route.frames = 824;
+    c.simulation.max_frames = 490;
+    // No steering wobble: both places are driven along the same straight line relative to their facades.
+    c.route.heading_wobble_rad = 0.0;
+    c.simulation.frame_rate_hz = c.route.rate_hz;
+    // The demo's field of view at half its resolution (fast to render); body x forward, y left, z up.
+    c.camera = CameraSettings{};
+    c.camera.width_px = 320;
+    c.camera.height_px = 100;
+    c.camera.fx = 185.0;
+    c.camera.fy = 185.0;
+    c.camera.cx = 159.5;
+    c.camera.cy = 49.5;
+    Eigen::Matrix3d R_b_c;
+    R_b_c << 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0;
+    const Eigen::Quaterniond q_b_c(R_b_c);
+    c.camera.q_b_c_w = q_b_c.w();
+    c.camera.q_b_c_x = q_b_c.x();
+    c.camera.q_b_c_y = q_b_c.y();
+    c.camera.q_b_c_z = q_b_c.z();
+    c.fit.smoothing_weight = 3.0;  // as the demo: rounds off the straight-to-arc curvature steps
+    c.imu.initial_gyro_bias_sigma_radps = 0.002;
+    c.imu.initial_accel_bias_sigma_mps2 = 0.02;
+    c.world.kind = "street";
+    c.world.street_camera_height_m = c.route.camera_height_m;
+    // Only the deterministic copy aliases (no random knob); facades without random setback and no posts,
+    // so that the copied facades stand where their sources stand relative to the road.
+    c.world.aliasing_fraction = 0.0;
+    c.world.street_facade_offset_jitter_m = 0.0;
+    c.world.street_pole_spacing_m = 0.0;
+    // The circuit is point-symmetric about the origin; the target centre is moved 6.3 m (half a facade
+    // pitch) from the mirror image of the source centre so that the two places' facades line up (copied
+    // facades are 0.3 m from their mapped sources' positions instead of 6 m).
+    c.world.alias_copy_source_x_m = -45.0;
+    c.world.alias_copy_source_y_m = -30.0;
+    c.world.alias_copy_target_x_m = 51.3;
+    c.world.alias_copy_target_y_m = 30.0;
+    c.world.alias_copy_rotation_deg = 180.0;
+    // 38 m: the mapped source area stays on the part of the bottom straight west of the start that is
+    // driven once (x in [-83, -7]); the 10 facades around B (both sides) are copies.
+    c.world.alias_copy_radius_m = 38.0;
+    c.world.alias_copy_tolerance_m = 6.0;
+    // Overcast, constant light: the sun straight overhead lights every facade alike whatever way it faces
+    // (a sun from the side would shade the rotated copy differently), and both places look the same.
+    c.illumination.kind = "constant";
+    c.illumination.sun_dir_x = 0.0;
+    c.illumination.sun_dir_y = 0.0;
+    c.illumination.sun_dir_z = 1.0;
+    c.loops.radius_m = 2.0;
+    c.loops.min_gap_frames = 20;
+    c.loops.min_travel_m = 10.0;
     c.loops.horizontal_only = true;
   } else {  // euroc-mh05
     const std::filesystem::path mav0 = shared_data_dir / "euroc" / "MH_05_difficult" / "mav0";
@@ -627,6 +697,17 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
                    {"aliasable_structures", world.aliasable_structure_count()},
                    {"aliased_structures", world.aliased_structure_count()},
                    {"up_w", {plan.up_w.x(), plan.up_w.y(), plan.up_w.z()}}};
+  if (config.world.alias_copy_radius_m > 0.0) {
+    // Which structures the place copy aliased: [target structure, source structure, texture seed].
+    nlohmann::json copies = nlohmann::json::array();
+    for (std::size_t k = 0; k < world.structures.size(); ++k) {
+      const Structure& st = world.structures[k];
+      if (st.copied) copies.push_back({k, st.aliased_from, st.texture_seed});
+    }
+    meta["world"]["place_copy"] = {{"copied_structures", world.copied_structure_count()},
+                                   {"columns", {"target", "source", "texture_seed"}},
+                                   {"structures", copies}};
+  }
   meta["trajectory"] = {{"format", s.trajectory_format},
                         {"samples", plan.trajectory_samples},
                         {"start_t_ns", plan.trajectory_start_t_ns},

@@ -185,7 +185,8 @@ struct SimulationConfig {
   void validate() const;
 };
 
-// Names of the built-in presets: "demo", "kitti00", "euroc-mh05".
+// Names of the built-in presets: "demo", "kitti00", "euroc-mh05", "aliasing" (a perceptual-aliasing street:
+// two far places with copied facade textures, each driven once, and one genuine revisit).
 std::vector<std::string> preset_names();
 // The configuration of a preset. Shared-data paths are resolved under `shared_data_dir` (see
 // default_shared_data_dir()). Throws ConfigError naming the allowed presets for an unknown name.

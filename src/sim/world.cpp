@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <unordered_map>
 
 #include "core/error.hpp"
@@ -592,6 +593,25 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
 
 // --------------------------------------------------------------------------------------------- aliasing
 
+// Structure `idx` takes the texture (seed, style) of structure `src`, and its size: same texture => same
+// size, so it adopts the source's height (quads of facades grow or shrink with it).
+void alias_structure(Builder& bld, int idx, int src) {
+  PendingStructure& s = bld.pending[static_cast<std::size_t>(idx)];
+  const PendingStructure& source = bld.pending[static_cast<std::size_t>(src)];
+  s.info.aliased_from = src;
+  s.info.style = source.info.style;
+  s.info.texture_seed = source.info.texture_seed;
+  const double dh = source.height_m - s.height_m;
+  if (std::abs(dh) > 1e-9) {
+    for (int q : s.quads) {
+      Quad& quad = bld.world.quads[static_cast<std::size_t>(q)];
+      if (std::abs(quad.axis_v_w.dot(bld.frame.up.cast<float>())) > 0.9f)
+        quad.height_m += static_cast<float>(dh);
+    }
+    s.height_m = source.height_m;
+  }
+}
+
 void apply_aliasing(Builder& bld) {
   const double fraction = bld.config.aliasing_fraction;
   std::vector<int> aliasable;
@@ -622,20 +642,7 @@ void apply_aliasing(Builder& bld) {
     std::sort(candidates.begin(), candidates.end());  // farthest first
     const int far_count = std::max(1, static_cast<int>(candidates.size() * kAliasMinDistanceFraction));
     const int src = candidates[static_cast<std::size_t>(rng.integer(0, far_count - 1))].second;
-    const PendingStructure& source = bld.pending[static_cast<std::size_t>(src)];
-    s.info.aliased_from = src;
-    s.info.style = source.info.style;
-    s.info.texture_seed = source.info.texture_seed;
-    // Same texture => same size: adopt the source's height (quads of facades grow or shrink with it).
-    const double dh = source.height_m - s.height_m;
-    if (std::abs(dh) > 1e-9) {
-      for (int q : s.quads) {
-        Quad& quad = bld.world.quads[static_cast<std::size_t>(q)];
-        if (std::abs(quad.axis_v_w.dot(bld.frame.up.cast<float>())) > 0.9f)
-          quad.height_m += static_cast<float>(dh);
-      }
-      s.height_m = source.height_m;
-    }
+    alias_structure(bld, idx, src);
     is_alias[static_cast<std::size_t>(idx)] = 1;
     is_source[static_cast<std::size_t>(src)] = 1;
     ++done;
@@ -645,6 +652,65 @@ void apply_aliasing(Builder& bld) {
         "world: aliasing_fraction {} asks for {} aliased structures, only {} have a same-size partner",
         fraction, target, done);
   }
+}
+
+// The deterministic place copy (WorldConfig alias_copy_*), after the random knob: a target structure that
+// the knob already aliased, or used as an alias source, keeps its texture (no chains of aliases).
+void apply_alias_copy(Builder& bld) {
+  const WorldConfig& cfg = bld.config;
+  if (cfg.alias_copy_radius_m <= 0.0) return;
+  const auto horizontal = [&](const Eigen::Vector3d& p) {
+    return Eigen::Vector2d(p.dot(bld.frame.e1), p.dot(bld.frame.e2));
+  };
+  const Eigen::Vector2d source_c(cfg.alias_copy_source_x_m, cfg.alias_copy_source_y_m);
+  const Eigen::Vector2d target_c(cfg.alias_copy_target_x_m, cfg.alias_copy_target_y_m);
+  const Eigen::Rotation2Dd R_target_source(cfg.alias_copy_rotation_deg * std::numbers::pi / 180.0);
+  const auto copyable = [](const Structure& info) { return info.kind != "ground" && info.kind != "marking"; };
+  std::vector<char> is_source(bld.pending.size(), 0);
+  for (const PendingStructure& s : bld.pending) {
+    if (s.info.aliased_from >= 0) is_source[static_cast<std::size_t>(s.info.aliased_from)] = 1;
+  }
+  std::vector<char> in_target(bld.pending.size(), 0);
+  for (std::size_t k = 0; k < bld.pending.size(); ++k) {
+    in_target[k] = (horizontal(bld.pending[k].center_w) - target_c).norm() <= cfg.alias_copy_radius_m ? 1 : 0;
+  }
+  int candidates = 0, copied = 0;
+  for (std::size_t k = 0; k < bld.pending.size(); ++k) {
+    PendingStructure& t = bld.pending[k];
+    if (!in_target[k] || !copyable(t.info)) continue;
+    ++candidates;
+    if (t.info.aliased_from >= 0 || is_source[k]) continue;
+    const Eigen::Vector2d expected =
+        source_c + R_target_source.inverse() * (horizontal(t.center_w) - target_c);
+    int best = -1;
+    double best_m = cfg.alias_copy_tolerance_m;
+    for (std::size_t o = 0; o < bld.pending.size(); ++o) {
+      const PendingStructure& s = bld.pending[o];
+      if (in_target[o] || s.info.kind != t.info.kind || std::abs(s.width_m - t.width_m) > 0.01) continue;
+      const double d = (horizontal(s.center_w) - expected).norm();
+      if (d <= best_m) {
+        best_m = d;
+        best = static_cast<int>(o);
+      }
+    }
+    spdlog::debug(
+        "world: place copy target {} ({}) at ({:.1f}, {:.1f}): source {} at {:.2f} m from the mapped "
+        "position",
+        k, t.info.kind, horizontal(t.center_w).x(), horizontal(t.center_w).y(), best,
+        best < 0 ? -1.0 : best_m);
+    if (best < 0) continue;
+    // Copy from the root of an alias (its seed is the root's anyway) so that no chain forms.
+    const int root = bld.pending[static_cast<std::size_t>(best)].info.aliased_from >= 0
+                         ? bld.pending[static_cast<std::size_t>(best)].info.aliased_from
+                         : best;
+    alias_structure(bld, static_cast<int>(k), root);
+    t.info.copied = true;
+    ++copied;
+  }
+  spdlog::info(
+      "world: place copy ({:.1f}, {:.1f}) -> ({:.1f}, {:.1f}) within {:.1f} m: {} of {} structures copied",
+      source_c.x(), source_c.y(), target_c.x(), target_c.y(), cfg.alias_copy_radius_m, copied, candidates);
+  if (copied == 0) spdlog::warn("world: the place copy found no structure to copy (check alias_copy_*)");
 }
 
 }  // namespace
@@ -668,6 +734,13 @@ void WorldConfig::validate() const {
   if (!(aliasing_fraction >= 0.0 && aliasing_fraction <= 0.5)) {
     throw ConfigError("world.aliasing_fraction: must be in [0, 0.5] (got " +
                       std::to_string(aliasing_fraction) + ")");
+  }
+  non_negative("alias_copy_radius_m", alias_copy_radius_m);
+  positive("alias_copy_tolerance_m", alias_copy_tolerance_m);
+  for (const double v : {alias_copy_source_x_m, alias_copy_source_y_m, alias_copy_target_x_m,
+                         alias_copy_target_y_m, alias_copy_rotation_deg}) {
+    if (!std::isfinite(v))
+      throw ConfigError("world.alias_copy_*: the place centres and rotation must be finite");
   }
   positive("street_facade_offset_m", street_facade_offset_m);
   non_negative("street_facade_offset_jitter_m", street_facade_offset_jitter_m);
@@ -709,6 +782,12 @@ int World::aliased_structure_count() const {
   return n;
 }
 
+int World::copied_structure_count() const {
+  int n = 0;
+  for (const Structure& s : structures) n += s.copied ? 1 : 0;
+  return n;
+}
+
 int World::aliasable_structure_count() const {
   int n = 0;
   for (const Structure& s : structures) n += s.aliasable ? 1 : 0;
@@ -733,6 +812,7 @@ World build_world(const WorldConfig& config, const std::vector<Eigen::Vector3d>&
     build_hall(bld, path_w);
   }
   apply_aliasing(bld);
+  apply_alias_copy(bld);
 
   // Textures: one per structure with its own seed; aliased ones and shared ground reuse.
   const double tpm_facade = config.street_facade_texels_per_m;

@@ -19,6 +19,21 @@ struct WorldConfig {
   std::string kind = "street";  // "street" | "hall"
   std::int64_t seed = 1;
   double aliasing_fraction = 0.0;  // fraction of structures that reuse another structure's texture seed
+  // Deterministic aliasing (a "copied place"): every structure except the ground and the road markings
+  // (facades, posts, hall walls / floor / ceiling tiles, pillars, crates) whose centre lies within
+  // alias_copy_radius_m (horizontally) of the target place takes the texture seed, style and height of the
+  // structure of the same kind and width nearest to the corresponding position around the source place
+  // (target = source rotated by alias_copy_rotation_deg about up, then moved to the target centre), if one
+  // lies within alias_copy_tolerance_m of it. Structures the random knob already aliased are left alone.
+  // Centres are horizontal world coordinates: x, y for up = +z (EuRoC); x, z for up = -y (KITTI).
+  // alias_copy_radius_m = 0: off.
+  double alias_copy_radius_m = 0.0;
+  double alias_copy_source_x_m = 0.0;
+  double alias_copy_source_y_m = 0.0;
+  double alias_copy_target_x_m = 0.0;
+  double alias_copy_target_y_m = 0.0;
+  double alias_copy_rotation_deg = 0.0;
+  double alias_copy_tolerance_m = 6.0;
 
   // street
   double street_facade_offset_m = 8.0;         // lateral distance of facades from the path
@@ -53,6 +68,13 @@ struct WorldConfig {
     v("kind", kind);
     v("seed", seed);
     v("aliasing_fraction", aliasing_fraction);
+    v("alias_copy_radius_m", alias_copy_radius_m);
+    v("alias_copy_source_x_m", alias_copy_source_x_m);
+    v("alias_copy_source_y_m", alias_copy_source_y_m);
+    v("alias_copy_target_x_m", alias_copy_target_x_m);
+    v("alias_copy_target_y_m", alias_copy_target_y_m);
+    v("alias_copy_rotation_deg", alias_copy_rotation_deg);
+    v("alias_copy_tolerance_m", alias_copy_tolerance_m);
     v("street_facade_offset_m", street_facade_offset_m);
     v("street_facade_offset_jitter_m", street_facade_offset_jitter_m);
     v("street_clearance_m", street_clearance_m);
@@ -115,6 +137,7 @@ struct Structure {
   int aliased_from = -1;  // index of the structure whose texture seed this one reuses, -1 if own
   int texture = 0;        // index into World::textures
   bool aliasable = true;  // ground strips are excluded from the aliasing knob
+  bool copied = false;    // aliased by the deterministic place copy (WorldConfig alias_copy_*)
 };
 
 // Flattened BVH node: leaf when count > 0 (quads quad_index[first .. first + count)), else children
@@ -142,6 +165,8 @@ struct World {
                 float* t_hit, float* u_tx, float* v_tx) const;
   // Number of structures whose texture seed is borrowed from another structure (aliasing knob).
   int aliased_structure_count() const;
+  // Of those, the ones copied by the deterministic alias_copy_* place copy.
+  int copied_structure_count() const;
   int aliasable_structure_count() const;
 };
 
