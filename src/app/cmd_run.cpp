@@ -25,6 +25,7 @@ struct RunOptions {
   std::string config_file;
   std::string dataset;
   std::string mode;
+  std::string method;
   std::string reference;
   std::string query;
   std::string out_dir;
@@ -70,6 +71,7 @@ int run_command(const RunOptions& options) {
   std::vector<std::string> overrides = options.overrides;
   if (!options.dataset.empty()) overrides.push_back("run.dataset=" + options.dataset);
   if (!options.mode.empty()) overrides.push_back("run.mode=" + options.mode);
+  if (!options.method.empty()) overrides.push_back("run.method=" + options.method);
   if (!options.rate.empty()) overrides.push_back("run.rate=" + options.rate);
   if (options.threads > 0) overrides.push_back("run.threads=" + std::to_string(options.threads));
   if (options.trace) overrides.push_back("output.trace=true");
@@ -126,7 +128,10 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--dataset", options->dataset,
                   "dataset folder (EuRoC, KITTI or image folder); overrides run.dataset");
   cmd->add_option("--mode", options->mode,
-                  "odometry (no loop detection, default) or full (DIRD on every frame); overrides run.mode");
+                  "gated (default: DIRD only inside the pose gate's candidate areas), full (DIRD on every "
+                  "frame) or odometry (no loop detection); overrides run.mode");
+  cmd->add_option("--method", options->method,
+                  "dird (default) or seqslam (the SeqSLAM baseline on every frame); overrides run.method");
   cmd->add_option("--reference", options->reference,
                   "two-sequence mode (with --query): reference dataset folder, e.g. Nordland summer");
   cmd->add_option("--query", options->query, "two-sequence mode (with --reference): query dataset folder");

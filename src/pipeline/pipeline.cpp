@@ -32,6 +32,7 @@
 #include "io/writers.hpp"
 #include "pipeline/descriptor_store.hpp"
 #include "pipeline/run_metrics.hpp"
+#include "pipeline/seqslam_batch.hpp"
 #include "pipeline/stage_profiler.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_similarity.hpp"
@@ -199,11 +200,22 @@ class PipelineRun {
     if (dataset_.has_imu())
       synchronizer_ = std::make_unique<ImuSynchronizer>(dataset_.imu_samples(), config_.sync);
     odometry_ = make_odometry_source(config_.odometry, config_.ekf, dataset_);
-    full_ = config_.run.mode == "full";
-    gated_ = config_.run.mode == "gated";
+    seqslam_ = config_.run.seqslam();
+    full_ = config_.run.mode == "full" && !seqslam_;
+    gated_ = config_.run.mode == "gated" && !seqslam_;
     const std::size_t capacity = last_frame_ - first_frame_;
     seq_frame_.resize(capacity);
     seq_t_ns_.resize(capacity);
+    if (seqslam_) {
+      if (!dataset_.has_images()) {
+        throw DataError(dataset_.root(), "run.method seqslam needs images, and this dataset has none");
+      }
+      seqslam_batch_ = std::make_unique<SeqSlamBatch>(config_.seqslam, capacity);
+      seqslam_described_.assign(capacity, 0);
+      spdlog::info(
+          "run: SeqSLAM on every frame (run.mode {} does not apply to it); matches at the end of the stream",
+          config_.run.mode);
+    }
     if (full_ || gated_) {
       if (!dataset_.has_images()) {
         throw DataError(dataset_.root(),
@@ -324,6 +336,14 @@ class PipelineRun {
   std::size_t next_push_seq_ = 0, match_end_seq_ = 0;
   std::atomic<std::size_t> images_read_for_description_{0};
 
+  // seqslam method: describe preprocesses every frame; the search runs at the end of the stream
+  bool seqslam_ = false;
+  std::unique_ptr<SeqSlamBatch> seqslam_batch_;
+  std::vector<std::uint8_t> seqslam_described_;  // per seq, written once by describe, read after the drain
+  double end_of_stream_ms_ = 0;                  // matcher flush / SeqSLAM batch after the last frame
+  void finish_seqslam(tbb::task_arena& arena);
+  bool detects() const { return full_ || gated_ || seqslam_; }
+
   // full and gated mode: describe (parallel; stateless extractor, store entries written once per seq)
   // and match
   bool full_ = false;
@@ -336,7 +356,8 @@ class PipelineRun {
   std::unique_ptr<SequenceMatcher> matcher_;
   CsvWriter loops_csv_;
   std::size_t loops_ = 0;
-  std::vector<Detection> detections_;  // every loop closure, dataset frame indices (evaluation)
+  std::vector<Detection> detections_;          // every loop closure, dataset frame indices (evaluation)
+  std::vector<Detection> seqslam_candidates_;  // SeqSLAM: every query's match, accepted or not
   std::array<std::size_t, 4> outcome_counts_{};
   // frame statuses finalised by the matcher (NMS delay), waiting for their frames.csv row
   std::mutex finished_mutex_;
@@ -396,7 +417,7 @@ void PipelineRun::stage_sync(FrameRecord& r) {
   std::lock_guard lock(sync_mutex_);
   // Lazy decode: pixels are needed now by a visual odometry source, and in full mode by describe (gated
   // mode: describe reads the images the candidate areas need itself, current frame included).
-  r.needs_pixels = decode_all_ || odometry_->needs_images() || full_;
+  r.needs_pixels = decode_all_ || odometry_->needs_images() || full_ || seqslam_;
   if (!synchronizer_) return;
   if (have_last_sync_t_ && r.t_ns <= last_sync_t_ns_) {
     add_message(r.errors,
@@ -545,6 +566,21 @@ void PipelineRun::describe_requested(FrameRecord& r) {
 // describe). The rest of the row (i - K < j <= i - margin, only when margin < K) is done by match,
 // after the sequencer. Either way the row is the same set of pairs whatever the thread timing.
 void PipelineRun::stage_describe(FrameRecord& r) {
+  if (seqslam_) {
+    const auto seq = static_cast<std::size_t>(r.seq);
+    if (r.decoded) {
+      try {
+        seqslam_batch_->add(seq, r.image);
+        r.described = true;
+        seqslam_described_[seq] = 1;
+        descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
+      } catch (const std::invalid_argument& e) {
+        add_message(r.errors, std::string("seqslam preprocessing: ") + e.what());
+      }
+    }
+    if (!r.described) seqslam_batch_->add_missing(seq);
+    return;
+  }
   if (gated_) {
     describe_requested(r);
     return;
@@ -744,7 +780,9 @@ void PipelineRun::stage_sink(FrameRecord& r) {
     row.emplace_back(g.gated ? "y" : "n");
     row.push_back(std::to_string(r.area_id));
   }
-  if (full_ || gated_) {
+  if (seqslam_) {
+    pending_rows_.push_back(PendingRow{static_cast<std::size_t>(r.seq), std::move(row)});  // until the end
+  } else if (full_ || gated_) {
     pending_rows_.push_back(PendingRow{static_cast<std::size_t>(r.seq), std::move(row)});
     write_finished_rows(false);
   } else {
@@ -841,9 +879,10 @@ void PipelineRun::open_outputs() {
     for (const char* column : {"nearest_frame", "gate_d_m", "gate_threshold_m", "gated", "area_id"})
       frame_columns.emplace_back(column);
   }
-  if (full_ || gated_) {
+  if (detects()) {
     // descriptor computed (y/n); detection: no candidate | below threshold | suppressed | loop; the best
-    // DP value of the frame and its earlier frame (accepted or not); why.
+    // DP value of the frame and its earlier frame (accepted or not); why. SeqSLAM: descriptor = the
+    // preprocessed image; detection no match | rejected | loop; its best match and ratio (lower is better).
     for (const char* column : {"descriptor", "detection", "match_frame", "match_score", "detection_reason"})
       frame_columns.emplace_back(column);
     loops_csv_.open(out_dir_ / "loops.csv", {"i", "j", "t_i", "t_j", "score"});
@@ -1023,20 +1062,25 @@ RunResult PipelineRun::run() {
   }
 
   std::lock_guard lock(sink_mutex_);
-  if (full_ || gated_) {
+  const std::int64_t end_of_stream_start_ns = now_ns();
+  if (detects()) {
     // End of stream: (gated) the rows still open go to the matcher; the matcher finalises its last 2 W
-    // frames; their rows follow.
+    // frames; their rows follow. SeqSLAM: the whole search, then every row.
     std::lock_guard match_lock(match_mutex_);
     try {
       MatchOutput output;
-      if (gated_) {
+      if (seqslam_) {
+        finish_seqslam(arena);
+      } else if (gated_) {
         tracker_->finish();
         push_final_rows(match_end_seq_, output);
         write_area_files();
       }
-      matcher_->flush(output);
-      handle_match_output(output);
-      write_finished_rows(true);
+      if (!seqslam_) {
+        matcher_->flush(output);
+        handle_match_output(output);
+        write_finished_rows(true);
+      }
     } catch (const std::exception& e) {
       std::lock_guard failure_lock(failure_mutex_);
       if (!failed_.load()) {
@@ -1048,6 +1092,11 @@ RunResult PipelineRun::run() {
     }
     loops_csv_.close();
   }
+  end_of_stream_ms_ = 1e-6 * static_cast<double>(now_ns() - end_of_stream_start_ns);
+  // The end-of-stream work is part of the run (SeqSLAM's search happens there).
+  result.wall_s = 1e-9 * static_cast<double>(now_ns());
+  result.cpu_s = cpu_seconds() - cpu_start_s;
+  result.peak_rss_mb = peak_rss_mb();
   if (show_progress_) show_progress(true);
   frames_csv_.close();
   timing_csv_.close();
@@ -1076,6 +1125,57 @@ RunResult PipelineRun::run() {
   }
   if (result.failed) spdlog::error("run failed: {}", result.error);
   return result;
+}
+
+// SeqSLAM at the end of the stream: the search over all frames (in the run's arena), loops.csv for the
+// accepted matches, and every frames.csv row with its match.
+void PipelineRun::finish_seqslam(tbb::task_arena& arena) {
+  const std::size_t count = next_sink_seq_;
+  std::vector<SeqSlamMatch> matches;
+  arena.execute([&] { matches = seqslam_batch_->run(count); });
+  const double threshold = config_.seqslam.ratio_threshold;
+  for (const SeqSlamMatch& m : matches) {
+    if (!m.has_match || !std::isfinite(m.ratio)) continue;
+    const std::size_t frame_i = frame_of(static_cast<std::int64_t>(m.query));
+    const std::size_t frame_j = frame_of(static_cast<std::int64_t>(m.reference));
+    seqslam_candidates_.push_back(Detection{frame_i, frame_j, m.ratio});
+    if (!m.accepted) continue;
+    loops_csv_.write_row({std::to_string(frame_i), std::to_string(frame_j),
+                          format_fixed(ns_to_s(seq_t_ns_[m.query]), 9),
+                          format_fixed(ns_to_s(seq_t_ns_[m.reference]), 9), format_fixed(m.ratio, 6)});
+    ++loops_;
+    detections_.push_back(Detection{frame_i, frame_j, m.ratio});
+  }
+  const std::size_t half = static_cast<std::size_t>(config_.seqslam.sequence_length_frames / 2);
+  for (PendingRow& row : pending_rows_) {
+    const SeqSlamMatch& m = matches.at(row.seq);
+    const bool described = seqslam_described_[row.seq] != 0;  // else it took part as a zero image
+    std::string detection, reason;
+    FrameOutcome outcome = FrameOutcome::kNoCandidate;
+    if (!m.has_match) {
+      detection = "no match";
+      reason = row.seq < half || row.seq + half >= count
+                   ? fmt::format("within ds/2 = {} frames of an end of the run", half)
+                   : fmt::format("every sequence touches the exclusion ({} {} frames)",
+                                 config_.seqslam.exclusion, config_.seqslam.exclusion_margin_frames);
+    } else if (!m.accepted) {
+      detection = "rejected";
+      outcome = FrameOutcome::kBelowThreshold;
+      reason = fmt::format("ratio {:.4f} > {:.4f}", m.ratio, threshold);
+    } else {
+      detection = "loop";
+      outcome = FrameOutcome::kLoop;
+      reason = fmt::format("ratio {:.4f} <= {:.4f}", m.ratio, threshold);
+    }
+    ++outcome_counts_[static_cast<std::size_t>(outcome)];
+    row.cells.emplace_back(described ? "y" : "n");
+    row.cells.push_back(detection);
+    row.cells.push_back(m.has_match ? std::to_string(frame_of(static_cast<std::int64_t>(m.reference))) : "");
+    row.cells.push_back(m.has_match ? format_fixed(m.ratio, 6) : "");
+    row.cells.push_back(reason);
+    frames_csv_.write_row(row.cells);
+  }
+  pending_rows_.clear();
 }
 
 // candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
@@ -1152,10 +1252,15 @@ nlohmann::json PipelineRun::evaluate_loops() {
     if (truth.is_true_match(detections.back().query, detections.back().reference)) ++within;
   }
   PrConfig pr_config;
-  pr_config.score_order = "higher_is_better";
-  const PrResult pr = evaluate_precision_recall(detections, truth, pr_config);
+  pr_config.score_order = seqslam_ ? "lower_is_better" : "higher_is_better";
+  // SeqSLAM: the PR sweep runs over every query's match (accepted or not: the ratio is the threshold);
+  // loop_truth counts the accepted ones (loops.csv).
+  std::vector<Detection> candidates;
+  for (const Detection& d : seqslam_candidates_)
+    candidates.push_back({d.query - first_frame_, d.reference - first_frame_, d.score});
+  const PrResult pr = evaluate_precision_recall(seqslam_ ? candidates : detections, truth, pr_config);
   std::size_t best_within = 0;
-  const auto best = best_detection_per_query(detections, false);
+  const auto best = best_detection_per_query(detections, pr_config.lower_is_better());
   for (const Detection& d : best) best_within += truth.is_true_match(d.query, d.reference) ? 1 : 0;
   nlohmann::json curve = nlohmann::json::array();
   for (const PrPoint& point : pr.curve) {
@@ -1228,7 +1333,6 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
   }
   std::size_t imu_anomalies_total = 0;
   if (synchronizer_) imu_anomalies_total = synchronizer_->anomalies().size();
-  const bool detects = full_ || gated_;
   nlohmann::json gate_json = {{"enabled", gated_}};
   if (gated_) {
     std::size_t cells = 0, rows = 0;
@@ -1279,9 +1383,10 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
         {"frames_error", result.frames_error},
         {"decoded", decoded_},
         {"odometry_lost", odometry_lost_}}},
-      {"mode", config_.run.mode},
-      {"method", "dird"},
-      {"score_order", "higher_is_better"},
+      {"mode", seqslam_ ? std::string("full") : config_.run.mode},  // SeqSLAM always sees every frame
+      {"method", seqslam_ ? "seqslam" : "dird"},
+      {"score_order", seqslam_ ? "lower_is_better" : "higher_is_better"},
+      {"end_of_stream_ms", end_of_stream_ms_},
       {"images_decoded", decoded_ + images_read_for_description_.load()},
       {"images_read_for_description", images_read_for_description_.load()},
       {"candidate_areas", gated_ ? tracker_->areas().size() : 0},
@@ -1294,7 +1399,7 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
         {"suppressed", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kSuppressed)]},
         {"loop", outcome_counts_[static_cast<std::size_t>(FrameOutcome::kLoop)]},
         {"nms_delay_frames", full_ ? matcher_->emission_delay() : 0}}},
-      {"evaluation", detects ? evaluate_loops() : nlohmann::json{{"available", false}}},
+      {"evaluation", detects() ? evaluate_loops() : nlohmann::json{{"available", false}}},
       {"gate", gate_json},
       {"trajectory_accuracy", trajectory_accuracy_json(tracked_poses_, dataset_)},
       {"stages", profiler_.to_json()},

@@ -55,6 +55,10 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 
 void RunConfig::validate() const {
   require_one_of("run.mode", mode, {"gated", "full", "odometry"});
+  require_one_of("run.method", method, {"dird", "seqslam"});
+  if (method == "seqslam" && mode == "odometry") {
+    throw ConfigError("run.method: seqslam detects loops; it needs run.mode gated or full, not odometry");
+  }
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
   require(max_in_flight >= 1, "run.max_in_flight", ">= 1", std::to_string(max_in_flight));

@@ -12,6 +12,7 @@
 #include "stages/gate/gate_config.hpp"
 #include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
+#include "stages/seqslam/seqslam_config.hpp"
 #include "stages/sync/imu_sync.hpp"
 
 namespace loopgate {
@@ -24,6 +25,10 @@ struct RunConfig {
   // same sequence match and NMS (the paper's pure-DIRD baseline); "odometry": sync, decode, odometry only
   // (no loop detection).
   std::string mode = "gated";
+  // "dird" (the paper's detector, in the chosen mode) or "seqslam" (the SeqSLAM baseline with the
+  // OpenSeqSLAM defaults of section seqslam, on every frame: it has no gated variant, so mode gated or
+  // full both run it on all frames; its score is the ratio best/second, lower is better).
+  std::string method = "dird";
   std::string rate = "max";     // "max" (as fast as the graph drains) or R > 0 (R x real time)
   int threads = 2;              // worker threads of the graph
   int max_in_flight = 8;        // limiter: frames inside the graph at once
@@ -37,6 +42,7 @@ struct RunConfig {
   void visit(V&& v) {
     v("dataset", dataset);
     v("mode", mode);
+    v("method", method);
     v("rate", rate);
     v("threads", threads);
     v("max_in_flight", max_in_flight);
@@ -49,6 +55,7 @@ struct RunConfig {
   void validate() const;
 
   bool detects_loops() const { return mode == "full" || mode == "gated"; }
+  bool seqslam() const { return method == "seqslam"; }
   // nullopt for "max", else the rate factor R.
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
@@ -96,6 +103,13 @@ struct EvalConfig {
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
 };
 
+inline SeqSlamConfig single_sequence_seqslam() {
+  SeqSlamConfig config;
+  config.exclusion = "past";
+  config.exclusion_margin_frames = 200;
+  return config;
+}
+
 struct PipelineConfig {
   RunConfig run;
   SyncConfig sync;
@@ -104,6 +118,9 @@ struct PipelineConfig {
   GateConfig gate;
   DirdConfig dird;
   MatchConfig match;
+  // SeqSLAM (run.method seqslam). A single run is matched against itself: reference rows closer than
+  // exclusion_margin_frames before the query are excluded ("past"); set the margin like match.margin.
+  SeqSlamConfig seqslam = single_sequence_seqslam();
   EvalConfig eval;
   OutputConfig output;
 
@@ -116,6 +133,7 @@ struct PipelineConfig {
     v("gate", gate);
     v("dird", dird);
     v("match", match);
+    v("seqslam", seqslam);
     v("eval", eval);
     v("output", output);
   }
@@ -127,6 +145,7 @@ struct PipelineConfig {
     gate.validate();
     dird.validate();
     match.validate();
+    seqslam.validate();
     if (run.mode == "gated") gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
     output.validate();

@@ -1,0 +1,85 @@
+#include "pipeline/seqslam_batch.hpp"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace loopgate {
+
+namespace {
+constexpr std::size_t kQueryBlock = 64;  // query columns per parallel task
+}
+
+SeqSlamBatch::SeqSlamBatch(const SeqSlamConfig& config, std::size_t capacity)
+    : seqslam_(config),
+      capacity_(capacity),
+      pixel_count_(static_cast<std::size_t>(config.image_width_px) *
+                   static_cast<std::size_t>(config.image_height_px)),
+      bytes_(new std::uint8_t[capacity * pixel_count_]) {}
+
+void SeqSlamBatch::add(std::size_t seq, const cv::Mat& image) {
+  if (seq >= capacity_)
+    throw std::out_of_range("SeqSlamBatch: seq " + std::to_string(seq) + " beyond capacity");
+  const std::vector<std::uint8_t> pixels = seqslam_.preprocess(image);
+  if (pixels.size() != pixel_count_) {
+    throw std::invalid_argument("SeqSLAM preprocessing gave " + std::to_string(pixels.size()) +
+                                " pixels, expected " + std::to_string(pixel_count_));
+  }
+  std::memcpy(bytes_.get() + seq * pixel_count_, pixels.data(), pixel_count_);
+}
+
+void SeqSlamBatch::add_missing(std::size_t seq) {
+  if (seq >= capacity_)
+    throw std::out_of_range("SeqSlamBatch: seq " + std::to_string(seq) + " beyond capacity");
+  std::memset(bytes_.get() + seq * pixel_count_, 0, pixel_count_);
+}
+
+std::vector<SeqSlamMatch> SeqSlamBatch::run(std::size_t count) const {
+  std::vector<SeqSlamMatch> matches(count);
+  for (std::size_t q = 0; q < count; ++q) matches[q].query = q;
+  if (count == 0) return matches;
+  SeqSlamImages images(pixel_count_);
+  images.reserve(count);
+  std::vector<std::uint8_t> one(pixel_count_);
+  for (std::size_t k = 0; k < count; ++k) {
+    std::memcpy(one.data(), bytes_.get() + k * pixel_count_, pixel_count_);
+    images.add(one);
+  }
+  const SeqSlamConfig& config = seqslam_.config();
+  const SeqSlamExclusion exclusion = SeqSlamExclusion::from_config(config);
+  SeqSlamMatrix M(count, count);
+  const std::size_t blocks = (count + kQueryBlock - 1) / kQueryBlock;
+  const auto block_range = [&](std::size_t b) {
+    return std::pair{b * kQueryBlock, std::min(count, (b + 1) * kQueryBlock)};
+  };
+  // Step 2 and step 3 (per column) in parallel blocks of query columns; the global minimum is reduced.
+  const double minimum = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, blocks), std::numeric_limits<double>::infinity(),
+      [&](const tbb::blocked_range<std::size_t>& range, double running) {
+        for (std::size_t b = range.begin(); b < range.end(); ++b) {
+          const auto [q0, q1] = block_range(b);
+          seqslam_difference_block(images, images, exclusion, 0, count, q0, q1, M);
+          running = std::min(running, seqslam_enhance_contrast(M, config.contrast_window_rows, q0, q1));
+        }
+        return running;
+      },
+      [](double a, double b) { return std::min(a, b); });
+  if (std::isfinite(minimum)) {
+    tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
+      const auto [q0, q1] = block_range(b);
+      seqslam_subtract(M, minimum, q0, q1);
+    });
+  }
+  // Step 4 per query column.
+  tbb::parallel_for(std::size_t{0}, count,
+                    [&](std::size_t q) { matches[q] = seqslam_match_query(M, q, config); });
+  return matches;
+}
+
+}  // namespace loopgate

@@ -1,0 +1,45 @@
+// SeqSLAM as a method of the pipeline (`run.method: seqslam`, ../shared/docs/seqslam.md): the describe node
+// preprocesses every frame (step 1, in parallel, stored by sequence number); at the end of the stream the
+// difference matrix, the contrast enhancement and the sequence search (steps 2-4) run over the whole run
+// in parallel blocks (single-sequence: reference = query = the run, with the configured exclusion).
+// SeqSLAM needs the frames on both sides of a query (ds/2 later ones) and the statistics of its
+// neighbouring reference rows, so it is a batch method: its results are known when the stream ends.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <opencv2/core/mat.hpp>
+#include <vector>
+
+#include "stages/seqslam/seqslam.hpp"
+
+namespace loopgate {
+
+class SeqSlamBatch {
+ public:
+  // `capacity`: frames the run may release. Validates the config (ConfigError).
+  SeqSlamBatch(const SeqSlamConfig& config, std::size_t capacity);
+
+  // Step 1 for frame `seq` (thread-safe for distinct seqs). Throws std::invalid_argument for an image
+  // the preprocessing cannot take (wrong pixel type, or a preprocessed input of the wrong size).
+  void add(std::size_t seq, const cv::Mat& image);
+  // Frame `seq` has no image (it did not decode): it takes part as an all-zero image (no place looks like
+  // it), like the zero images of the authors' setup.
+  void add_missing(std::size_t seq);
+
+  // Steps 2-4 over frames [0, count) (count <= capacity, every one added), one match per frame, with
+  // tbb::parallel_for over blocks of query columns (call it inside the run's task arena).
+  std::vector<SeqSlamMatch> run(std::size_t count) const;
+
+  const SeqSlamConfig& config() const { return seqslam_.config(); }
+  std::size_t pixel_count() const { return pixel_count_; }
+
+ private:
+  SeqSlam seqslam_;
+  std::size_t capacity_;
+  std::size_t pixel_count_;
+  std::unique_ptr<std::uint8_t[]> bytes_;  // capacity x pixel_count, committed as frames are written
+};
+
+}  // namespace loopgate
