@@ -7,7 +7,7 @@ namespace loopgate::app {
 
 // Exit codes shared by all subcommands.
 constexpr int kExitOk = 0;
-constexpr int kExitFailure = 1;     // the job failed (bad input, error during the run)
+constexpr int kExitFailure = 1;        // the job failed (bad input, error during the run)
 constexpr int kExitInterrupted = 130;  // SIGINT: outputs written for the frames processed
 
 // Each add_*_command adds its subcommand to `app`; its callback stores the exit code in `exit_code`.
@@ -15,5 +15,6 @@ void add_simulate_command(CLI::App& app, int& exit_code);
 void add_describe_command(CLI::App& app, int& exit_code);
 void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_run_command(CLI::App& app, int& exit_code);
+void add_compare_command(CLI::App& app, int& exit_code);
 
 }  // namespace loopgate::app

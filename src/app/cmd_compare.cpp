@@ -1,0 +1,339 @@
+// loopgate compare: the same dataset and configuration through full DIRD, gated DIRD and SeqSLAM, one after
+// the other (each run alone on the machine), side by side: a table on stdout, compare.json (one object per
+// method holding that run's summary.json, plus the ratios), each run's outputs in OUT/<method>, and the
+// plots of scripts/plot.py in OUT/plots.
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "app/commands.hpp"
+#include "core/error.hpp"
+#include "io/config.hpp"
+#include "io/dataset.hpp"
+#include "io/writers.hpp"
+#include "pipeline/pipeline.hpp"
+#include "stages/dird/dird_extractor.hpp"
+
+namespace loopgate::app {
+
+namespace {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+struct CompareOptions {
+  std::string config_file;
+  std::string dataset;
+  std::string out_dir;
+  std::string methods = "full,gated,seqslam";
+  std::string frames;
+  int threads = 0;
+  bool no_plots = false;
+  std::string plot_script;
+  std::vector<std::string> overrides;
+};
+
+std::atomic<bool> g_compare_stop{false};
+extern "C" void on_compare_sigint(int) {
+  g_compare_stop.store(true);
+  std::signal(SIGINT, SIG_DFL);
+}
+
+std::vector<std::string> split_methods(const std::string& text) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    const std::size_t comma = text.find(',', start);
+    const std::string name =
+        text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    if (name != "full" && name != "gated" && name != "seqslam") {
+      throw ConfigError("--methods: '" + name + "' is not one of full, gated, seqslam");
+    }
+    for (const auto& seen : out) {
+      if (seen == name) throw ConfigError("--methods: '" + name + "' listed twice");
+    }
+    out.push_back(name);
+    if (comma == std::string::npos) break;
+    start = comma + 1;
+  }
+  return out;
+}
+
+// Overrides that make a method out of the shared configuration.
+std::vector<std::string> method_overrides(const std::string& method) {
+  if (method == "full") return {"run.mode=full", "run.method=dird"};
+  if (method == "gated") return {"run.mode=gated", "run.method=dird"};
+  return {"run.mode=full", "run.method=seqslam"};
+}
+
+double stage_total_ms(const json& summary, const char* stage) {
+  const auto& stages = summary.at("stages");
+  return stages.contains(stage) ? stages.at(stage).at("total_ms").get<double>() : 0.0;
+}
+
+// Time of the loop-detection work: describe + match + the end-of-stream step, and the same with decode
+// (the full run decodes every frame for describe; the gated one reads its frames inside describe).
+double detection_ms(const json& s) {
+  return stage_total_ms(s, "describe") + stage_total_ms(s, "match") + s.value("end_of_stream_ms", 0.0);
+}
+double detection_with_decode_ms(const json& s) {
+  return detection_ms(s) + stage_total_ms(s, "decode");
+}
+
+std::string number(const json& value, int decimals = 0) {
+  if (value.is_null()) return "-";
+  if (value.is_number_integer() || value.is_number_unsigned()) return std::to_string(value.get<long long>());
+  return fmt::format("{:.{}f}", value.get<double>(), decimals);
+}
+
+const json* find_path(const json& root, const std::vector<std::string>& path) {
+  const json* node = &root;
+  for (const auto& key : path) {
+    if (!node->is_object() || !node->contains(key)) return nullptr;
+    node = &node->at(key);
+  }
+  return node;
+}
+
+std::string table(const std::vector<std::string>& methods, const std::map<std::string, json>& summaries) {
+  struct Row {
+    std::string label;
+    std::function<std::string(const json&)> cell;
+  };
+  const auto at = [](std::vector<std::string> path, int decimals = 0) {
+    return [path, decimals](const json& s) {
+      const json* v = find_path(s, path);
+      return v ? number(*v, decimals) : std::string("-");
+    };
+  };
+  const std::vector<Row> rows = {
+      {"wall time (s)", at({"wall_s"}, 2)},
+      {"cpu time (s)", at({"cpu_s"}, 2)},
+      {"real-time factor", at({"realtime_factor"}, 1)},
+      {"decode (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "decode")); }},
+      {"odometry (ms, sum)",
+       [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "odometry")); }},
+      {"gate (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "gate")); }},
+      {"describe (ms, sum)",
+       [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "describe")); }},
+      {"match (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "match")); }},
+      {"end of stream (ms)", at({"end_of_stream_ms"}, 1)},
+      {"describe+match+end (ms)", [](const json& s) { return fmt::format("{:.1f}", detection_ms(s)); }},
+      {"  with decode (ms)",
+       [](const json& s) { return fmt::format("{:.1f}", detection_with_decode_ms(s)); }},
+      {"peak RSS (MiB)", at({"peak_rss_mb"}, 0)},
+      {"images decoded", at({"images_decoded"})},
+      {"descriptors computed", at({"descriptors_computed"})},
+      {"similarities computed", at({"similarities_computed"})},
+      {"candidate areas", at({"candidate_areas"})},
+      {"loops", at({"loops"})},
+      {"loops true", at({"evaluation", "loop_truth", "loops_true"})},
+      {"loops false", at({"evaluation", "loop_truth", "loops_false"})},
+      {"positive query frames", at({"evaluation", "precision_recall", "positives"})},
+      {"average precision", at({"evaluation", "precision_recall", "average_precision"}, 3)},
+      {"recall at 100% precision", at({"evaluation", "precision_recall", "recall_at_100"}, 3)},
+      {"recall at 99% precision", at({"evaluation", "precision_recall", "recall_at_99"}, 3)},
+      {"recall at 95% precision", at({"evaluation", "precision_recall", "recall_at_95"}, 3)},
+  };
+  std::string out = fmt::format("{:<26}", "");
+  for (const auto& m : methods) out += fmt::format("{:>14}", m);
+  out += "\n";
+  for (const Row& row : rows) {
+    out += fmt::format("{:<26}", row.label);
+    for (const auto& m : methods) out += fmt::format("{:>14}", row.cell(summaries.at(m)));
+    out += "\n";
+  }
+  return out;
+}
+
+// A DIRD descriptor of one frame (the gated run's first loop query, else the middle frame), for the plots.
+void write_descriptor_example(const PipelineConfig& config, const Dataset& dataset, const fs::path& run_dir) {
+  std::size_t frame = dataset.frame_count() / 2;
+  std::ifstream loops(run_dir / "loops.csv");
+  std::string line;
+  if (std::getline(loops, line) && std::getline(loops, line))
+    frame = std::stoul(line.substr(0, line.find(',')));
+  const DirdExtractor extractor(config.dird);
+  const Descriptor d = extractor.extract(dataset.load_image(frame));
+  std::ofstream out(run_dir / "descriptor.csv");
+  out << frame;
+  for (const std::uint8_t v : d) out << ',' << static_cast<int>(v);
+  out << '\n';
+}
+
+fs::path find_plot_script(const std::string& option) {
+  if (!option.empty()) return option;
+  if (const char* env = std::getenv("LOOPGATE_PLOT_SCRIPT")) return env;
+  return fs::path(LOOPGATE_SOURCE_DIR) / "scripts" / "plot.py";
+}
+
+std::string shell_quote(const std::string& text) {
+  std::string out = "'";
+  for (const char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+int compare_command(const CompareOptions& options) {
+  const std::vector<std::string> methods = split_methods(options.methods);
+  std::vector<std::string> shared = options.overrides;
+  if (!options.dataset.empty()) shared.push_back("run.dataset=" + options.dataset);
+  if (options.threads > 0) shared.push_back("run.threads=" + std::to_string(options.threads));
+  if (!options.frames.empty()) shared.push_back("run.frames=" + options.frames);
+  PipelineConfig base = load_config<PipelineConfig>(options.config_file, shared);
+  if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
+  log_config_lines(config_to_lines(base));
+  OpenOptions open_options;
+  open_options.strict = base.run.strict;
+  open_options.camera_index = base.run.camera_index;
+  const auto dataset = open_dataset(base.run.dataset, open_options);
+  const fs::path out_dir = options.out_dir;
+  fs::create_directories(out_dir);
+
+  std::map<std::string, json> summaries;
+  json compare = json::object();
+  g_compare_stop.store(false);
+  auto* previous = std::signal(SIGINT, on_compare_sigint);
+  bool failed = false;
+  for (const std::string& method : methods) {
+    std::vector<std::string> overrides = shared;
+    for (auto& o : method_overrides(method)) overrides.push_back(std::move(o));
+    const PipelineConfig config = load_config<PipelineConfig>(options.config_file, overrides);
+    spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    RunResult result;
+    try {
+      result = run_pipeline(config, *dataset, out_dir / method, &g_compare_stop);
+    } catch (...) {
+      std::signal(SIGINT, previous);
+      throw;
+    }
+    std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);
+    summaries[method] = result.summary;
+    compare[method] = result.summary;
+    if (result.failed) {
+      spdlog::error("compare: the {} run failed: {}", method, result.error);
+      failed = true;
+      break;
+    }
+    if (result.interrupted) break;
+    if (method == "gated") write_descriptor_example(config, *dataset, out_dir / method);
+  }
+  std::signal(SIGINT, previous);
+
+  std::vector<std::string> ran;
+  for (const auto& m : methods)
+    if (summaries.count(m)) ran.push_back(m);
+  json comparison = json::object();
+  std::string ratios;
+  if (summaries.count("full") && summaries.count("gated")) {
+    const json& f = summaries.at("full");
+    const json& g = summaries.at("gated");
+    const auto ratio = [](double a, double b) { return b > 0 ? a / b : 0.0; };
+    comparison = {
+        {"full_over_gated_detection_time", ratio(detection_ms(f), detection_ms(g))},
+        {"full_over_gated_detection_time_with_decode",
+         ratio(detection_with_decode_ms(f), detection_with_decode_ms(g))},
+        {"full_over_gated_wall_time", ratio(f.value("wall_s", 0.0), g.value("wall_s", 0.0))},
+        {"full_over_gated_descriptors",
+         ratio(f.value("descriptors_computed", 0.0), g.value("descriptors_computed", 0.0))},
+        {"full_over_gated_similarities",
+         ratio(f.value("similarities_computed", 0.0), g.value("similarities_computed", 0.0))},
+        {"paper_ratio", 182763.66 / 28329.93},
+    };
+    if (const json* cov = find_path(g, {"evaluation", "gate_coverage", "covered_fraction"}))
+      comparison["gated_true_loop_frames_in_candidate_areas"] = *cov;
+    ratios = fmt::format(
+        "full / gated: describe+match time {:.2f}x ({:.2f}x with decode), wall {:.2f}x, descriptors {:.2f}x, "
+        "similarities {:.1f}x (paper: 6.45x in time)\n",
+        comparison["full_over_gated_detection_time"].get<double>(),
+        comparison["full_over_gated_detection_time_with_decode"].get<double>(),
+        comparison["full_over_gated_wall_time"].get<double>(),
+        comparison["full_over_gated_descriptors"].get<double>(),
+        comparison["full_over_gated_similarities"].get<double>());
+    if (comparison.contains("gated_true_loop_frames_in_candidate_areas")) {
+      const json& cov = g.at("evaluation").at("gate_coverage");
+      ratios += fmt::format("true-loop query frames inside candidate areas: {} of {} ({:.1f}%)\n",
+                            cov.at("covered_query_frames").get<std::size_t>(),
+                            cov.at("positive_query_frames").get<std::size_t>(),
+                            100.0 * cov.at("covered_fraction").get<double>());
+    }
+  }
+  compare["comparison"] = comparison;
+  compare["methods"] = ran;
+  write_json_file(out_dir / "compare.json", compare);
+
+  if (!ran.empty()) {
+    const json& any = summaries.at(ran.front());
+    std::string header =
+        fmt::format("compare on {} ({} frames)", base.run.dataset, any.value("frames_processed", 0));
+    if (const json* truth = find_path(any, {"evaluation", "truth"})) {
+      header +=
+          fmt::format("; ground-truth loops within {} m ({}), gap {} frames, detections true within {} m",
+                      number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
+                      number(truth->at("gap_frames")), number(truth->at("accept_radius_m"), 2));
+    }
+    std::printf("%s\n%s%s", header.c_str(), table(ran, summaries).c_str(), ratios.c_str());
+  }
+
+  if (!options.no_plots && !ran.empty()) {
+    const fs::path script = find_plot_script(options.plot_script);
+    if (!fs::exists(script)) {
+      spdlog::warn("compare: no plots: {} not found (--plot-script PATH or LOOPGATE_PLOT_SCRIPT)",
+                   script.string());
+    } else {
+      const std::string command = "/usr/bin/python3 " + shell_quote(script.string()) + " compare " +
+                                  shell_quote(out_dir.string()) + " --out " +
+                                  shell_quote((out_dir / "plots").string());
+      const int status = std::system(command.c_str());
+      if (status != 0) {
+        spdlog::warn("compare: plotting failed (exit status {}): {}", status, command);
+      } else {
+        std::printf("plots in %s\n", (out_dir / "plots").c_str());
+      }
+    }
+  }
+  std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
+              fmt::format("{}", fmt::join(ran, "/, ")).c_str());
+  std::fflush(stdout);
+  if (failed) return kExitFailure;
+  if (g_compare_stop.load()) return kExitInterrupted;
+  return kExitOk;
+}
+
+}  // namespace
+
+void add_compare_command(CLI::App& app, int& exit_code) {
+  auto options = std::make_shared<CompareOptions>();
+  CLI::App* cmd = app.add_subcommand(
+      "compare", "Run full DIRD, gated DIRD and SeqSLAM on one dataset and compare them side by side");
+  cmd->add_option("--config", options->config_file, "YAML configuration (configs/*.yaml)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--dataset", options->dataset, "dataset folder; overrides run.dataset");
+  cmd->add_option("--out", options->out_dir,
+                  "output folder: compare.json, plots/, and one run folder per method")
+      ->required();
+  cmd->add_option("--methods", options->methods, "comma-separated subset of full,gated,seqslam")
+      ->capture_default_str();
+  cmd->add_option("--frames", options->frames, "frame range A:B (indices, B exclusive; A: or :B)");
+  cmd->add_option("--threads", options->threads, "worker threads of each run (default 2)")
+      ->check(CLI::Range(1, 256));
+  cmd->add_flag("--no-plots", options->no_plots, "do not call scripts/plot.py");
+  cmd->add_option("--plot-script", options->plot_script,
+                  "path of plot.py (default: the source tree's scripts/plot.py)");
+  cmd->add_option("--set", options->overrides, "override any config key: section.key=value (repeatable)")
+      ->allow_extra_args(false);
+  cmd->callback([options, &exit_code] { exit_code = compare_command(*options); });
+}
+
+}  // namespace loopgate::app
