@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: installs dependencies, builds, renders the synthetic `demo`
-# dataset (a procedural street drive, two laps, the second at dusk), prints its summary, then runs the
-# full-DIRD detector over it and prints the run's summary (loops found, how many within 2 m of truth).
-# Usage: scripts/demo.sh [OUT_DIR]   (default: out/demo; the run's outputs go to OUT_DIR-run)
+# dataset if it is absent (a procedural street drive, two laps, the second at dusk), then runs
+# `loopgate compare` on it: full DIRD, gated DIRD (the paper's method) and SeqSLAM side by side, printing
+# one table (time per stage, descriptors, loops true/false, PR figures) and writing the plots.
+# Usage: scripts/demo.sh [OUT_DIR]   (default: out/demo; the comparison goes to OUT_DIR-compare)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-out/demo}
@@ -15,16 +16,9 @@ else
   build/release/loopgate simulate --preset demo --out "$out"
 fi
 echo "demo: dataset in $out (EuRoC layout: $out/mav0), metadata in $out/simulation.json" >&2
-run_out="$out-run"
-rm -rf "$run_out"
-build/release/loopgate run --config configs/demo.yaml --dataset "$out" --out "$run_out" --mode full
-/usr/bin/python3 - "$run_out/summary.json" <<'PY'
-import json, sys
-s = json.load(open(sys.argv[1]))
-t = s.get("loop_truth", {})
-print(f"demo: {s['frames_processed']} frames, {s.get('loops', 0)} loop closures "
-      f"({t.get('loops_within_accept_radius', 0)} within {t.get('accept_radius_m', 0)} m of ground truth, "
-      f"{t.get('loops_beyond_accept_radius', 0)} beyond); best detection of {t.get('query_frames_with_loops', 0)} "
-      f"query frames: {t.get('query_best_loop_within_accept_radius', 0)} true; wall {s['wall_s']:.2f} s")
-PY
-echo "demo: run outputs (frames.csv, loops.csv, timing.csv, summary.json) in $run_out" >&2
+compare_out="$out-compare"
+rm -rf "$compare_out"
+build/release/loopgate compare --config configs/demo.yaml --dataset "$out" --out "$compare_out" \
+  --set output.progress=off
+echo "demo: open $compare_out/plots/*.png (pr.png, plane.png, trajectory.png, time_per_frame.png);" \
+  "per-run outputs in $compare_out/{full,gated,seqslam}" >&2
