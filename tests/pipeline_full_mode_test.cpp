@@ -1,5 +1,5 @@
 // Full mode (run.mode = full) of the pipeline: DIRD on every frame, similarities against every earlier frame
-// beyond the margin, streaming sequence match and NMS; and the two-sequence mode (dird.md §5).
+// beyond the margin, streaming sequence match and NMS (the two-sequence mode: pipeline_two_sequence_test).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -13,7 +13,6 @@
 #include "core/error.hpp"
 #include "io/config.hpp"
 #include "pipeline/pipeline.hpp"
-#include "pipeline/two_sequence.hpp"
 #include "pipeline_fake_dataset.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/sequence_matcher.hpp"
@@ -192,38 +191,6 @@ TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
   EXPECT_FALSE(fs::exists(out / "loops.csv"));
   EXPECT_EQ(result.summary["descriptors_computed"].get<std::size_t>(), 0u);
   EXPECT_EQ(result.summary["images_decoded"].get<std::size_t>(), 0u);  // lazy decode: nobody needs pixels
-}
-
-TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
-  const RevisitDataset reference(kPeriod, 1, 0);
-  RevisitDataset query(kPeriod, 1, 12345);  // same places, other noise
-  query.corrupt_frames = {50};
-  PipelineConfig config = full_config();
-  config.eval.aligned_tolerance_frames = 1;
-  const auto out = testing::make_temp_dir("pipeline-two-seq");
-  const TwoSequenceResult result = run_two_sequences(config, reference, query, out);
-  EXPECT_EQ(result.reference_frames, kPeriod);
-  EXPECT_EQ(result.query_frames, kPeriod);
-  ASSERT_GT(result.loops, 0u);
-  const auto loops = read_csv(out / "loops.csv");
-  ASSERT_EQ(loops.size(), result.loops);
-  for (const auto& row : loops) EXPECT_LE(std::abs(std::stol(row[0]) - std::stol(row[1])), 1) << row[0];
-  std::vector<std::string> header;
-  const auto rows = read_csv(out / "frames.csv", &header);
-  ASSERT_EQ(rows.size(), kPeriod);
-  const std::size_t match = column(header, "match_frame");
-  std::size_t best_aligned = 0;
-  for (std::size_t q = 0; q < rows.size(); ++q) {
-    EXPECT_EQ(rows[q][0], std::to_string(q));
-    if (!rows[q][match].empty() && std::abs(std::stol(rows[q][match]) - static_cast<long>(q)) <= 1) {
-      ++best_aligned;
-    }
-  }
-  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
-  EXPECT_EQ(rows[50][column(header, "status")], "error");
-  EXPECT_GE(best_aligned, kPeriod * 8 / 10);
-  EXPECT_EQ(result.summary["aligned"]["loops_within_tolerance"].get<std::size_t>(), result.loops);
-  EXPECT_EQ(result.summary["similarities_computed"].get<std::size_t>(), kPeriod * (kPeriod - 1));
 }
 
 }  // namespace

@@ -41,19 +41,42 @@ void SeqSlamBatch::add_missing(std::size_t seq) {
 }
 
 std::vector<SeqSlamMatch> SeqSlamBatch::run(std::size_t count) const {
+  if (count > capacity_)
+    throw std::out_of_range("SeqSlamBatch: " + std::to_string(count) + " frames beyond capacity");
+  const SeqSlamImages all = images(0, count);
+  return search(all, all);
+}
+
+std::vector<SeqSlamMatch> SeqSlamBatch::run_two_sequence(std::size_t reference_count,
+                                                         std::size_t query_count) const {
+  if (reference_count + query_count > capacity_) {
+    throw std::out_of_range("SeqSlamBatch: " + std::to_string(reference_count) + " + " +
+                            std::to_string(query_count) + " frames beyond capacity");
+  }
+  return search(images(0, reference_count), images(reference_count, query_count));
+}
+
+SeqSlamImages SeqSlamBatch::images(std::size_t first, std::size_t count) const {
+  SeqSlamImages out(pixel_count_);
+  out.reserve(count);
+  std::vector<std::uint8_t> one(pixel_count_);
+  for (std::size_t k = first; k < first + count; ++k) {
+    std::memcpy(one.data(), bytes_.get() + k * pixel_count_, pixel_count_);
+    out.add(one);
+  }
+  return out;
+}
+
+std::vector<SeqSlamMatch> SeqSlamBatch::search(const SeqSlamImages& reference,
+                                               const SeqSlamImages& query) const {
+  const std::size_t rows = reference.size();
+  const std::size_t count = query.size();
   std::vector<SeqSlamMatch> matches(count);
   for (std::size_t q = 0; q < count; ++q) matches[q].query = q;
-  if (count == 0) return matches;
-  SeqSlamImages images(pixel_count_);
-  images.reserve(count);
-  std::vector<std::uint8_t> one(pixel_count_);
-  for (std::size_t k = 0; k < count; ++k) {
-    std::memcpy(one.data(), bytes_.get() + k * pixel_count_, pixel_count_);
-    images.add(one);
-  }
+  if (count == 0 || rows == 0) return matches;
   const SeqSlamConfig& config = seqslam_.config();
   const SeqSlamExclusion exclusion = SeqSlamExclusion::from_config(config);
-  SeqSlamMatrix M(count, count);
+  SeqSlamMatrix M(rows, count);
   const std::size_t blocks = (count + kQueryBlock - 1) / kQueryBlock;
   const auto block_range = [&](std::size_t b) {
     return std::pair{b * kQueryBlock, std::min(count, (b + 1) * kQueryBlock)};
@@ -64,7 +87,7 @@ std::vector<SeqSlamMatch> SeqSlamBatch::run(std::size_t count) const {
       [&](const tbb::blocked_range<std::size_t>& range, double running) {
         for (std::size_t b = range.begin(); b < range.end(); ++b) {
           const auto [q0, q1] = block_range(b);
-          seqslam_difference_block(images, images, exclusion, 0, count, q0, q1, M);
+          seqslam_difference_block(reference, query, exclusion, 0, rows, q0, q1, M);
           running = std::min(running, seqslam_enhance_contrast(M, config.contrast_window_rows, q0, q1));
         }
         return running;

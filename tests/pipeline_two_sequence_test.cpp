@@ -1,0 +1,337 @@
+// Two-sequence mode (`loopgate run --reference DIR --query DIR`, dird.md §5): DIRD and SeqSLAM over a
+// reference and a query sequence, frames.csv / loops.csv / summary.json, and the PR evaluation against
+// the aligned ground truth (eval.aligned_tolerance_frames).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "io/config.hpp"
+#include "io/dataset.hpp"
+#include "pipeline/two_sequence.hpp"
+#include "pipeline_fake_dataset.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+using testing::read_csv;
+using testing::read_file;
+using testing::RevisitDataset;
+
+std::size_t column(const std::vector<std::string>& header, const std::string& name) {
+  const auto it = std::find(header.begin(), header.end(), name);
+  if (it == header.end()) throw std::runtime_error("no column " + name);
+  return static_cast<std::size_t>(it - header.begin());
+}
+
+constexpr std::size_t kPeriod = 120;
+
+PipelineConfig dird_config() {
+  PipelineConfig config;
+  config.run.threads = 2;
+  config.output.progress = "off";
+  config.match.margin = 30;
+  config.match.sequence_length = 10;
+  config.match.tau3 = 0.05;
+  config.match.nms_half_window = 20;
+  return config;
+}
+
+PipelineConfig seqslam_config(int threads = 2) {
+  PipelineConfig config;
+  config.run.method = "seqslam";
+  config.run.threads = threads;
+  config.output.progress = "off";
+  config.eval.aligned_tolerance_frames = 1;
+  // config.seqslam keeps the single-sequence default (exclusion "past", margin 200): two-sequence mode
+  // must replace it by "none", else nothing could match.
+  return config;
+}
+
+TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
+  const RevisitDataset reference(kPeriod, 1, 0);
+  RevisitDataset query(kPeriod, 1, 12345);  // same places, other noise
+  query.corrupt_frames = {50};
+  PipelineConfig config = dird_config();
+  config.eval.aligned_tolerance_frames = 1;
+  const auto out = testing::make_temp_dir("pipeline-two-seq");
+  const TwoSequenceResult result = run_two_sequences(config, reference, query, out);
+  EXPECT_EQ(result.reference_frames, kPeriod);
+  EXPECT_EQ(result.query_frames, kPeriod);
+  ASSERT_GT(result.loops, 0u);
+  const auto loops = read_csv(out / "loops.csv");
+  ASSERT_EQ(loops.size(), result.loops);
+  std::set<long> loop_queries;
+  for (const auto& row : loops) {
+    EXPECT_LE(std::abs(std::stol(row[0]) - std::stol(row[1])), 1) << row[0];
+    loop_queries.insert(std::stol(row[0]));
+  }
+  std::vector<std::string> header;
+  const auto rows = read_csv(out / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), kPeriod);
+  const std::size_t match = column(header, "match_frame");
+  std::size_t best_aligned = 0;
+  for (std::size_t q = 0; q < rows.size(); ++q) {
+    EXPECT_EQ(rows[q][0], std::to_string(q));
+    if (!rows[q][match].empty() && std::abs(std::stol(rows[q][match]) - static_cast<long>(q)) <= 1) {
+      ++best_aligned;
+    }
+  }
+  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
+  EXPECT_EQ(rows[50][column(header, "status")], "error");
+  EXPECT_GE(best_aligned, kPeriod * 8 / 10);
+  const nlohmann::json& summary = result.summary;
+  EXPECT_EQ(summary["aligned"]["loops_within_tolerance"].get<std::size_t>(), result.loops);
+  EXPECT_EQ(summary["similarities_computed"].get<std::size_t>(), kPeriod * (kPeriod - 1));
+  EXPECT_EQ(summary["mode"], "two-sequence");
+  EXPECT_EQ(summary["method"], "dird");
+  EXPECT_EQ(summary["score_order"], "higher_is_better");
+  // PR block: detections = loops.csv rows, every query has aligned references.
+  const nlohmann::json& evaluation = summary["evaluation"];
+  ASSERT_TRUE(evaluation["available"].get<bool>());
+  EXPECT_EQ(evaluation["truth"]["aligned_tolerance_frames"].get<int>(), 1);
+  EXPECT_EQ(evaluation["truth"]["positives"].get<std::size_t>(), kPeriod);
+  EXPECT_EQ(evaluation["loop_truth"]["loops"].get<std::size_t>(), result.loops);
+  EXPECT_EQ(evaluation["loop_truth"]["loops_true"].get<std::size_t>(), result.loops);
+  EXPECT_EQ(evaluation["loop_truth"]["query_frames_with_loops"].get<std::size_t>(), loop_queries.size());
+  const nlohmann::json& pr = evaluation["precision_recall"];
+  EXPECT_EQ(pr["score_order"], "higher_is_better");
+  EXPECT_EQ(pr["queries_with_detection"].get<std::size_t>(), loop_queries.size());
+  EXPECT_DOUBLE_EQ(pr["recall_at_100"].get<double>(),
+                   static_cast<double>(loop_queries.size()) / static_cast<double>(kPeriod));
+  ASSERT_FALSE(pr["curve"].empty());
+  EXPECT_DOUBLE_EQ(pr["curve"].back()["precision"].get<double>(), 1.0);
+  // The aligned pairs: 2 for the first and last query frame, 3 for the others.
+  EXPECT_EQ(read_csv(out / "truth_loops.csv").size(), 3 * kPeriod - 2);
+}
+
+TEST(PipelineTwoSequence, SeqSlamFindsTheAlignedReferences) {
+  const RevisitDataset reference(kPeriod, 1, 0);
+  RevisitDataset query(kPeriod, 1, 777);
+  query.corrupt_frames = {50};
+  const auto out = testing::make_temp_dir("pipeline-two-seq-seqslam");
+  const TwoSequenceResult result = run_two_sequences(seqslam_config(), reference, query, out);
+  EXPECT_EQ(result.reference_frames, kPeriod);
+  EXPECT_EQ(result.query_frames, kPeriod);
+
+  std::vector<std::string> header;
+  const auto rows = read_csv(out / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), kPeriod);
+  const std::size_t match = column(header, "match_frame");
+  const std::size_t score = column(header, "match_score");
+  const std::size_t detection = column(header, "detection");
+  const std::size_t half = 5;  // ds / 2 with the default ds = 10
+  std::size_t with_match = 0, aligned = 0, ranked = 0, ranked_true = 0, accepted = 0;
+  for (std::size_t q = 0; q < kPeriod; ++q) {
+    ASSERT_EQ(rows[q].size(), header.size());
+    EXPECT_EQ(rows[q][0], std::to_string(q));
+    const bool near_end = q < half || q + half >= kPeriod;
+    EXPECT_EQ(rows[q][match].empty(), near_end) << q;
+    if (near_end) {
+      EXPECT_EQ(rows[q][detection], "no match");
+      continue;
+    }
+    ++with_match;
+    const bool is_aligned = std::abs(std::stol(rows[q][match]) - static_cast<long>(q)) <= 1;
+    aligned += is_aligned ? 1 : 0;
+    EXPECT_TRUE(rows[q][detection] == "loop" || rows[q][detection] == "rejected") << rows[q][detection];
+    accepted += rows[q][detection] == "loop" ? 1 : 0;
+    if (std::isfinite(std::stod(rows[q][score]))) {
+      ++ranked;
+      ranked_true += is_aligned ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(with_match, kPeriod - 2 * half);
+  EXPECT_GE(aligned, with_match * 95 / 100);
+  EXPECT_GE(accepted, with_match * 8 / 10);
+  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
+  EXPECT_EQ(rows[50][column(header, "status")], "error");
+
+  const auto loops = read_csv(out / "loops.csv");
+  ASSERT_EQ(loops.size(), accepted);
+  EXPECT_EQ(result.loops, accepted);
+  for (const auto& row : loops) {
+    EXPECT_LE(std::abs(std::stol(row[0]) - std::stol(row[1])), 1) << row[0];
+    EXPECT_LE(std::stod(row[4]), 0.9);  // ratio <= ratio_threshold
+  }
+
+  const nlohmann::json& summary = result.summary;
+  EXPECT_EQ(summary["mode"], "two-sequence");
+  EXPECT_EQ(summary["method"], "seqslam");
+  EXPECT_EQ(summary["score_order"], "lower_is_better");
+  EXPECT_EQ(summary["config"]["seqslam"]["exclusion"], "none");  // forced
+  EXPECT_EQ(summary["similarities_computed"].get<std::size_t>(), kPeriod * kPeriod);
+  EXPECT_EQ(summary["aligned"]["best_match_within_tolerance"].get<std::size_t>(), aligned);
+  EXPECT_EQ(summary["aligned"]["loops_within_tolerance"].get<std::size_t>(), loops.size());
+  const nlohmann::json& evaluation = summary["evaluation"];
+  ASSERT_TRUE(evaluation["available"].get<bool>());
+  EXPECT_EQ(evaluation["truth"]["positives"].get<std::size_t>(), kPeriod);
+  EXPECT_EQ(evaluation["loop_truth"]["loops"].get<std::size_t>(), accepted);
+  const nlohmann::json& pr = evaluation["precision_recall"];
+  EXPECT_EQ(pr["score_order"], "lower_is_better");
+  // The sweep runs over every query's match, accepted or not.
+  EXPECT_EQ(pr["queries_with_detection"].get<std::size_t>(), ranked);
+  ASSERT_FALSE(pr["curve"].empty());
+  EXPECT_EQ(pr["curve"].back()["detections"].get<std::size_t>(), ranked);
+  EXPECT_EQ(pr["curve"].back()["true_positives"].get<std::size_t>(), ranked_true);
+  EXPECT_NEAR(pr["curve"].back()["recall"].get<double>(),
+              static_cast<double>(ranked_true) / static_cast<double>(kPeriod), 1e-12);
+  EXPECT_GE(pr["average_precision"].get<double>(), 0.8);
+}
+
+TEST(PipelineTwoSequence, SeqSlamFrameRangeAndThreadCountIndependent) {
+  const RevisitDataset reference(kPeriod, 1, 3);
+  const RevisitDataset query(kPeriod, 1, 4);
+  PipelineConfig config1 = seqslam_config(1);
+  PipelineConfig config2 = seqslam_config(2);
+  config1.run.frames = config2.run.frames = "20:100";
+  const auto out1 = testing::make_temp_dir("pipeline-two-seq-seqslam-t1");
+  const auto out2 = testing::make_temp_dir("pipeline-two-seq-seqslam-t2");
+  run_two_sequences(config1, reference, query, out1);
+  run_two_sequences(config2, reference, query, out2);
+  EXPECT_EQ(read_file(out1 / "frames.csv"), read_file(out2 / "frames.csv"));
+  EXPECT_EQ(read_file(out1 / "loops.csv"), read_file(out2 / "loops.csv"));
+  std::vector<std::string> header;
+  const auto rows = read_csv(out1 / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), 80u);
+  EXPECT_EQ(rows.front()[0], "20");
+  EXPECT_EQ(rows.back()[0], "99");
+  std::size_t aligned = 0;
+  for (const auto& row : rows) {
+    const std::string& m = row[column(header, "match_frame")];
+    if (!m.empty() && std::abs(std::stol(m) - std::stol(row[0])) <= 1) ++aligned;
+  }
+  EXPECT_GE(aligned, 65u);  // 70 with a match (5 at either end have none)
+}
+
+// Hand-checked: 6 query and 6 reference frames from frame 2 on, tolerance 1, so every query is positive
+// (16 true pairs). Ranked (lower is better): q0->r0 0.1 true, q1->r3 0.2 false, q2->r2 0.3 true (and
+// q2->r5 0.35, not its best), q3->r5 0.4 false.
+TEST(PipelineTwoSequence, AlignedEvaluationByHand) {
+  const AlignedSequences sequences{2, 6, 2, 6, 1};
+  EXPECT_EQ(sequences.pairs().size(), 16u);
+  EXPECT_TRUE(sequences.aligned(3, 4));
+  EXPECT_FALSE(sequences.aligned(3, 5));
+  const std::vector<Detection> ranked = {{0, 0, 0.1}, {1, 3, 0.2}, {2, 5, 0.35}, {2, 2, 0.3}, {3, 5, 0.4}};
+  const std::vector<Detection> loops = {{0, 0, 0.1}, {1, 3, 0.2}};
+  const nlohmann::json lower = evaluate_aligned(sequences, loops, ranked, "lower_is_better");
+  EXPECT_TRUE(lower["available"].get<bool>());
+  EXPECT_EQ(lower["truth"]["aligned_tolerance_frames"].get<int>(), 1);
+  EXPECT_EQ(lower["truth"]["positives"].get<std::size_t>(), 6u);
+  const nlohmann::json& loop_truth = lower["loop_truth"];
+  EXPECT_EQ(loop_truth["loops"].get<std::size_t>(), 2u);
+  EXPECT_EQ(loop_truth["loops_true"].get<std::size_t>(), 1u);
+  EXPECT_EQ(loop_truth["loops_false"].get<std::size_t>(), 1u);
+  EXPECT_EQ(loop_truth["query_frames_with_loops"].get<std::size_t>(), 2u);
+  EXPECT_EQ(loop_truth["query_best_loop_true"].get<std::size_t>(), 1u);
+  EXPECT_EQ(loop_truth["query_best_loop_false"].get<std::size_t>(), 1u);
+  const nlohmann::json& pr = lower["precision_recall"];
+  EXPECT_EQ(pr["score_order"], "lower_is_better");
+  EXPECT_EQ(pr["positives"].get<std::size_t>(), 6u);
+  EXPECT_EQ(pr["queries_with_detection"].get<std::size_t>(), 4u);
+  const std::vector<double> thresholds = {0.1, 0.2, 0.3, 0.4};
+  const std::vector<double> precision = {1.0, 0.5, 2.0 / 3.0, 0.5};
+  const std::vector<double> recall = {1.0 / 6, 1.0 / 6, 2.0 / 6, 2.0 / 6};
+  const std::vector<std::size_t> true_positives = {1, 1, 2, 2};
+  ASSERT_EQ(pr["curve"].size(), 4u);
+  for (std::size_t k = 0; k < 4; ++k) {
+    const nlohmann::json& point = pr["curve"][k];
+    EXPECT_DOUBLE_EQ(point["threshold"].get<double>(), thresholds[k]);
+    EXPECT_DOUBLE_EQ(point["precision"].get<double>(), precision[k]);
+    EXPECT_DOUBLE_EQ(point["recall"].get<double>(), recall[k]);
+    EXPECT_EQ(point["detections"].get<std::size_t>(), k + 1);
+    EXPECT_EQ(point["true_positives"].get<std::size_t>(), true_positives[k]);
+  }
+  EXPECT_NEAR(pr["average_precision"].get<double>(), 1.0 / 6 + (1.0 / 6) * (2.0 / 3), 1e-12);
+  EXPECT_NEAR(pr["recall_at_100"].get<double>(), 1.0 / 6, 1e-12);
+  EXPECT_NEAR(pr["recall_at_99"].get<double>(), 1.0 / 6, 1e-12);
+  EXPECT_NEAR(pr["recall_at_95"].get<double>(), 1.0 / 6, 1e-12);
+
+  // Higher is better: q2's best is now 0.35 -> r5 (false); order 0.4 false, 0.35 false, 0.2 false,
+  // 0.1 true.
+  const nlohmann::json higher = evaluate_aligned(sequences, loops, ranked, "higher_is_better");
+  const nlohmann::json& hpr = higher["precision_recall"];
+  ASSERT_EQ(hpr["curve"].size(), 4u);
+  EXPECT_DOUBLE_EQ(hpr["curve"][0]["precision"].get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(hpr["curve"][3]["precision"].get<double>(), 0.25);
+  EXPECT_NEAR(hpr["average_precision"].get<double>(), (1.0 / 6) * 0.25, 1e-12);
+  EXPECT_DOUBLE_EQ(hpr["recall_at_100"].get<double>(), 0.0);
+}
+
+TEST(PipelineTwoSequence, NoToleranceNoEvaluation) {
+  const RevisitDataset reference(40, 1, 0);
+  const RevisitDataset query(40, 1, 1);
+  PipelineConfig config = seqslam_config();
+  config.eval.aligned_tolerance_frames = -1;
+  const auto out = testing::make_temp_dir("pipeline-two-seq-no-eval");
+  const TwoSequenceResult result = run_two_sequences(config, reference, query, out);
+  EXPECT_FALSE(result.summary["evaluation"]["available"].get<bool>());
+  EXPECT_FALSE(result.summary.contains("aligned"));
+  EXPECT_FALSE(std::filesystem::exists(out / "truth_loops.csv"));
+  EXPECT_EQ(read_csv(out / "frames.csv").size(), 40u);
+}
+
+TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
+  const RevisitDataset reference(20, 1, 0);
+  const RevisitDataset query(20, 1, 1);
+  PipelineConfig config = dird_config();
+  config.run.method = "netvlad";
+  const auto out = testing::make_temp_dir("pipeline-two-seq-bad-method");
+  try {
+    run_two_sequences(config, reference, query, out);
+    FAIL() << "run.method=netvlad accepted";
+  } catch (const ConfigError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("run.method"), std::string::npos) << what;
+    EXPECT_NE(what.find("seqslam"), std::string::npos) << what;
+  }
+  RawConfig raw;
+  raw.apply_override("run.method=bogus");
+  PipelineConfig loaded;
+  EXPECT_THROW(apply_config(raw, loaded), ConfigError);
+}
+
+// Issue 7: Nordland summer (reference) vs winter (query), configs/nordland.yaml, both methods, the whole
+// ride (3576 x 3576). Measured when written (docs/nordland.md): DIRD AP 0.104, R@P100 0, 1361 query
+// frames with a loop, the best one within +-2 frames for 743; SeqSLAM AP 0.483, R@P100 0.355, 1535
+// accepted of which 1494 within +-2, every query's match within +-2 for 1782.
+TEST(PipelineTwoSequence, NordlandSummerWinterDirdVsSeqSlam) {
+  LOOPGATE_REQUIRE_SHARED_DATA("nordland-64x32/winter");
+  const auto data = testing::shared_data_dir() / "nordland-64x32";
+  const auto summer = open_dataset(data / "summer");
+  const auto winter = open_dataset(data / "winter");
+  const auto config_file = std::filesystem::path(LOOPGATE_SOURCE_DIR) / "configs/nordland.yaml";
+  const auto dird = load_config<PipelineConfig>(config_file, {"output.progress=off"});
+  const auto seqslam =
+      load_config<PipelineConfig>(config_file, {"output.progress=off", "run.method=seqslam"});
+  const auto dird_out = testing::make_temp_dir("pipeline-nordland-dird");
+  const auto seqslam_out = testing::make_temp_dir("pipeline-nordland-seqslam");
+  const nlohmann::json d = run_two_sequences(dird, *summer, *winter, dird_out).summary;
+  const nlohmann::json s = run_two_sequences(seqslam, *summer, *winter, seqslam_out).summary;
+  ASSERT_TRUE(d["evaluation"]["available"].get<bool>());
+  ASSERT_TRUE(s["evaluation"]["available"].get<bool>());
+  EXPECT_EQ(d["evaluation"]["truth"]["positives"].get<std::size_t>(), 3576u);
+  const auto& d_truth = d["evaluation"]["loop_truth"];
+  EXPECT_NEAR(d_truth["query_frames_with_loops"].get<double>(), 1361, 30);
+  EXPECT_NEAR(d_truth["query_best_loop_true"].get<double>(), 743, 30);
+  EXPECT_NEAR(d["evaluation"]["precision_recall"]["average_precision"].get<double>(), 0.104, 0.02);
+  const auto& s_truth = s["evaluation"]["loop_truth"];
+  EXPECT_NEAR(s_truth["loops"].get<double>(), 1535, 30);
+  EXPECT_GE(s_truth["loops_true"].get<double>(), 0.95 * s_truth["loops"].get<double>());
+  EXPECT_NEAR(s["aligned"]["best_match_within_tolerance"].get<double>(), 1782, 30);
+  const auto& s_pr = s["evaluation"]["precision_recall"];
+  EXPECT_EQ(s_pr["queries_with_detection"].get<std::size_t>(), 3566u);  // all but ds/2 = 5 at each end
+  EXPECT_NEAR(s_pr["average_precision"].get<double>(), 0.483, 0.02);
+  EXPECT_NEAR(s_pr["recall_at_100"].get<double>(), 0.355, 0.02);
+  // Across seasons, SeqSLAM's sequence search beats DIRD's single-image similarity here.
+  EXPECT_GT(s_pr["average_precision"].get<double>(),
+            2 * d["evaluation"]["precision_recall"]["average_precision"].get<double>());
+}
+
+}  // namespace
+}  // namespace loopgate
