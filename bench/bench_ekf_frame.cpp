@@ -1,12 +1,17 @@
 // Per-frame cost of the ekf source at 752 x 480: the KLT front end on real EuRoC images, the MSCKF on a
 // simulated scene (~150 features, window 11), and optionally a whole rendered EuRoC-layout dataset
 // (LOOPGATE_EKF_DATASET=<dir>, e.g. rendered by `loopgate simulate --preset euroc-mh05`) with the ATE.
+// OpenCV runs on one thread here (cv::setNumThreads(1)): the figures are single-core costs. With
+// LOOPGATE_EKF_DATASET set, BM_EkfTracking tracks the first 400 images of that dataset (with the gyro
+// rotation prediction the odometry node uses) instead of the real V1_01 excerpt.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <opencv2/core/utility.hpp>
 #include <random>
 #include <string>
 #include <type_traits>
@@ -16,6 +21,7 @@
 #include "io/dataset.hpp"
 #include "stages/ekf/feature_tracker.hpp"
 #include "stages/ekf/msckf.hpp"
+#include "stages/ekf/so3.hpp"
 #include "stages/ekf/vio_ekf.hpp"
 
 namespace {
@@ -26,26 +32,103 @@ std::filesystem::path micro_dir() {
   return std::filesystem::path(LOOPGATE_SHARED_DATA_DIR) / "euroc/V1_01_easy_micro";
 }
 
+// Config overrides "key=value,key=value" from LOOPGATE_EKF_SET (bench only; the app uses the config system).
+EkfConfig config_from_env() {
+  EkfConfig config;
+  const char* env = std::getenv("LOOPGATE_EKF_SET");
+  if (env == nullptr) return config;
+  std::string list(env);
+  std::size_t start = 0;
+  while (start < list.size()) {
+    const std::size_t end = std::min(list.find(',', start), list.size());
+    const std::string item = list.substr(start, end - start);
+    const std::size_t eq = item.find('=');
+    if (eq != std::string::npos) {
+      const std::string key = item.substr(0, eq);
+      const std::string value = item.substr(eq + 1);
+      config.visit([&](const char* name, auto& field) {
+        using T = std::decay_t<decltype(field)>;
+        if (key != name) return;
+        if constexpr (std::is_same_v<T, bool>) {
+          field = value == "true" || value == "1";
+        } else if constexpr (std::is_same_v<T, std::string>) {
+          field = value;
+        } else if constexpr (std::is_same_v<T, double>) {
+          field = std::stod(value);
+        } else {
+          field = static_cast<T>(std::stoll(value));
+        }
+      });
+    }
+    start = end + 1;
+  }
+  config.validate();
+  return config;
+}
+
 void BM_EkfTracking(benchmark::State& state) {
-  if (!std::filesystem::exists(micro_dir())) {
+  const char* dataset_env = std::getenv("LOOPGATE_EKF_DATASET");
+  const std::filesystem::path dir = dataset_env != nullptr ? std::filesystem::path(dataset_env) : micro_dir();
+  if (!std::filesystem::exists(dir)) {
     state.SkipWithError("shared data absent: euroc/V1_01_easy_micro");
     return;
   }
-  const auto dataset = open_dataset(micro_dir());
+  const auto dataset = open_dataset(dir);
+  // LOOPGATE_EKF_FIRST_FRAME: where the 400 images start (e.g. the dark part of a day-to-night dataset).
+  const char* first_env = std::getenv("LOOPGATE_EKF_FIRST_FRAME");
+  const std::size_t first = std::min<std::size_t>(
+      first_env != nullptr ? std::strtoul(first_env, nullptr, 10) : 0, dataset->frame_count() - 1);
+  const std::size_t frames = std::min<std::size_t>(dataset->frame_count() - first, 400);
   std::vector<cv::Mat> images;
-  for (std::size_t i = 0; i < dataset->frame_count(); ++i) images.push_back(dataset->load_image(i));
-  FeatureTracker tracker(EkfConfig{}, *dataset->camera());
+  for (std::size_t i = 0; i < frames; ++i) images.push_back(dataset->load_image(first + i));
+  // Gyro rotation between consecutive images, camera frame (ground-truth biases when known).
+  const Eigen::Matrix3d R_i_c =
+      (dataset->imu_calibration()->T_b_i.inverse() * dataset->camera()->T_b_c).rotation();
+  std::vector<Eigen::Matrix3d> R_cur_prev(frames, Eigen::Matrix3d::Identity());
+  for (std::size_t i = 1; i < frames; ++i) {
+    const auto imu = dataset->imu_between(dataset->frame_t_ns(first + i - 1), dataset->frame_t_ns(first + i));
+    const auto gt = ground_truth_state_at(dataset->ground_truth(), dataset->frame_t_ns(first + i));
+    const Eigen::Vector3d bias = gt.has_value() ? gt->gyro_bias_radps : Eigen::Vector3d::Zero().eval();
+    Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
+    for (std::size_t k = 0; k + 1 < imu.size(); ++k) {
+      q = q * so3::exp_quat((0.5 * (imu[k].gyro_radps + imu[k + 1].gyro_radps) - bias) *
+                            ns_to_s(imu[k + 1].t_ns - imu[k].t_ns));
+    }
+    R_cur_prev[i] = R_i_c.transpose() * q.toRotationMatrix().transpose() * R_i_c;
+  }
+  EkfConfig config = config_from_env();
+  FeatureTracker tracker(config, *dataset->camera());
   std::size_t i = 0;
   long tracked = 0;
+  long detected = 0;
+  long rejected = 0;
+  double pyramid_ms = 0;
+  double klt_ms = 0;
+  double ransac_ms = 0;
+  double detect_ms = 0;
   for (auto _ : state) {
     // Forward through the sequence, then restart (a jump the tracker survives by re-detecting).
-    const auto& features = tracker.track(images[i]);
+    const bool predict = config.klt_predict_rotation && i > 0;
+    const auto& features = tracker.track(images[i], predict ? &R_cur_prev[i] : nullptr);
     benchmark::DoNotOptimize(features.data());
-    tracked += tracker.last_stats().tracked;
+    const TrackerStats& st = tracker.last_stats();
+    tracked += st.tracked;
+    detected += st.detected;
+    rejected += st.rejected_fb + st.rejected_ransac;
+    pyramid_ms += st.pyramid_ms;
+    klt_ms += st.klt_ms;
+    ransac_ms += st.ransac_ms;
+    detect_ms += st.detect_ms;
     i = (i + 1) % images.size();
   }
-  state.counters["tracked_per_frame"] =
-      benchmark::Counter(static_cast<double>(tracked), benchmark::Counter::kAvgIterations);
+  const auto avg = [](double v) { return benchmark::Counter(v, benchmark::Counter::kAvgIterations); };
+  state.counters["tracked_per_frame"] = avg(static_cast<double>(tracked));
+  state.counters["detected_per_frame"] = avg(static_cast<double>(detected));
+  state.counters["rejected_per_frame"] = avg(static_cast<double>(rejected));
+  state.counters["pyramid_ms"] = avg(pyramid_ms);
+  state.counters["klt_ms"] = avg(klt_ms);
+  state.counters["ransac_ms"] = avg(ransac_ms);
+  state.counters["detect_ms"] = avg(detect_ms);
 }
 BENCHMARK(BM_EkfTracking)->Unit(benchmark::kMillisecond);
 
@@ -158,40 +241,6 @@ double ate_rmse_position_yaw(const std::vector<Eigen::Vector3d>& est,
   return std::sqrt(sum / n);
 }
 
-// Config overrides "key=value,key=value" from LOOPGATE_EKF_SET (bench only; the app uses the config system).
-EkfConfig config_from_env() {
-  EkfConfig config;
-  const char* env = std::getenv("LOOPGATE_EKF_SET");
-  if (env == nullptr) return config;
-  std::string list(env);
-  std::size_t start = 0;
-  while (start < list.size()) {
-    const std::size_t end = std::min(list.find(',', start), list.size());
-    const std::string item = list.substr(start, end - start);
-    const std::size_t eq = item.find('=');
-    if (eq != std::string::npos) {
-      const std::string key = item.substr(0, eq);
-      const std::string value = item.substr(eq + 1);
-      config.visit([&](const char* name, auto& field) {
-        using T = std::decay_t<decltype(field)>;
-        if (key != name) return;
-        if constexpr (std::is_same_v<T, bool>) {
-          field = value == "true" || value == "1";
-        } else if constexpr (std::is_same_v<T, std::string>) {
-          field = value;
-        } else if constexpr (std::is_same_v<T, double>) {
-          field = std::stod(value);
-        } else {
-          field = static_cast<T>(std::stoll(value));
-        }
-      });
-    }
-    start = end + 1;
-  }
-  config.validate();
-  return config;
-}
-
 // A whole dataset through the VioEkf (ground-truth initialisation), one iteration = the whole sequence.
 void BM_EkfDataset(benchmark::State& state) {
   const char* dir = std::getenv("LOOPGATE_EKF_DATASET");
@@ -215,6 +264,11 @@ void BM_EkfDataset(benchmark::State& state) {
     std::vector<Eigen::Vector3d> truth;
     double tracking_ms = 0.0;
     double filter_ms = 0.0;
+    double pyramid_ms = 0.0;
+    double klt_ms = 0.0;
+    double ransac_ms = 0.0;
+    double detect_ms = 0.0;
+    long detected = 0;
     int lost = 0;
     double path_m = 0.0;
     for (std::size_t i = 0; i < frames; ++i) {
@@ -228,16 +282,23 @@ void BM_EkfDataset(benchmark::State& state) {
       const EkfFrameOutput out = vio.process(in);
       tracking_ms += out.tracking_ms;
       filter_ms += out.filter_ms;
+      const TrackerStats& st = vio.tracker().last_stats();
+      pyramid_ms += st.pyramid_ms;
+      klt_ms += st.klt_ms;
+      ransac_ms += st.ransac_ms;
+      detect_ms += st.detect_ms;
+      detected += st.detected;
       if (out.pose.status == OdometryStatus::kLost) ++lost;
       if (verbose && in.ground_truth.has_value()) {
         const Eigen::Vector3d e = out.pose.T_w_b.translation() - in.ground_truth->T_w_b.translation();
         std::printf(
             "frame %zu status %s tracked %d disp %.2f zupt %d used %d rejtri %d rejchi2 %d err %.3f sigma "
-            "%.3f v %.3f %.3f %.3f\n",
+            "%.3f v %.3f %.3f %.3f klt_lost %d fb %d ransac %d detected %d\n",
             i, to_string(out.pose.status), out.tracked_features, out.median_disparity_px,
             out.zero_velocity ? 1 : 0, out.update.used_features, out.update.rejected_triangulation,
             out.update.rejected_chi2, e.norm(), out.position_sigma_m, vio.filter().state().v_w_mps.x(),
-            vio.filter().state().v_w_mps.y(), vio.filter().state().v_w_mps.z());
+            vio.filter().state().v_w_mps.y(), vio.filter().state().v_w_mps.z(), st.lost_klt, st.rejected_fb,
+            st.rejected_ransac, st.detected);
       }
       if (out.pose.status == OdometryStatus::kTracking && in.ground_truth.has_value()) {
         if (!truth.empty()) path_m += (in.ground_truth->T_w_b.translation() - truth.back()).norm();
@@ -250,6 +311,11 @@ void BM_EkfDataset(benchmark::State& state) {
     state.counters["frames"] = static_cast<double>(frames);
     state.counters["tracking_ms_per_frame"] = tracking_ms / static_cast<double>(frames);
     state.counters["filter_ms_per_frame"] = filter_ms / static_cast<double>(frames);
+    state.counters["pyramid_ms"] = pyramid_ms / static_cast<double>(frames);
+    state.counters["klt_ms"] = klt_ms / static_cast<double>(frames);
+    state.counters["ransac_ms"] = ransac_ms / static_cast<double>(frames);
+    state.counters["detect_ms"] = detect_ms / static_cast<double>(frames);
+    state.counters["detected_per_frame"] = static_cast<double>(detected) / static_cast<double>(frames);
     state.counters["lost_frames"] = lost;
     // Lengths in centimetres so that the counters print without SI prefixes ("m" would read as milli).
     state.counters["path_cm"] = 100.0 * path_m;
@@ -263,4 +329,11 @@ BENCHMARK(BM_EkfDataset)->Unit(benchmark::kSecond)->Iterations(1);
 
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  cv::setNumThreads(1);  // single-core figures
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  return 0;
+}

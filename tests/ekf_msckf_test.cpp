@@ -80,6 +80,8 @@ RunResult run_filter(const RunSettings& settings) {
   EkfConfig config;
   config.pixel_sigma_px = settings.pixel_sigma_px > 0.0 ? settings.pixel_sigma_px : 0.1;
   config.init_sigma_gyro_bias_radps = 0.002;
+  // LOOPGATE_EKF_FEJ=1: first-estimate Jacobians on (off by default, see ekf_config.hpp), to compare by hand.
+  if (std::getenv("LOOPGATE_EKF_FEJ") != nullptr) config.first_estimate_jacobians = true;
   config.init_sigma_accel_bias_mps2 = 0.02;
   const ImuNoise noise{1.6968e-04, 1.9393e-05, 2.0e-3, 3.0e-3};
   ImuNoiseSim sim_noise;

@@ -1,9 +1,12 @@
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <opencv2/imgproc.hpp>
 #include <set>
+#include <utility>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -41,6 +44,9 @@ TEST(EkfTracker, FollowsAKnownImageShift) {
   const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, dy);
   cv::warpAffine(first, second, shift, first.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
   EkfConfig config;
+  // The synthetic texture is uniform (its median corner response is high): no noise floor here, so that
+  // the full target of corners is found (the noise floor has its own test below).
+  config.corner_noise_factor = 0.0;
   FeatureTracker tracker(config, pinhole(320, 240));
   const std::vector<TrackedFeature> before = tracker.track(first);
   ASSERT_GE(static_cast<int>(before.size()), config.max_features * 9 / 10);
@@ -65,6 +71,66 @@ TEST(EkfTracker, FollowsAKnownImageShift) {
   EXPECT_GT(accurate, checked * 9 / 10);
   // Re-detection tops the set back up to the target.
   EXPECT_EQ(static_cast<int>(after.size()), config.max_features);
+}
+
+// A pure camera rotation moves every feature by the homography K R K^-1. With one pyramid level and a
+// small window the KLT cannot find a 30 px jump on its own; started at the gyro-predicted position it does.
+TEST(EkfTracker, RotationPredictionFollowsAFastTurn) {
+  const cv::Mat first = textured_image(320, 240);
+  const double angle = std::atan(30.0 / 400.0);  // 30 px at the image centre
+  Eigen::Matrix3d R_cur_prev = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const CameraCalibration calib = pinhole(320, 240);
+  Eigen::Matrix3d K;
+  K << calib.fx, 0.0, calib.cx, 0.0, calib.fy, calib.cy, 0.0, 0.0, 1.0;
+  const Eigen::Matrix3d H = K * R_cur_prev * K.inverse();
+  cv::Mat H_cv(3, 3, CV_64F);
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) H_cv.at<double>(r, c) = H(r, c);
+  cv::Mat second;
+  cv::warpPerspective(first, second, H_cv, first.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+  EkfConfig config;
+  config.klt_pyramid_levels = 0;
+  config.klt_window_px = 11;
+  auto tracked_with = [&](const Eigen::Matrix3d* R) {
+    FeatureTracker tracker(config, calib);
+    tracker.track(first);
+    tracker.track(second, R);
+    return std::make_pair(tracker.last_stats().tracked, tracker.last_stats().predicted);
+  };
+  const auto [without, predicted_without] = tracked_with(nullptr);
+  const auto [with, predicted_with] = tracked_with(&R_cur_prev);
+  std::printf("30 px turn: tracked %d without prediction, %d with (%d predicted)\n", without, with,
+              predicted_with);
+  EXPECT_EQ(predicted_without, 0);
+  EXPECT_GT(predicted_with, config.max_features / 2);
+  // Features that leave the image are lost either way; of the others, nearly all are kept with prediction.
+  EXPECT_GT(with, predicted_with * 8 / 10);
+  EXPECT_LT(without, with / 4);
+}
+
+// Half of the image is texture, half is sensor noise only (a dark, high-gain image): the noise gives
+// Shi-Tomasi corners that the KLT cannot follow. corner_noise_factor keeps the detector off them.
+TEST(EkfTracker, NoiseFloorKeepsCornersOffSensorNoise) {
+  cv::Mat image = textured_image(320, 240);
+  cv::Mat noise(240, 160, CV_8UC1);
+  cv::RNG rng(11);
+  rng.fill(noise, cv::RNG::NORMAL, 60, 6);
+  noise.copyTo(image(cv::Rect(160, 0, 160, 240)));
+  auto corners_in_noise = [&](double factor) {
+    EkfConfig config;
+    config.corner_noise_factor = factor;
+    FeatureTracker tracker(config, pinhole(320, 240));
+    int in_noise = 0;
+    for (const TrackedFeature& f : tracker.track(image)) in_noise += f.uv_px.x >= 165.0F ? 1 : 0;
+    return std::make_pair(in_noise, static_cast<int>(tracker.features().size()));
+  };
+  const auto [noise_off, total_off] = corners_in_noise(0.0);
+  const auto [noise_on, total_on] = corners_in_noise(8.0);
+  std::printf("corners on noise: %d of %d without the noise floor, %d of %d with\n", noise_off, total_off,
+              noise_on, total_on);
+  EXPECT_GT(noise_off, 20);
+  EXPECT_LT(noise_on, 3);
+  EXPECT_GT(total_on, 30);  // the textured half still gives corners (fewer: its median is high too)
 }
 
 TEST(EkfTracker, RejectsBadImages) {

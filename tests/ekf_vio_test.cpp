@@ -166,6 +166,31 @@ TEST(EkfVio, DivergenceIsReportedAndRecovered) {
   EXPECT_GT(tracking_after_loss, 10);
 }
 
+// clone_every_n_frames = 2: every second image becomes a clone, the others only propagate the state; every
+// image still gets a pose at its own time.
+TEST(EkfVio, CloneEveryNFramesClonesEverySecondImage) {
+  EkfConfig config;
+  config.clone_every_n_frames = 2;
+  VioEkf vio(config, test_camera(), test_imu());
+  const std::vector<ImuSample> imu = static_imu(0, 1'000'000'000, Eigen::Matrix3d::Identity());
+  const std::vector<FeatureObservation> none;
+  GroundTruthState gt;
+  for (int k = 0; k < 9; ++k) {
+    EkfFrameInput in;
+    in.t_ns = static_cast<Timestamp>(k) * 50'000'000;
+    const auto begin = static_cast<std::size_t>(k > 0 ? (k - 1) * 10 : 0);
+    in.imu = std::span<const ImuSample>(imu.data() + begin, static_cast<std::size_t>(k > 0 ? 11 : 1));
+    in.observations = &none;
+    gt.t_ns = in.t_ns;
+    in.ground_truth = gt;
+    const EkfFrameOutput out = vio.process(in);
+    ASSERT_EQ(out.pose.status, OdometryStatus::kTracking) << "frame " << k;
+    EXPECT_EQ(vio.filter().state().t_ns, in.t_ns);
+    // The initial image, then images 2, 4, 6, 8.
+    EXPECT_EQ(vio.filter().clones().size(), static_cast<std::size_t>(1 + k / 2)) << "frame " << k;
+  }
+}
+
 std::string fmt_vec(const Eigen::Vector3d& v) {
   char buf[96];
   std::snprintf(buf, sizeof(buf), "(%.3f %.3f %.3f)", v.x(), v.y(), v.z());

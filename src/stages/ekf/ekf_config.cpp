@@ -25,11 +25,17 @@ void EkfConfig::validate() const {
     throw ConfigError("ekf.init_mode: '" + init_mode + "' is not one of ground_truth, standstill");
   }
   require(window_size >= 3 && window_size <= 50, "window_size", "must be in [3, 50]");
+  require(clone_every_n_frames >= 1 && clone_every_n_frames <= 10, "clone_every_n_frames",
+          "must be in [1, 10]");
   require(positive(gravity_mps2), "gravity_mps2", "must be > 0");
   require(max_features >= 8, "max_features", "must be >= 8");
   require(grid_cols >= 1, "grid_cols", "must be >= 1");
   require(grid_rows >= 1, "grid_rows", "must be >= 1");
   require(positive(min_feature_distance_px), "min_feature_distance_px", "must be > 0");
+  require(non_negative(image_blur_sigma_px), "image_blur_sigma_px", "must be >= 0 (0 = no smoothing)");
+  require(non_negative(corner_noise_factor), "corner_noise_factor", "must be >= 0 (0 = off)");
+  require(empty_cell_retry_frames >= 0, "empty_cell_retry_frames", "must be >= 0");
+  require(redetect_min_missing >= 1, "redetect_min_missing", "must be >= 1");
   require(shi_tomasi_quality > 0.0 && shi_tomasi_quality < 1.0, "shi_tomasi_quality", "must be in (0, 1)");
   require(shi_tomasi_block_size >= 3, "shi_tomasi_block_size", "must be >= 3");
   require(klt_window_px >= 5 && klt_window_px % 2 == 1, "klt_window_px", "must be odd and >= 5");

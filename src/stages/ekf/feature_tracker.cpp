@@ -1,6 +1,7 @@
 #include "stages/ekf/feature_tracker.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -14,6 +15,11 @@ namespace {
 
 constexpr int kMinRansacPoints = 8;
 
+using Clock = std::chrono::steady_clock;
+double ms_since(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
 }  // namespace
 
 FeatureTracker::FeatureTracker(const EkfConfig& config, const CameraCalibration& camera)
@@ -22,6 +28,7 @@ FeatureTracker::FeatureTracker(const EkfConfig& config, const CameraCalibration&
 void FeatureTracker::reset() {
   previous_pyramid_.clear();
   features_.clear();
+  cell_cooldown_.clear();
   stats_ = {};
 }
 
@@ -33,6 +40,11 @@ std::vector<FeatureObservation> FeatureTracker::observations() const {
 }
 
 const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
+  return track(grey, nullptr);
+}
+
+const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
+                                                         const Eigen::Matrix3d* R_cur_prev) {
   const CameraCalibration& calib = camera_.calibration();
   if (grey.empty() || grey.type() != CV_8UC1) {
     throw DataError("<image>", "ekf tracker: expected a non-empty 8-bit grey image");
@@ -44,8 +56,16 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
   }
   stats_ = {};
   const cv::Size window(config_.klt_window_px, config_.klt_window_px);
+  auto t0 = Clock::now();
+  // Pixel noise (dark, high-gain images) breeds corners on noise and drags the KLT: smooth it first.
+  const cv::Mat* image = &grey;
+  if (config_.image_blur_sigma_px > 0.0) {
+    cv::GaussianBlur(grey, smoothed_, cv::Size(0, 0), config_.image_blur_sigma_px);
+    image = &smoothed_;
+  }
   std::vector<cv::Mat> pyramid;
-  cv::buildOpticalFlowPyramid(grey, pyramid, window, config_.klt_pyramid_levels);
+  cv::buildOpticalFlowPyramid(*image, pyramid, window, config_.klt_pyramid_levels);
+  stats_.pyramid_ms = ms_since(t0);
 
   if (!previous_pyramid_.empty() && !features_.empty()) {
     std::vector<cv::Point2f> previous_pts;
@@ -53,15 +73,29 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
     for (const TrackedFeature& f : features_) previous_pts.push_back(f.uv_px);
     const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
                                     config_.klt_max_iterations, config_.klt_epsilon);
-    std::vector<cv::Point2f> current_pts;
+    t0 = Clock::now();
+    // Initial positions: the previous ones moved by the camera rotation (far points move with it).
+    std::vector<cv::Point2f> current_pts = previous_pts;
+    if (R_cur_prev != nullptr) {
+      for (std::size_t i = 0; i < features_.size(); ++i) {
+        const Eigen::Vector3d ray = *R_cur_prev * features_[i].xy.homogeneous();
+        Eigen::Vector2d uv;
+        if (ray.z() > 0.0 && camera_.project(ray, &uv) && uv.x() >= 0.0 && uv.y() >= 0.0 &&
+            uv.x() <= grey.cols - 1 && uv.y() <= grey.rows - 1) {
+          current_pts[i] = cv::Point2f(static_cast<float>(uv.x()), static_cast<float>(uv.y()));
+          ++stats_.predicted;
+        }
+      }
+    }
     std::vector<unsigned char> status_fwd;
     std::vector<float> error;
     cv::calcOpticalFlowPyrLK(previous_pyramid_, pyramid, previous_pts, current_pts, status_fwd, error, window,
-                             config_.klt_pyramid_levels, criteria);
+                             config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     std::vector<cv::Point2f> back_pts = previous_pts;
     std::vector<unsigned char> status_bwd;
     cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, error, window,
                              config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    stats_.klt_ms = ms_since(t0);
     const auto border = static_cast<float>(config_.border_px);
     const float max_x = static_cast<float>(grey.cols - 1) - border;
     const float max_y = static_cast<float>(grey.rows - 1) - border;
@@ -91,6 +125,7 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
                                     static_cast<float>(f.xy.y() * focal_px_));
       kept.push_back(f);
     }
+    t0 = Clock::now();
     if (static_cast<int>(kept.size()) >= kMinRansacPoints) {
       std::vector<unsigned char> inliers;
       const cv::Mat F =
@@ -110,13 +145,71 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
       }
     }
     features_ = std::move(kept);
+    stats_.ransac_ms = ms_since(t0);
   } else {
     features_.clear();
   }
   stats_.tracked = static_cast<int>(features_.size());
-  detect(grey);
+  t0 = Clock::now();
+  detect(*image);
+  stats_.detect_ms = ms_since(t0);
   previous_pyramid_ = std::move(pyramid);
   return features_;
+}
+
+void FeatureTracker::detect_in(const cv::Mat& grey, const cv::Mat& mask, const cv::Rect& roi, int count,
+                               std::vector<cv::Point2f>* corners) const {
+  // Shi-Tomasi as cv::goodFeaturesToTrack, with one more threshold: the response must exceed
+  // corner_noise_factor times the median response of the region, so that on a dark, noisy image the
+  // corners of sensor noise (a high median) are not taken for features.
+  cv::Mat response;
+  cv::cornerMinEigenVal(grey(roi), response, config_.shi_tomasi_block_size, 3);
+  const cv::Mat roi_mask = mask(roi);
+  double max_response = 0.0;
+  cv::minMaxLoc(response, nullptr, &max_response, nullptr, nullptr, roi_mask);
+  double threshold = config_.shi_tomasi_quality * max_response;
+  if (config_.corner_noise_factor > 0.0) {
+    // Median over every second row and column (a quarter of the pixels is plenty for a noise level).
+    std::vector<float> values;
+    values.reserve(static_cast<std::size_t>(response.total() / 4 + 1));
+    for (int y = 0; y < response.rows; y += 2) {
+      const float* r = response.ptr<float>(y);
+      for (int x = 0; x < response.cols; x += 2) values.push_back(r[x]);
+    }
+    const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+    std::nth_element(values.begin(), mid, values.end());
+    threshold = std::max(threshold, config_.corner_noise_factor * static_cast<double>(*mid));
+  }
+  cv::Mat dilated;
+  cv::dilate(response, dilated, cv::Mat());
+  struct Candidate {
+    float response;
+    int x;
+    int y;
+  };
+  std::vector<Candidate> candidates;
+  for (int y = 1; y + 1 < response.rows; ++y) {
+    const float* r = response.ptr<float>(y);
+    const float* d = dilated.ptr<float>(y);
+    const unsigned char* m = roi_mask.ptr<unsigned char>(y);
+    for (int x = 1; x + 1 < response.cols; ++x) {
+      if (m[x] != 0 && r[x] > threshold && r[x] == d[x]) candidates.push_back(Candidate{r[x], x, y});
+    }
+  }
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const Candidate& a, const Candidate& b) { return a.response > b.response; });
+  const double min_d2 = config_.min_feature_distance_px * config_.min_feature_distance_px;
+  const std::size_t first = corners->size();
+  for (const Candidate& c : candidates) {
+    if (static_cast<int>(corners->size() - first) >= count) break;
+    const cv::Point2f p(static_cast<float>(c.x + roi.x), static_cast<float>(c.y + roi.y));
+    bool far = true;
+    for (std::size_t k = first; k < corners->size() && far; ++k) {
+      const cv::Point2f d = (*corners)[k] - p;
+      far = static_cast<double>(d.dot(d)) >= min_d2;
+    }
+    if (far) corners->push_back(p);
+  }
 }
 
 void FeatureTracker::detect(const cv::Mat& grey) {
@@ -142,26 +235,52 @@ void FeatureTracker::detect(const cv::Mat& grey) {
     ++count[static_cast<std::size_t>(cell_of(f.uv_px))];
   }
   const int needed = target - static_cast<int>(features_.size());
-  std::vector<cv::Point2f> corners;
-  // Ask for more than needed so that empty cells can be filled before crowded ones.
-  cv::goodFeaturesToTrack(grey, corners, 3 * needed + cells, config_.shi_tomasi_quality,
-                          config_.min_feature_distance_px, mask, config_.shi_tomasi_block_size);
-  // Corners come sorted by strength: first fill each cell up to per_cell, then take the rest in order.
-  std::vector<bool> taken(corners.size(), false);
   int added = 0;
-  for (int pass = 0; pass < 2 && added < needed; ++pass) {
-    for (std::size_t i = 0; i < corners.size() && added < needed; ++i) {
-      if (taken[i]) continue;
-      const auto cell = static_cast<std::size_t>(cell_of(corners[i]));
-      if (pass == 0 && count[cell] >= per_cell) continue;
-      taken[i] = true;
-      ++count[cell];
-      ++added;
-      TrackedFeature f;
-      f.id = next_id_++;
-      f.uv_px = corners[i];
-      f.xy = camera_.undistort_normalized(Eigen::Vector2d(corners[i].x, corners[i].y));
-      features_.push_back(f);
+  auto add = [&](const cv::Point2f& p) {
+    TrackedFeature f;
+    f.id = next_id_++;
+    f.uv_px = p;
+    f.xy = camera_.undistort_normalized(Eigen::Vector2d(p.x, p.y));
+    features_.push_back(f);
+    cv::circle(mask, p, radius, cv::Scalar(0), cv::FILLED);
+    ++count[static_cast<std::size_t>(cell_of(p))];
+    ++added;
+  };
+  // Pass 1: corners only inside the cells below their share, the emptiest first. Usually a few features
+  // are lost per image, so this looks at a few cells instead of the whole image. Pass 2: when cells
+  // without texture leave the set short by at least redetect_min_missing, the other cells take more than
+  // their share. A cell that gives fewer corners than asked is left alone for empty_cell_retry_frames
+  // images (dark or texture-poor parts of the image would otherwise be searched in every image).
+  if (cell_cooldown_.size() != static_cast<std::size_t>(cells))
+    cell_cooldown_.assign(static_cast<std::size_t>(cells), 0);
+  std::vector<int> order(static_cast<std::size_t>(cells));
+  for (int c = 0; c < cells; ++c) order[static_cast<std::size_t>(c)] = c;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int c) {
+    return count[static_cast<std::size_t>(a)] < count[static_cast<std::size_t>(c)];
+  });
+  std::vector<bool> barren(static_cast<std::size_t>(cells), false);
+  for (int& cooldown : cell_cooldown_) cooldown = std::max(0, cooldown - 1);
+  std::vector<cv::Point2f> corners;
+  for (int pass = 1; pass <= 2; ++pass) {
+    if (pass == 2 && needed - added < config_.redetect_min_missing) break;
+    for (int c : order) {
+      const auto cell = static_cast<std::size_t>(c);
+      if (cell_cooldown_[cell] > 0 || barren[cell]) continue;
+      const int share = pass == 1 ? per_cell - count[cell] : needed - added;
+      const int wanted = std::min(share, needed - added);
+      if (wanted <= 0) continue;
+      const int x0 = static_cast<int>(std::lround((c % config_.grid_cols) * cell_w));
+      const int y0 = static_cast<int>(std::lround((c / config_.grid_cols) * cell_h));
+      const int x1 = static_cast<int>(std::lround((c % config_.grid_cols + 1) * cell_w));
+      const int y1 = static_cast<int>(std::lround((c / config_.grid_cols + 1) * cell_h));
+      corners.clear();
+      detect_in(grey, mask, cv::Rect(x0, y0, x1 - x0, y1 - y0), wanted, &corners);
+      for (const cv::Point2f& p : corners) add(p);
+      if (static_cast<int>(corners.size()) < wanted) {
+        // Nothing more to find here: not again in this image, nor in the next empty_cell_retry_frames.
+        barren[cell] = true;
+        cell_cooldown_[cell] = config_.empty_cell_retry_frames;
+      }
     }
   }
   stats_.detected = added;

@@ -1,8 +1,11 @@
 // KLT front end of the ekf source (vio-ekf.md § Front end): Shi-Tomasi corners, pyramidal Lucas-Kanade
 // with a forward-backward check, RANSAC (fundamental matrix on undistorted points) and grid-based
-// re-detection to keep about config.max_features tracked.
+// re-detection to keep about config.max_features tracked. With the rotation between the two images (from
+// the gyro) the KLT search starts at the rotation-predicted position, which needs fewer iterations and
+// pyramid levels and loses fewer features under fast turns.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <vector>
@@ -27,6 +30,12 @@ struct TrackerStats {
   int rejected_fb = 0;      // forward-backward check
   int rejected_ransac = 0;  // RANSAC outliers
   int detected = 0;         // new corners
+  int predicted = 0;        // KLT searches started at a rotation-predicted position
+  // Wall time of the steps (the per-frame profile of the front end).
+  double pyramid_ms = 0;
+  double klt_ms = 0;  // forward + backward Lucas-Kanade
+  double ransac_ms = 0;
+  double detect_ms = 0;
 };
 
 class FeatureTracker {
@@ -37,6 +46,9 @@ class FeatureTracker {
   // Tracks into `grey` (8-bit, one channel); returns the current features. Throws DataError when the
   // image is empty, not 8-bit grey, or of another size than the calibration.
   const std::vector<TrackedFeature>& track(const cv::Mat& grey);
+  // As above; `R_cur_prev` rotates bearings of the previous camera frame into the current one (from the
+  // gyro), used to predict where each feature moved. nullptr: no prediction (the previous position).
+  const std::vector<TrackedFeature>& track(const cv::Mat& grey, const Eigen::Matrix3d* R_cur_prev);
 
   const std::vector<TrackedFeature>& features() const { return features_; }
   const TrackerStats& last_stats() const { return stats_; }
@@ -47,11 +59,17 @@ class FeatureTracker {
 
  private:
   void detect(const cv::Mat& grey);
+  // Shi-Tomasi corners of one grid cell outside `mask`, strongest first, appended to `corners`.
+  void detect_in(const cv::Mat& grey, const cv::Mat& mask, const cv::Rect& roi, int count,
+                 std::vector<cv::Point2f>* corners) const;
 
   EkfConfig config_;
   CameraModel camera_;
   double focal_px_;
   std::vector<cv::Mat> previous_pyramid_;
+  cv::Mat smoothed_;
+  std::vector<int> cell_cooldown_;  // images until an empty grid cell is searched again  // the image after
+                                    // image_blur_sigma_px (buffer reused from image to image)
   std::vector<TrackedFeature> features_;
   TrackerStats stats_;
   std::uint64_t next_id_ = 0;

@@ -39,6 +39,7 @@ Msckf::Msckf(const EkfConfig& config, const ImuNoise& noise, const Eigen::Isomet
 void Msckf::initialize(const ImuState& state, const ImuMatrix& cov) {
   state_ = state;
   state_.q_w_i.normalize();
+  fej_ = state_;
   P_ = cov;
   P_ = 0.5 * (P_ + P_.transpose()).eval();
   clones_.clear();
@@ -56,10 +57,28 @@ void Msckf::reset() {
 void Msckf::propagate(std::span<const ImuSample> imu, Timestamp t_ns) {
   ImuMatrix Phi;
   ImuMatrix Q;
+  const Timestamp t0_ns = state_.t_ns;
   if (!propagator_.propagate(imu, t_ns, &state_, &Phi, &Q)) {
     state_.t_ns = t_ns;  // nothing to integrate with: the state stays, time moves on
+    fej_ = state_;
     return;
   }
+  if (config_.first_estimate_jacobians) {
+    // First-estimate Jacobians (Huang, Mourikis & Roumeliotis): the attitude columns of Phi in closed form
+    // at the previous *propagated* state instead of the updated one, so that Phi maps the unobservable
+    // directions (global position, yaw about gravity) of one linearisation point onto those of the next
+    // and the filter gains no spurious yaw information. Right perturbation: dtheta_w = R dtheta.
+    const double dt_s = ns_to_s(t_ns - t0_ns);
+    const Eigen::Matrix3d R0 = fej_.q_w_i.toRotationMatrix();
+    const Eigen::Matrix3d R1 = state_.q_w_i.toRotationMatrix();
+    const Eigen::Vector3d& g = propagator_.gravity_w();
+    using I = ImuErrorIndex;
+    Phi.block<3, 3>(I::kTheta, I::kTheta) = R1.transpose() * R0;
+    Phi.block<3, 3>(I::kVel, I::kTheta) = -so3::skew(state_.v_w_mps - fej_.v_w_mps - g * dt_s) * R0;
+    Phi.block<3, 3>(I::kPos, I::kTheta) =
+        -so3::skew(state_.p_w_m - fej_.p_w_m - fej_.v_w_mps * dt_s - 0.5 * g * dt_s * dt_s) * R0;
+  }
+  fej_ = state_;
   const Eigen::Index n = P_.rows();
   P_.topLeftCorner<kImuErrorDim, kImuErrorDim>() =
       Phi * P_.topLeftCorner<kImuErrorDim, kImuErrorDim>() * Phi.transpose() + Q;
@@ -80,7 +99,7 @@ void Msckf::augment(std::uint64_t clone_id) {
   P_new.topRightCorner(n, kCloneDim) = P_.leftCols(kCloneDim);
   P_new.bottomRightCorner(kCloneDim, kCloneDim) = P_.topLeftCorner(kCloneDim, kCloneDim);
   P_ = std::move(P_new);
-  clones_.push_back(PoseClone{clone_id, state_.t_ns, state_.q_w_i, state_.p_w_m});
+  clones_.push_back(PoseClone{clone_id, state_.t_ns, state_.q_w_i, state_.p_w_m, state_.q_w_i, state_.p_w_m});
 }
 
 void Msckf::marginalize_oldest() {
@@ -255,8 +274,8 @@ bool Msckf::triangulate(const FeatureTrack& track, Eigen::Vector3d* p_w_f) const
 bool Msckf::feature_jacobian(const FeatureTrack& track, const Eigen::Vector3d& p_w_f, Eigen::MatrixXd* H0,
                              Eigen::VectorXd* r0) const {
   const Eigen::Index m = static_cast<Eigen::Index>(track.clone_ids.size());
-  const Eigen::Index n = P_.rows();
-  Eigen::MatrixXd H_x = Eigen::MatrixXd::Zero(2 * m, n);
+  const Eigen::Index clone_cols = kCloneDim * static_cast<Eigen::Index>(clones_.size());
+  Eigen::MatrixXd H_x = Eigen::MatrixXd::Zero(2 * m, clone_cols);
   Eigen::MatrixXd H_f(2 * m, 3);
   Eigen::VectorXd r(2 * m);
   const Eigen::Matrix3d R_c_i = R_i_c_.transpose();
@@ -265,22 +284,29 @@ bool Msckf::feature_jacobian(const FeatureTrack& track, const Eigen::Vector3d& p
     if (k < 0) return false;
     const PoseClone& clone = clones_[static_cast<std::size_t>(k)];
     const Eigen::Matrix3d R_w_i = clone.q_w_i.toRotationMatrix();
-    const Eigen::Vector3d p_i = R_w_i.transpose() * (p_w_f - clone.p_w_m);
-    const Eigen::Vector3d p_c = R_c_i * (p_i - p_i_c_);
+    const Eigen::Vector3d p_c = R_c_i * (R_w_i.transpose() * (p_w_f - clone.p_w_m) - p_i_c_);
     if (!(p_c.z() > config_.min_depth_m)) return false;
-    const Eigen::Matrix<double, 2, 3> Jp = projection_jacobian(p_c) * R_c_i;
-    const Eigen::Index col = kImuErrorDim + kCloneDim * k;
-    H_x.block<2, 3>(2 * j, col) = Jp * so3::skew(p_i);
-    H_x.block<2, 3>(2 * j, col + 3) = -Jp * R_w_i.transpose();
-    H_f.block<2, 3>(2 * j, 0) = Jp * R_w_i.transpose();
     r.segment<2>(2 * j) = track.xy[static_cast<std::size_t>(j)] - p_c.head<2>() / p_c.z();
+    // Residual at the current estimate; Jacobian at the clone's first estimate (FEJ) or the current one.
+    const bool fej = config_.first_estimate_jacobians;
+    const Eigen::Matrix3d R_lin = fej ? clone.q_w_i_fej.toRotationMatrix() : R_w_i;
+    const Eigen::Vector3d p_i = R_lin.transpose() * (p_w_f - (fej ? clone.p_w_m_fej : clone.p_w_m));
+    const Eigen::Vector3d p_c_lin = R_c_i * (p_i - p_i_c_);
+    if (!(p_c_lin.z() > config_.min_depth_m)) return false;
+    const Eigen::Matrix<double, 2, 3> Jp = projection_jacobian(p_c_lin) * R_c_i;
+    const Eigen::Matrix<double, 2, 3> Jp_R = Jp * R_lin.transpose();
+    const Eigen::Index col = kCloneDim * k;
+    H_x.block<2, 3>(2 * j, col) = Jp * so3::skew(p_i);
+    H_x.block<2, 3>(2 * j, col + 3) = -Jp_R;
+    H_f.block<2, 3>(2 * j, 0) = Jp_R;
   }
-  // Left null space of H_f: the last 2m - 3 rows of Q^T.
-  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(H_f);
-  const Eigen::MatrixXd QtH = qr.householderQ().adjoint() * H_x;
-  const Eigen::VectorXd Qtr = qr.householderQ().adjoint() * r;
-  *H0 = QtH.bottomRows(2 * m - 3);
-  *r0 = Qtr.tail(2 * m - 3);
+  // Left null space of H_f: the last 2m - 3 rows of Q^T, applied in place (Householder reflections).
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(H_f);
+  const auto Qt = qr.householderQ().adjoint();
+  H_x.applyOnTheLeft(Qt);
+  r.applyOnTheLeft(Qt);
+  *H0 = H_x.bottomRows(2 * m - 3);
+  *r0 = r.tail(2 * m - 3);
   return true;
 }
 
@@ -288,8 +314,10 @@ MsckfUpdateStats Msckf::update(const std::vector<std::uint64_t>& feature_ids) {
   MsckfUpdateStats stats;
   stats.candidate_features = static_cast<int>(feature_ids.size());
   if (feature_ids.empty()) return stats;
-  const Eigen::Index n = P_.rows();
+  const Eigen::Index clone_cols = kCloneDim * static_cast<Eigen::Index>(clones_.size());
   const double var = sigma_normalized_ * sigma_normalized_;
+  // The measurements see the clones only: the chi-square test needs the clone block of P.
+  const Eigen::MatrixXd P_cc = P_.bottomRightCorner(clone_cols, clone_cols);
   std::vector<Eigen::MatrixXd> blocks_H;
   std::vector<Eigen::VectorXd> blocks_r;
   Eigen::Index rows = 0;
@@ -303,7 +331,7 @@ MsckfUpdateStats Msckf::update(const std::vector<std::uint64_t>& feature_ids) {
       continue;
     }
     // Mahalanobis gate at the upper chi-square quantile.
-    Eigen::MatrixXd S = H0 * P_ * H0.transpose();
+    Eigen::MatrixXd S = H0 * P_cc.selfadjointView<Eigen::Upper>() * H0.transpose();
     S.diagonal().array() += var;
     const double gamma = r0.dot(S.llt().solve(r0));
     if (!std::isfinite(gamma) || gamma > chi2_.quantile(static_cast<int>(r0.size()))) {
@@ -317,7 +345,7 @@ MsckfUpdateStats Msckf::update(const std::vector<std::uint64_t>& feature_ids) {
   }
   stats.rows = static_cast<int>(rows);
   if (rows == 0) return stats;
-  Eigen::MatrixXd H(rows, n);
+  Eigen::MatrixXd H(rows, clone_cols);
   Eigen::VectorXd r(rows);
   Eigen::Index row = 0;
   for (std::size_t i = 0; i < blocks_H.size(); ++i) {
@@ -325,35 +353,33 @@ MsckfUpdateStats Msckf::update(const std::vector<std::uint64_t>& feature_ids) {
     r.segment(row, blocks_r[i].size()) = blocks_r[i];
     row += blocks_H[i].rows();
   }
-  if (rows > n) {
-    // QR compression: H = Q [R; 0] -> use R and the first n entries of Q^T r (noise stays isotropic).
-    const Eigen::HouseholderQR<Eigen::MatrixXd> qr(H);
-    const Eigen::VectorXd Qtr = qr.householderQ().adjoint() * r;
-    const Eigen::MatrixXd R = qr.matrixQR().topRows(n).triangularView<Eigen::Upper>();
-    apply_update(R, Qtr.head(n), var);
+  if (rows > clone_cols) {
+    // QR compression: H = Q [R; 0] -> use R and the first entries of Q^T r (noise stays isotropic).
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(H);
+    r.applyOnTheLeft(qr.householderQ().adjoint());
+    const Eigen::MatrixXd R = qr.matrixQR().topRows(clone_cols).triangularView<Eigen::Upper>();
+    apply_update(kImuErrorDim, R, r.head(clone_cols), var);
   } else {
-    apply_update(H, r, var);
+    apply_update(kImuErrorDim, H, r, var);
   }
   return stats;
 }
 
 void Msckf::zero_velocity_update(double sigma_mps) {
   if (!initialized_) return;
-  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(3, P_.rows());
-  H.block<3, 3>(0, ImuErrorIndex::kVel).setIdentity();
-  apply_update(H, -state_.v_w_mps, sigma_mps * sigma_mps);
+  apply_update(ImuErrorIndex::kVel, Eigen::Matrix3d::Identity(), -state_.v_w_mps, sigma_mps * sigma_mps);
 }
 
-void Msckf::apply_update(const Eigen::MatrixXd& H, const Eigen::VectorXd& r, double var) {
-  const Eigen::MatrixXd PHt = P_ * H.transpose();
-  Eigen::MatrixXd S = H * PHt;
+void Msckf::apply_update(Eigen::Index col0, const Eigen::MatrixXd& H, const Eigen::VectorXd& r, double var) {
+  // P H^T with H zero outside its columns: only those columns of P are needed.
+  const Eigen::MatrixXd PHt = P_.middleCols(col0, H.cols()) * H.transpose();
+  Eigen::MatrixXd S = H * PHt.middleRows(col0, H.cols());
   S.diagonal().array() += var;
-  const Eigen::MatrixXd K = S.llt().solve(PHt.transpose()).transpose();
-  const Eigen::VectorXd dx = K * r;
-  // Joseph form.
-  Eigen::MatrixXd IKH = -K * H;
-  IKH.diagonal().array() += 1.0;
-  P_ = IKH * P_ * IKH.transpose() + var * K * K.transpose();
+  const Eigen::LLT<Eigen::MatrixXd> llt(S);
+  // K = P H^T S^-1;  dx = K r;  P <- P - K S K^T = P - P H^T S^-1 H P (symmetrised).
+  const Eigen::MatrixXd Kt = llt.solve(PHt.transpose());
+  const Eigen::VectorXd dx = Kt.transpose() * r;
+  P_.noalias() -= PHt * Kt;
   P_ = 0.5 * (P_ + P_.transpose()).eval();
 
   state_.apply_correction(dx.head<kImuErrorDim>());

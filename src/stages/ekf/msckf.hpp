@@ -25,12 +25,15 @@ struct FeatureObservation {
   Eigen::Vector2d xy = Eigen::Vector2d::Zero();
 };
 
-// A cloned IMU pose of the window. Error state: [dtheta (right), dp].
+// A cloned IMU pose of the window. Error state: [dtheta (right), dp]. The first estimate (the pose when
+// cloned, before any update) is kept for first-estimate Jacobians (config.first_estimate_jacobians).
 struct PoseClone {
   std::uint64_t id = 0;
   Timestamp t_ns = 0;
   Eigen::Quaterniond q_w_i = Eigen::Quaterniond::Identity();
   Eigen::Vector3d p_w_m = Eigen::Vector3d::Zero();
+  Eigen::Quaterniond q_w_i_fej = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d p_w_m_fej = Eigen::Vector3d::Zero();
 };
 
 struct MsckfUpdateStats {
@@ -84,10 +87,13 @@ class Msckf {
   void marginalize_oldest();
   MsckfUpdateStats update(const std::vector<std::uint64_t>& feature_ids);
   bool triangulate(const FeatureTrack& track, Eigen::Vector3d* p_w_f) const;
-  // Null-space projected Jacobian and residual of one feature; false when a depth is not positive.
+  // Null-space projected Jacobian and residual of one feature; false when a depth is not positive. The
+  // Jacobian is w.r.t. the clone part of the state only (the IMU state does not enter the measurement):
+  // H0 has 6 * clones_.size() columns, clone k at columns 6k.
   bool feature_jacobian(const FeatureTrack& track, const Eigen::Vector3d& p_w_f, Eigen::MatrixXd* H0,
                         Eigen::VectorXd* r0) const;
-  void apply_update(const Eigen::MatrixXd& H, const Eigen::VectorXd& r, double variance);
+  // EKF update with a Jacobian that is zero outside the columns [col0, col0 + H.cols()) of the state.
+  void apply_update(Eigen::Index col0, const Eigen::MatrixXd& H, const Eigen::VectorXd& r, double variance);
   int clone_index(std::uint64_t clone_id) const;
 
   EkfConfig config_;
@@ -99,6 +105,7 @@ class Msckf {
 
   bool initialized_ = false;
   ImuState state_;
+  ImuState fej_;  // the IMU state as last propagated (before the update): linearisation point of Phi
   Eigen::MatrixXd P_;
   std::deque<PoseClone> clones_;
   std::unordered_map<std::uint64_t, FeatureTrack> features_;

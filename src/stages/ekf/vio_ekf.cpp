@@ -70,6 +70,7 @@ std::optional<GroundTruthState> ground_truth_state_at(const std::vector<GroundTr
 VioEkf::VioEkf(const EkfConfig& config, const CameraCalibration& camera, const ImuCalibration& imu)
     : config_((config.validate(), config)),
       T_b_i_(imu.T_b_i),
+      R_i_c_((imu.T_b_i.inverse() * camera.T_b_c).rotation()),
       focal_px_(0.5 * (camera.fx + camera.fy)),
       tracker_(config, camera),
       filter_(config, effective_imu_noise(config, imu), imu.T_b_i.inverse() * camera.T_b_c,
@@ -185,12 +186,37 @@ EkfFrameOutput VioEkf::lost(std::size_t frame, const std::string& reason) {
   return out;
 }
 
+std::optional<Eigen::Matrix3d> VioEkf::camera_rotation_since_previous(const EkfFrameInput& input) const {
+  if (!previous_image_t_ns_.has_value() || input.imu.empty()) return std::nullopt;
+  const Timestamp t0 = *previous_image_t_ns_;
+  const Timestamp t1 = input.t_ns;
+  if (t1 <= t0 || input.imu.front().t_ns > t0 || input.imu.back().t_ns < t1) return std::nullopt;
+  const Eigen::Vector3d bias =
+      filter_.initialized() ? filter_.state().gyro_bias_radps : Eigen::Vector3d::Zero().eval();
+  // Midpoint rule between consecutive samples, clipped to [t0, t1].
+  Eigen::Quaterniond q_prev_cur = Eigen::Quaterniond::Identity();
+  for (std::size_t k = 0; k + 1 < input.imu.size(); ++k) {
+    const ImuSample& a = input.imu[k];
+    const ImuSample& b = input.imu[k + 1];
+    const Timestamp lo = std::max(a.t_ns, t0);
+    const Timestamp hi = std::min(b.t_ns, t1);
+    if (hi <= lo) continue;
+    const Eigen::Vector3d w = 0.5 * (a.gyro_radps + b.gyro_radps) - bias;
+    q_prev_cur = q_prev_cur * so3::exp_quat(w * ns_to_s(hi - lo));
+  }
+  if (!q_prev_cur.coeffs().allFinite()) return std::nullopt;
+  return (R_i_c_.transpose() * q_prev_cur.toRotationMatrix().transpose() * R_i_c_).eval();
+}
+
 EkfFrameOutput VioEkf::process(const EkfFrameInput& input) {
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   std::vector<FeatureObservation> tracked;
   if (input.image != nullptr) {
-    tracker_.track(*input.image);
+    const std::optional<Eigen::Matrix3d> R_cur_prev =
+        config_.klt_predict_rotation ? camera_rotation_since_previous(input) : std::nullopt;
+    tracker_.track(*input.image, R_cur_prev.has_value() ? &*R_cur_prev : nullptr);
+    previous_image_t_ns_ = input.t_ns;
     tracked = tracker_.observations();
   } else if (input.observations != nullptr) {
     tracked = *input.observations;
@@ -222,9 +248,17 @@ EkfFrameOutput VioEkf::update_filter(const EkfFrameInput& input, const std::vect
     }
     // The first frame of the filter: no IMU interval yet, clone and start the tracks.
     out.update = filter_.process_frame(input.t_ns, {}, obs);
+    frames_since_clone_ = 0;
   } else {
     try {
-      out.update = filter_.process_frame(input.t_ns, input.imu, obs);
+      // Only every clone_every_n_frames-th image becomes a clone (the others propagate): the same window
+      // then spans a longer baseline. The tracker still runs on every image, so tracks survive.
+      if (++frames_since_clone_ >= config_.clone_every_n_frames) {
+        out.update = filter_.process_frame(input.t_ns, input.imu, obs);
+        frames_since_clone_ = 0;
+      } else {
+        filter_.propagate(input.imu, input.t_ns);
+      }
       out.zero_velocity =
           config_.zupt_enabled && disparity_px >= 0.0 && disparity_px < config_.zupt_max_disparity_px;
       if (out.zero_velocity) filter_.zero_velocity_update(config_.zupt_sigma_mps);

@@ -77,15 +77,22 @@ class VioEkf {
 
   EkfConfig config_;
   Eigen::Isometry3d T_b_i_;
+  Eigen::Matrix3d R_i_c_;  // camera -> IMU rotation
   double focal_px_;
   FeatureTracker tracker_;
   Msckf filter_;
   double median_disparity_px(const std::vector<FeatureObservation>& observations) const;
+  // Rotation of the camera from the previous image to this one from the gyro (bias from the filter when it
+  // runs): R_cur_prev maps bearings of the previous camera frame into the current one. nullopt without a
+  // previous image or IMU samples covering the interval.
+  std::optional<Eigen::Matrix3d> camera_rotation_since_previous(const EkfFrameInput& input) const;
 
   std::unordered_map<std::uint64_t, Eigen::Vector2d> previous_xy_;
   std::deque<ImuSample> standstill_buffer_;
   std::size_t frame_ = 0;
+  std::optional<Timestamp> previous_image_t_ns_;
   int few_feature_frames_ = 0;
+  int frames_since_clone_ = 0;
   std::optional<PoseEstimate> last_good_;
 };
 
