@@ -8,6 +8,7 @@
 
 #include "core/error.hpp"
 #include "sim/imu_synth.hpp"
+#include "sim/simulator.hpp"
 #include "sim/trajectory.hpp"
 #include "test_support.hpp"
 
@@ -106,8 +107,21 @@ TEST(ImuSynth, StaticBodyMeasuresGravityUp) {
   EXPECT_LT(s.gyro_radps.norm(), 1e-9);
 }
 
-TEST(ImuSynth, RoundTripOnTheDemoRoute) {
+TEST(ImuSynth, RoundTripOnTheProceduralCircuit) {
   const SplineTrajectory trajectory = SplineTrajectory::fit(make_procedural_route(ProceduralRouteConfig{}));
+  double rotation_error_rad = 0.0;
+  const double drift_m = round_trip_drift_m(trajectory, Eigen::Vector3d::UnitZ(), 60.0, &rotation_error_rad);
+  std::printf("IMU round trip, procedural circuit (%.1f s): position drift %.4g m, rotation error %.3g rad\n",
+              ns_to_s(trajectory.end_t_ns() - trajectory.start_t_ns()), drift_m, rotation_error_rad);
+  ::testing::Test::RecordProperty("circuit_drift_m", std::to_string(drift_m));
+  EXPECT_LT(drift_m, 0.05);
+  EXPECT_LT(rotation_error_rad, 1e-4);
+}
+
+TEST(ImuSynth, RoundTripOnTheDemoRoute) {
+  // The demo preset's waypoint route with the preset's fit (its corners are curvature steps).
+  const SimulationConfig demo = make_preset("demo", "");
+  const SplineTrajectory trajectory = SplineTrajectory::fit(make_procedural_route(demo.route), demo.fit);
   double rotation_error_rad = 0.0;
   const double drift_m = round_trip_drift_m(trajectory, Eigen::Vector3d::UnitZ(), 60.0, &rotation_error_rad);
   std::printf("IMU round trip, demo route (%.1f s): position drift %.4g m, rotation error %.3g rad\n",

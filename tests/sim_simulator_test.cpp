@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
+#include <set>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -203,6 +204,91 @@ TEST(SimulatorPresets, AliasingPresetCopiesOnePlaceOntoAFarPlaceDrivenOnce) {
   EXPECT_GE(loops.back().query - loops.front().query, 50);  // a revisit of 50+ frames
 }
 
+TEST(SimulatorPresets, DemoPresetShowsARevisitAtDuskNewStreetsAndAnAliasedPlace) {
+  SimulationConfig config = make_preset("demo", "");
+  const SimulationPlan plan = plan_simulation(config);
+  ASSERT_EQ(plan.frames_used, 600u);
+  EXPECT_EQ(plan.camera.width_px, 640);
+  EXPECT_EQ(plan.camera.height_px, 200);
+  EXPECT_EQ(config.route.shape, "waypoints");
+
+  // 1. One genuine revisit: every ground-truth query frame lies in one run of frames late in the drive, under
+  // dusk light (night factor 1), and revisits frames of the first loop, by day, more than 200 frames (the
+  // configs/demo.yaml match margin) earlier.
+  const std::vector<LoopInterval> loops = find_loop_truth(plan.T_w_c, plan.up_w, config.loops);
+  ASSERT_FALSE(loops.empty());
+  const std::int64_t q_first = loops.front().query, q_last = loops.back().query;
+  std::set<std::int64_t> queries;
+  for (const LoopInterval& loop : loops) {
+    queries.insert(loop.query);
+    EXPECT_LT(loop.last, 200) << loop.query;
+    EXPECT_GT(loop.query - loop.last, 200) << loop.query;
+    EXPECT_EQ(config.illumination.night_factor(plan.illumination_phase[static_cast<std::size_t>(loop.query)]),
+              1.0);
+    EXPECT_EQ(config.illumination.night_factor(plan.illumination_phase[static_cast<std::size_t>(loop.first)]),
+              0.0);
+  }
+  EXPECT_EQ(static_cast<std::int64_t>(queries.size()), q_last - q_first + 1);  // one run
+  EXPECT_GE(queries.size(), 60u);
+  std::printf("demo preset: %zu revisit query frames (%lld-%lld)\n", queries.size(),
+              static_cast<long long>(q_first), static_cast<long long>(q_last));
+
+  // 2. Most of the drive is never revisited: the frames involved in a revisit (queries and references, with
+  // 20 frames of margin on each side) are less than half of the drive.
+  std::set<std::int64_t> involved;
+  for (const LoopInterval& loop : loops) {
+    for (std::int64_t f = loop.query - 20; f <= loop.query + 20; ++f) involved.insert(f);
+    for (std::int64_t f = loop.first - 20; f <= loop.last + 20; ++f) involved.insert(f);
+  }
+  EXPECT_LT(involved.size(), 300u);
+
+  // 3. The aliased place: copies of far facades, each standing where its source stands relative to the road
+  // (the same translation for all, within 0.75 m), more than 100 m from it, passed by day more than 200
+  // frames after its source and more than 20 m (the gate threshold is 5-8 m) from every frame at least 30
+  // frames (the gate gap) older.
+  std::vector<Eigen::Vector3d> path_w;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path_w.push_back(T.translation());
+  const World world = build_world(config.world, path_w, plan.up_w);
+  const auto centre = [&](int structure) {
+    Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+    int n = 0;
+    for (const Quad& q : world.quads) {
+      if (q.structure != structure) continue;
+      sum += (q.origin_w + 0.5f * q.width_m * q.axis_u_w).head<2>().cast<double>();
+      ++n;
+    }
+    return Eigen::Vector2d(sum / std::max(1, n));
+  };
+  const Eigen::Vector2d shift(config.world.alias_copy_target_x_m - config.world.alias_copy_source_x_m,
+                              config.world.alias_copy_target_y_m - config.world.alias_copy_source_y_m);
+  int facades = 0;
+  for (std::size_t k = 0; k < world.structures.size(); ++k) {
+    const Structure& s = world.structures[k];
+    if (s.aliased_from < 0) continue;
+    EXPECT_TRUE(s.copied) << k;
+    const Structure& src = world.structures[static_cast<std::size_t>(s.aliased_from)];
+    EXPECT_EQ(s.texture, src.texture);
+    const Eigen::Vector2d c = centre(static_cast<int>(k));
+    const Eigen::Vector2d c_src = centre(s.aliased_from);
+    EXPECT_GT((c - c_src).norm(), 100.0) << k;
+    if (s.kind != "facade") continue;
+    ++facades;
+    EXPECT_LT((c - (c_src + shift)).norm(), 0.75) << "facade " << k << " at " << c.transpose();
+    const auto at_copy = passes_near(plan.T_w_c, plan.frames_used, c, 12.0);
+    const auto at_source = passes_near(plan.T_w_c, plan.frames_used, c_src, 12.0);
+    ASSERT_EQ(at_copy.size(), 1u) << "copy " << k;
+    ASSERT_FALSE(at_source.empty()) << "source " << k;
+    EXPECT_GT(at_copy[0].first, at_source[0].second + 200) << "copy " << k;
+    for (std::size_t f = at_copy[0].first; f <= at_copy[0].second; ++f) {
+      EXPECT_EQ(config.illumination.night_factor(plan.illumination_phase[f]), 0.0) << f;
+      for (std::size_t g = 0; g + 30 <= f; ++g) {
+        ASSERT_GT((plan.T_w_c[f].translation() - plan.T_w_c[g].translation()).norm(), 20.0) << f << " " << g;
+      }
+    }
+  }
+  EXPECT_GE(facades, 8);
+}
+
 TEST(LoopTruth, OutAndBackAlongALine) {
   // 0..49 go along x, 50..99 come back along the same line 0.5 m to the side.
   std::vector<Eigen::Isometry3d> T_w_c(100, Eigen::Isometry3d::Identity());
@@ -272,10 +358,14 @@ TEST(SimulatorPlan, DemoFramesGroundTruthAndImuAgree) {
   const Eigen::Vector3d motion = plan.T_w_c[101].translation() - plan.T_w_c[99].translation();
   EXPECT_GT(plan.T_w_c[100].linear().col(2).dot(motion.normalized()), 0.99);
   EXPECT_NEAR(plan.T_w_c[100].linear().col(1).z(), -1.0, 1e-3);  // image y (down) = -up
-  // Speed about 7 m/s: a KITTI-like street drive.
-  const double speed = plan.ground_truth[500].v_w_mps.norm();
-  EXPECT_GT(speed, 4.0);
-  EXPECT_LT(speed, 12.0);
+  // A town drive: 640 m in 60 s, 9-12.5 m/s (33-45 km/h) all along.
+  double min_speed = 1e9, max_speed = 0.0;
+  for (const GroundTruthState& gt : plan.ground_truth) {
+    min_speed = std::min(min_speed, gt.v_w_mps.norm());
+    max_speed = std::max(max_speed, gt.v_w_mps.norm());
+  }
+  EXPECT_GT(min_speed, 8.0);
+  EXPECT_LT(max_speed, 13.0);
 }
 
 TEST(SimulatorPlan, PrefixRunMatchesTheFullRun) {

@@ -171,6 +171,104 @@ TEST(ProceduralRoute, TwoLapsRevisitTheSamePlaces) {
   EXPECT_THROW(bad.validate(), ConfigError);
 }
 
+TEST(ProceduralRoute, WaypointsParseAndRejectMalformedLists) {
+  const auto points = parse_route_waypoints(" -25,-25; 40.5 , -25;40,25e0 ;");
+  ASSERT_EQ(points.size(), 3u);
+  EXPECT_EQ(points[0], Eigen::Vector2d(-25.0, -25.0));
+  EXPECT_EQ(points[1], Eigen::Vector2d(40.5, -25.0));
+  EXPECT_EQ(points[2], Eigen::Vector2d(40.0, 25.0));
+  for (const char* bad :
+       {"", "1,2", "1,2; 3", "1,2; 3,4,5", "1,2; x,4", "1,2;; 3,4", "1,2; 3,4m", "1,2; nan,4"}) {
+    try {
+      parse_route_waypoints(bad);
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("route.waypoints"), std::string::npos) << e.what();
+    }
+  }
+  ProceduralRouteConfig config;
+  config.shape = "waypoints";
+  config.waypoints = "0,0; 100,0; 100,50";
+  EXPECT_NO_THROW(config.validate());
+  config.waypoints = "0,0; 100,0; 100,10";  // 10 m segment, two 12 m fillets would need 12 m
+  config.corner_radius_m = 12.0;
+  EXPECT_THROW(config.validate(), ConfigError);
+  config.waypoints = "0,0; 100,0; 0,0.1";  // a U-turn
+  EXPECT_THROW(config.validate(), ConfigError);
+  config.waypoints = "0,0; 0,0; 10,0";  // coincident points
+  EXPECT_THROW(config.validate(), ConfigError);
+  config.shape = "spiral";
+  try {
+    config.validate();
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("route.shape"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("waypoints"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ProceduralRoute, WaypointsAreDrivenOnceWithRoundedCorners) {
+  // A left turn then a right turn: 0,0 -> 100,0 -> 100,60 -> 160,60, corners of radius 10.
+  ProceduralRouteConfig config;
+  config.shape = "waypoints";
+  config.waypoints = "0,0; 100,0; 100,60; 160,60";
+  config.corner_radius_m = 10.0;
+  config.frames = 501;
+  config.speed_variation = 0.0;
+  config.heading_wobble_rad = 0.0;
+  config.lap_lateral_offset_m = 0.0;
+  const auto poses = make_procedural_route(config);
+  ASSERT_EQ(poses.size(), 501u);
+  // Length: 100 + 60 + 60 - 4 * 10 (tangents) + 2 * (pi / 2 * 10) (arcs), at constant speed.
+  const double length_m = 180.0 + 10.0 * std::numbers::pi;
+  const Eigen::Vector3d first = poses.front().T_w_b.translation();
+  const Eigen::Vector3d last = poses.back().T_w_b.translation();
+  EXPECT_LT((first - Eigen::Vector3d(0.0, 0.0, config.camera_height_m)).norm(), 1e-9);
+  EXPECT_LT((last - Eigen::Vector3d(160.0, 60.0, config.camera_height_m)).norm(), 1e-9);
+  double travelled_m = 0.0, max_step_m = 0.0, min_step_m = 1e9;
+  for (std::size_t i = 1; i < poses.size(); ++i) {
+    const double step = (poses[i].T_w_b.translation() - poses[i - 1].T_w_b.translation()).norm();
+    travelled_m += step;
+    max_step_m = std::max(max_step_m, step);
+    min_step_m = std::min(min_step_m, step);
+    // Heading continuous and along the motion.
+    const Eigen::Vector3d motion = poses[i].T_w_b.translation() - poses[i - 1].T_w_b.translation();
+    EXPECT_GT(motion.normalized().dot(poses[i].T_w_b.linear().col(0)), 0.995) << i;
+    EXPECT_LT(rotation_error_rad(poses[i].T_w_b.linear(), poses[i - 1].T_w_b.linear()), 0.06) << i;
+  }
+  EXPECT_NEAR(travelled_m, length_m, 0.05);
+  EXPECT_NEAR(max_step_m, min_step_m, 1e-3);  // chords on the arcs are a hair shorter than the arc
+  // Halfway along the first straight, heading east; the middle of the second straight heading north; the
+  // left corner's arc midpoint lies 10 * (sqrt(2) - 1) m inside the waypoint.
+  const auto frame_at = [&](double s_m) {
+    return static_cast<std::size_t>(std::lround(s_m / length_m * 500));
+  };
+  const Eigen::Isometry3d& mid_first = poses[frame_at(45.0)].T_w_b;
+  EXPECT_NEAR(mid_first.translation().y(), 0.0, 1e-9);
+  EXPECT_NEAR(mid_first.linear().col(0).x(), 1.0, 1e-9);
+  const Eigen::Isometry3d& mid_second = poses[frame_at(90.0 + 5.0 * std::numbers::pi + 20.0)].T_w_b;
+  EXPECT_NEAR(mid_second.translation().x(), 100.0, 1e-9);
+  EXPECT_NEAR(mid_second.linear().col(0).y(), 1.0, 1e-9);
+  double corner_m = 1e9;
+  for (const StampedPose& p : poses)
+    corner_m = std::min(corner_m, (p.T_w_b.translation().head<2>() - Eigen::Vector2d(100.0, 0.0)).norm());
+  EXPECT_NEAR(corner_m, 10.0 * (std::sqrt(2.0) - 1.0), 0.02);
+  // The right turn: the last straight heads east again, on y = 60.
+  EXPECT_NEAR(poses[495].T_w_b.translation().y(), 60.0, 1e-9);
+  EXPECT_NEAR(poses[495].T_w_b.linear().col(0).x(), 1.0, 1e-9);
+
+  // Speed modulation and the lateral offset keep the end points: the last frame at the last waypoint, the
+  // offset grown to lap_lateral_offset_m (to the left of the last heading, east: +y).
+  config.speed_variation = 0.15;
+  config.speed_cycles_per_lap = 1.5;
+  config.lap_lateral_offset_m = 0.6;
+  const auto modulated = make_procedural_route(config);
+  EXPECT_LT(
+      (modulated.back().T_w_b.translation() - Eigen::Vector3d(160.0, 60.6, config.camera_height_m)).norm(),
+      1e-9);
+  EXPECT_LT((modulated.front().T_w_b.translation() - first).norm(), 1e-12);
+}
+
 TEST(SplineTrajectory, FitsKitti00) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/poses.txt");
   const auto dir = loopgate::testing::shared_data_dir() / "kitti" / "00";

@@ -192,12 +192,33 @@ SimulationConfig make_preset(const std::string& name, const std::filesystem::pat
   SimulationConfig c;
   c.simulation.preset = name;
   if (name == "demo") {
-    // A street-like drive: two laps of a closed circuit at 10 Hz, day on the first lap, night on the second.
+    // What loopgate is for, in one minute of driving (600 frames at 10 Hz, 625 m, 640 x 200;
+    // configs/demo.yaml): a street map driven once along waypoints (x east, y north, metres; corners rounded
+    // with a 20 m radius, so that cornering at 9-12 m/s stays car-like: |a| p99 7.1 m/s^2):
+    //  - frames 0-175, day: loop A, counter-clockwise round block A (x in [-40, 40], y in [-25, 25]) from
+    //    (-25, -25): east along its south street, north, west along its north street;
+    //  - frames 175-485, new streets driven once: south down x = -40 (15 m west of the start: no revisit) to
+    //    street B (y = -140.6), east along B and its corner (frames 335-400), north up x = 40 back to loop A;
+    //    the light turns to dusk on the way (illumination phase 0.70-0.79, frames 420-474);
+    //  - frames 485-565, dusk: x = 40 rejoins loop A at its south-east corner and drives its east street and
+    //    part of its north street again, the only genuine revisit (67 ground-truth query frames, 492-558, of
+    //    frames 57-118);
+    //  - frames 565-599, dusk: a right turn onto a new street north (the revisit does not end the drive).
+    // Perceptual aliasing: street B and its corner are laid out like loop A's south street and its corner,
+    // 115.6 m further south, and the place copy gives B's facades those of A (same textures, styles,
+    // heights): B by day looks like the start of the drive (frames 0-60), driven the same way under the same
+    // light. B's y = -140.6 puts its facades at the same phase of the facade pitch (12.6 m of path) as A's,
+    // so that each copy stands 0.3-0.7 m from where its source stands relative to the road.
     c.simulation.trajectory_format = "procedural";
     c.simulation.imu_source = "synthesised";
     c.simulation.up_x = 0.0;
     c.simulation.up_y = 0.0;
     c.simulation.up_z = 1.0;
+    c.route.shape = "waypoints";
+    c.route.waypoints = "-25,-25; 40,-25; 40,25; -40,25; -40,-140.6; 40,-140.6; 40,25; -5,25; -5,60";
+    c.route.corner_radius_m = 20.0;
+    c.route.laps = 1;
+    c.route.frames = 600;
     c.simulation.frame_rate_hz = c.route.rate_hz;
     // KITTI-like field of view at 640 x 200; the vehicle body is x forward, y left, z up.
     c.camera = CameraSettings{};
@@ -208,20 +229,32 @@ SimulationConfig make_preset(const std::string& name, const std::filesystem::pat
     c.camera.q_b_c_x = q_b_c.x();
     c.camera.q_b_c_y = q_b_c.y();
     c.camera.q_b_c_z = q_b_c.z();
-    // The circuit's straight-to-arc joints are curvature steps: smoothing rounds them off like a driver
-    // would (longitudinal |a| <= 2.4 m/s^2 instead of 9) for a fit within 3 cm of the generated poses.
+    // The straight-to-arc joints are curvature steps: smoothing rounds them off like a driver would.
     c.fit.smoothing_weight = 3.0;
     c.imu.initial_gyro_bias_sigma_radps = 0.002;
     c.imu.initial_accel_bias_sigma_mps2 = 0.02;
     c.world.kind = "street";
-    c.world.aliasing_fraction = 0.1;
     c.world.street_camera_height_m = c.route.camera_height_m;
-    // Lap 2 at dusk, not full night: with the full-night sensor noise (sigma 9) DIRD at 640 x 200 does not
-    // separate revisits from unrelated places (median L1 88 332 vs 88 512, libdird); at dusk (noise 3) it
-    // does (l2 mode: 42 018 vs 54 260), so the demo can show the detector across a change of light.
+    // Only the deterministic place copy aliases; facades without random setback so that the copies stand
+    // where their sources stand relative to the road. The copied area: street B from x = -20 to its corner
+    // and the first 20 m north of it, from the same part of loop A (9 facades; the others around B have no
+    // counterpart in A, e.g. A's outer corner facade is missing where the street north to the revisit
+    // leaves).
+    c.world.aliasing_fraction = 0.0;
+    c.world.street_facade_offset_jitter_m = 0.0;
+    c.world.alias_copy_source_x_m = 15.0;
+    c.world.alias_copy_source_y_m = -25.0;
+    c.world.alias_copy_target_x_m = 15.0;
+    c.world.alias_copy_target_y_m = -140.6;
+    c.world.alias_copy_rotation_deg = 0.0;
+    c.world.alias_copy_radius_m = 35.0;
+    c.world.alias_copy_tolerance_m = 6.0;
+    // Dusk, not full night, for the revisit: with the full-night sensor noise (sigma 9) DIRD at 640 x 200
+    // does not separate revisits from unrelated places (README "Known limitations"); at dusk (noise 3) it
+    // does. Day until frame 420 (after street B), dusk from frame 474 (before the revisit).
     c.illumination.kind = "day-to-night";
-    c.illumination.transition_start = 0.42;
-    c.illumination.transition_end = 0.58;
+    c.illumination.transition_start = 0.70;
+    c.illumination.transition_end = 0.79;
     c.illumination.night_noise_sigma = 3.0;
     c.illumination.night_ambient = 0.15;
     c.illumination.night_sky_brightness = 0.2;

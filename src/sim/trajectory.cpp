@@ -3,6 +3,7 @@
 #include <Eigen/Sparse>
 #include <Eigen/SparseCholesky>
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -260,11 +261,147 @@ std::vector<StampedPose> load_tum_trajectory(const std::filesystem::path& file) 
   return read_tum(file);
 }
 
+namespace {
+
+// Largest turn at a waypoint: a U-turn cannot be rounded by a fillet.
+constexpr double kMaxWaypointTurnRad = 170.0 * std::numbers::pi / 180.0;
+// Turns below this are treated as straight on (no fillet).
+constexpr double kStraightTurnRad = 1e-9;
+
+// One piece of a waypoint route: a straight, or a circular arc (signed turn, + = left).
+struct RoutePiece {
+  Eigen::Vector2d start = Eigen::Vector2d::Zero();
+  double heading_rad = 0.0;  // at the start of the piece
+  double length_m = 0.0;
+  double turn_rad = 0.0;  // 0 for a straight
+  double radius_m = 0.0;
+};
+
+// The straights and corner arcs of a waypoint polyline with every corner rounded with `radius_m`.
+// Throws ConfigError (route.waypoints) when consecutive points coincide, a turn is a U-turn or a segment
+// is too short for the fillets at its ends.
+std::vector<RoutePiece> waypoint_pieces(const std::vector<Eigen::Vector2d>& points, double radius_m) {
+  const std::size_t n = points.size();
+  std::vector<Eigen::Vector2d> dir(n - 1);
+  std::vector<double> length(n - 1);
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    const Eigen::Vector2d d = points[k + 1] - points[k];
+    length[k] = d.norm();
+    if (!(length[k] > 0.0)) {
+      throw ConfigError("route.waypoints: points " + std::to_string(k) + " and " + std::to_string(k + 1) +
+                        " coincide (expected distinct consecutive points)");
+    }
+    dir[k] = d / length[k];
+  }
+  // Turn and tangent length (distance from the waypoint to where its arc starts / ends) per interior point.
+  std::vector<double> turn(n, 0.0), tangent(n, 0.0);
+  for (std::size_t k = 1; k + 1 < n; ++k) {
+    const Eigen::Vector2d& a = dir[k - 1];
+    const Eigen::Vector2d& b = dir[k];
+    turn[k] = std::atan2(a.x() * b.y() - a.y() * b.x(), a.dot(b));
+    if (std::abs(turn[k]) > kMaxWaypointTurnRad) {
+      throw ConfigError("route.waypoints: the turn at point " + std::to_string(k) +
+                        " is a U-turn (expected turns of at most 170 degrees)");
+    }
+    if (std::abs(turn[k]) < kStraightTurnRad) turn[k] = 0.0;
+    tangent[k] = radius_m * std::tan(0.5 * std::abs(turn[k]));
+  }
+  std::vector<RoutePiece> pieces;
+  for (std::size_t k = 0; k + 1 < n; ++k) {
+    const double straight_m = length[k] - tangent[k] - tangent[k + 1];
+    if (straight_m < 0.0) {
+      throw ConfigError("route.waypoints: segment " + std::to_string(k) + " -> " + std::to_string(k + 1) +
+                        " (" + std::to_string(length[k]) + " m) is shorter than its rounded corners need (" +
+                        std::to_string(tangent[k] + tangent[k + 1]) + " m with route.corner_radius_m " +
+                        std::to_string(radius_m) + ")");
+    }
+    const double heading = std::atan2(dir[k].y(), dir[k].x());
+    RoutePiece straight;
+    straight.start = points[k] + tangent[k] * dir[k];
+    straight.heading_rad = heading;
+    straight.length_m = straight_m;
+    pieces.push_back(straight);
+    if (k + 2 < n && turn[k + 1] != 0.0) {
+      RoutePiece arc;
+      arc.start = points[k + 1] - tangent[k + 1] * dir[k];
+      arc.heading_rad = heading;
+      arc.turn_rad = turn[k + 1];
+      arc.radius_m = radius_m;
+      arc.length_m = radius_m * std::abs(turn[k + 1]);
+      pieces.push_back(arc);
+    }
+  }
+  return pieces;
+}
+
+// Point and heading at distance `along_m` into a piece.
+void piece_point(const RoutePiece& piece, double along_m, Eigen::Vector2d* p, double* heading_rad) {
+  const Eigen::Vector2d d(std::cos(piece.heading_rad), std::sin(piece.heading_rad));
+  if (piece.turn_rad == 0.0) {
+    *p = piece.start + along_m * d;
+    *heading_rad = piece.heading_rad;
+    return;
+  }
+  const double side = piece.turn_rad > 0.0 ? 1.0 : -1.0;  // left turn: centre on the left
+  const Eigen::Vector2d left(-d.y(), d.x());
+  const Eigen::Vector2d centre = piece.start + side * piece.radius_m * left;
+  const double h = piece.heading_rad + side * along_m / piece.radius_m;
+  // The point is at -side * radius * left(h) from the centre.
+  *p = centre - side * piece.radius_m * Eigen::Vector2d(-std::sin(h), std::cos(h));
+  *heading_rad = h;
+}
+
+}  // namespace
+
+std::vector<Eigen::Vector2d> parse_route_waypoints(const std::string& text) {
+  std::vector<Eigen::Vector2d> points;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find(';', start);
+    if (end == std::string::npos) end = text.size();
+    const std::string item = text.substr(start, end - start);
+    start = end + 1;
+    if (item.find_first_not_of(" \t") == std::string::npos) {
+      if (end == text.size()) break;  // a trailing ';'
+      throw ConfigError("route.waypoints: empty point " + std::to_string(points.size()) +
+                        " (expected 'x,y; x,y; ...')");
+    }
+    const std::size_t comma = item.find(',');
+    double xy[2] = {0.0, 0.0};
+    bool ok = comma != std::string::npos && item.find(',', comma + 1) == std::string::npos;
+    for (int c = 0; ok && c < 2; ++c) {
+      std::string field = c == 0 ? item.substr(0, comma) : item.substr(comma + 1);
+      const std::size_t b = field.find_first_not_of(" \t");
+      const std::size_t e = field.find_last_not_of(" \t");
+      field = b == std::string::npos ? std::string() : field.substr(b, e - b + 1);
+      const char* first = field.data();
+      const char* last = field.data() + field.size();
+      const auto [ptr, ec] = std::from_chars(first, last, xy[c]);
+      ok = !field.empty() && ec == std::errc() && ptr == last && std::isfinite(xy[c]);
+    }
+    if (!ok) {
+      throw ConfigError("route.waypoints: point " + std::to_string(points.size()) + " '" + item +
+                        "' is not 'x,y' with two finite numbers in metres");
+    }
+    points.emplace_back(xy[0], xy[1]);
+  }
+  if (points.size() < 2) {
+    throw ConfigError("route.waypoints: " + std::to_string(points.size()) +
+                      " points given, expected at least 2 ('x0,y0; x1,y1; ...')");
+  }
+  return points;
+}
+
 void ProceduralRouteConfig::validate() const {
+  if (shape != "circuit" && shape != "waypoints") {
+    throw ConfigError("route.shape: '" + shape + "' is not one of circuit, waypoints");
+  }
   if (!(corner_radius_m > 0.0)) throw ConfigError("corner_radius_m must be > 0");
-  if (!(length_x_m >= 2.0 * corner_radius_m) || !(length_y_m >= 2.0 * corner_radius_m)) {
+  if (shape == "circuit" &&
+      (!(length_x_m >= 2.0 * corner_radius_m) || !(length_y_m >= 2.0 * corner_radius_m))) {
     throw ConfigError("length_x_m and length_y_m must be >= 2 * corner_radius_m");
   }
+  if (shape == "waypoints") waypoint_pieces(parse_route_waypoints(waypoints), corner_radius_m);
   if (laps < 1) throw ConfigError("laps must be >= 1");
   if (frames < 2) throw ConfigError("frames must be >= 2");
   if (!(rate_hz > 0.0)) throw ConfigError("rate_hz must be > 0");
@@ -273,8 +410,60 @@ void ProceduralRouteConfig::validate() const {
   if (!(heading_wobble_period_s > 0.0)) throw ConfigError("heading_wobble_period_s must be > 0");
 }
 
+namespace {
+
+std::vector<StampedPose> make_waypoint_route(const ProceduralRouteConfig& config) {
+  const std::vector<RoutePiece> pieces =
+      waypoint_pieces(parse_route_waypoints(config.waypoints), config.corner_radius_m);
+  std::vector<double> piece_start_m(pieces.size(), 0.0);
+  double total_m = 0.0;
+  for (std::size_t k = 0; k < pieces.size(); ++k) {
+    piece_start_m[k] = total_m;
+    total_m += pieces[k].length_m;
+  }
+  const auto route_point = [&](double s, Eigen::Vector2d* p, double* heading) {
+    s = std::clamp(s, 0.0, total_m);
+    std::size_t k = static_cast<std::size_t>(std::upper_bound(piece_start_m.begin(), piece_start_m.end(), s) -
+                                             piece_start_m.begin());
+    k = k == 0 ? 0 : k - 1;
+    piece_point(pieces[k], s - piece_start_m[k], p, heading);
+  };
+  // Speed modulation over the whole route, rescaled so that the last frame is at the last waypoint.
+  const double cycles = config.speed_cycles_per_lap;
+  const auto progress = [&](double tau) {
+    const double modulation = cycles > 0.0 ? config.speed_variation / (2.0 * std::numbers::pi * cycles) *
+                                                 std::sin(2.0 * std::numbers::pi * cycles * tau)
+                                           : 0.0;
+    return tau + modulation;
+  };
+  const double progress_end = progress(1.0);
+  std::vector<StampedPose> poses;
+  poses.reserve(static_cast<std::size_t>(config.frames));
+  for (int i = 0; i < config.frames; ++i) {
+    const double tau = static_cast<double>(i) / static_cast<double>(config.frames - 1);
+    const double t_s = static_cast<double>(i) / config.rate_hz;
+    const double s = total_m * progress(tau) / progress_end;
+    Eigen::Vector2d p;
+    double heading = 0.0;
+    route_point(s, &p, &heading);
+    const Eigen::Vector2d left(-std::sin(heading), std::cos(heading));
+    p += config.lap_lateral_offset_m * (s / total_m) * left;
+    const double yaw = heading + config.heading_wobble_rad *
+                                     std::sin(2.0 * std::numbers::pi * t_s / config.heading_wobble_period_s);
+    StampedPose pose;
+    pose.t_ns = config.start_t_ns + s_to_ns(t_s);
+    pose.T_w_b.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    pose.T_w_b.translation() = Eigen::Vector3d(p.x(), p.y(), config.camera_height_m);
+    poses.push_back(pose);
+  }
+  return poses;
+}
+
+}  // namespace
+
 std::vector<StampedPose> make_procedural_route(const ProceduralRouteConfig& config) {
   config.validate();
+  if (config.shape == "waypoints") return make_waypoint_route(config);
   const double r = config.corner_radius_m;
   const double straight_x = config.length_x_m - 2.0 * r;
   const double straight_y = config.length_y_m - 2.0 * r;

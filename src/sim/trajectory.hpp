@@ -91,10 +91,20 @@ std::vector<StampedPose> load_euroc_trajectory(const std::filesystem::path& csv_
 // TUM "t tx ty tz qx qy qz qw".
 std::vector<StampedPose> load_tum_trajectory(const std::filesystem::path& file);
 
-// A street-like drive around a closed rounded-rectangle circuit, `laps` times, with a lateral offset and
-// a speed variation between laps so that revisits are close but not identical. World up is +z; the body
-// frame is x forward, y left, z up, at camera height above the ground plane z = 0.
+// A street-like drive, world up +z; the body frame is x forward, y left, z up, at camera height above the
+// ground plane z = 0. Two shapes:
+//  - "circuit": a closed rounded-rectangle circuit (length_x_m x length_y_m, centred on the origin, starting
+//    mid-way along the bottom straight, counter-clockwise) driven `laps` times, with a lateral offset and a
+//    speed variation between laps so that revisits are close but not identical;
+//  - "waypoints": a street map as a polyline "x0,y0; x1,y1; ..." (metres) driven once from the first to the
+//    last point, every corner rounded with corner_radius_m, so that a drive can revisit some streets (a
+//    waypoint sequence that repeats a street) and not others. `laps` and the length_* keys are unused;
+//    speed_cycles_per_lap periods of the speed modulation span the whole route, and the lateral offset grows
+//    linearly from 0 to lap_lateral_offset_m along it (two passes of one street run that far apart times the
+//    fraction of the route between them).
 struct ProceduralRouteConfig {
+  std::string shape = "circuit";  // "circuit" | "waypoints"
+  std::string waypoints;          // shape "waypoints": "x0,y0; x1,y1; ..." in metres, at least 2 points
   double length_x_m = 90.0;       // circuit extent along x
   double length_y_m = 50.0;       // circuit extent along y
   double corner_radius_m = 14.0;  // radius of the four rounded corners
@@ -111,6 +121,8 @@ struct ProceduralRouteConfig {
 
   template <class V>
   void visit(V&& v) {
+    v("shape", shape);
+    v("waypoints", waypoints);
     v("length_x_m", length_x_m);
     v("length_y_m", length_y_m);
     v("corner_radius_m", corner_radius_m);
@@ -129,5 +141,9 @@ struct ProceduralRouteConfig {
 };
 
 std::vector<StampedPose> make_procedural_route(const ProceduralRouteConfig& config);
+
+// The points of a "waypoints" string ("x0,y0; x1,y1; ..."). Throws ConfigError naming route.waypoints and
+// what was expected for a malformed list (a bad number, a point without two coordinates, fewer than 2).
+std::vector<Eigen::Vector2d> parse_route_waypoints(const std::string& text);
 
 }  // namespace loopgate::sim
