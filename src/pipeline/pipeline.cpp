@@ -31,6 +31,7 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/descriptor_store.hpp"
+#include "pipeline/parallel_handoff.hpp"
 #include "pipeline/run_metrics.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "pipeline/stage_profiler.hpp"
@@ -49,8 +50,18 @@
 extern "C" const char* __tsan_default_suppressions() {
   // race_top: only reports whose top frame lies in a oneTBB header; and the publication of a freshly
   // constructed node's aggregator (exact inlined frame name) to the worker that TBB spawns at make_edge.
+  // The partitioner internals of tbb::parallel_for (tree nodes on the spawning thread's stack, folded by the
+  // thieves) are joined by the library's wait, invisible too.
   return "race_top:/usr/include/oneapi/tbb/\n"
-         "race:^aggregator_generic$\n";
+         "race:^aggregator_generic$\n"
+         "race:tbb::detail::d1::fold_tree\n"
+         "race:tbb::detail::d1::tree_node\n"
+         "race:tbb::detail::d1::node::node\n"
+         "race:check_being_stolen\n"
+         "race:mark_task_stolen\n"
+         // A task's read of the parallel_for body object TBB copied on the spawning thread (two pointers);
+         // everything after it goes through the body's explicit hand-over (parallel_handoff.hpp).
+         "race_top:parallel_handoff.hpp\n";
 }
 #endif
 
@@ -550,7 +561,7 @@ void PipelineRun::describe_requested(FrameRecord& r) {
     store_->publish(k, frame, seq_t_ns_[k], ok);
   };
   if (seqs.size() > 1) {
-    tbb::parallel_for(std::size_t{0}, seqs.size(), describe_one);
+    parallel_for_with_handoff(seqs.size(), describe_one);
   } else if (seqs.size() == 1) {
     describe_one(0);
   }

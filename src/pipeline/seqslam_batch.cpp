@@ -1,14 +1,13 @@
 #include "pipeline/seqslam_batch.hpp"
 
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
-
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
 #include <string>
+
+#include "pipeline/parallel_handoff.hpp"
 
 namespace loopgate {
 
@@ -81,27 +80,23 @@ std::vector<SeqSlamMatch> SeqSlamBatch::search(const SeqSlamImages& reference,
   const auto block_range = [&](std::size_t b) {
     return std::pair{b * kQueryBlock, std::min(count, (b + 1) * kQueryBlock)};
   };
-  // Step 2 and step 3 (per column) in parallel blocks of query columns; the global minimum is reduced.
-  const double minimum = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, blocks), std::numeric_limits<double>::infinity(),
-      [&](const tbb::blocked_range<std::size_t>& range, double running) {
-        for (std::size_t b = range.begin(); b < range.end(); ++b) {
-          const auto [q0, q1] = block_range(b);
-          seqslam_difference_block(reference, query, exclusion, 0, rows, q0, q1, M);
-          running = std::min(running, seqslam_enhance_contrast(M, config.contrast_window_rows, q0, q1));
-        }
-        return running;
-      },
-      [](double a, double b) { return std::min(a, b); });
+  // Step 2 and step 3 (per column) in parallel blocks of query columns, each block's minimum kept; then the
+  // global minimum is subtracted, then step 4 per query column. parallel_for_with_handoff makes the
+  // hand-overs visible to ThreadSanitizer.
+  std::vector<double> block_minimum(blocks, std::numeric_limits<double>::infinity());
+  parallel_for_with_handoff(blocks, [&](std::size_t b) {
+    const auto [q0, q1] = block_range(b);
+    seqslam_difference_block(reference, query, exclusion, 0, rows, q0, q1, M);
+    block_minimum[b] = seqslam_enhance_contrast(M, config.contrast_window_rows, q0, q1);
+  });
+  const double minimum = *std::min_element(block_minimum.begin(), block_minimum.end());
   if (std::isfinite(minimum)) {
-    tbb::parallel_for(std::size_t{0}, blocks, [&](std::size_t b) {
+    parallel_for_with_handoff(blocks, [&](std::size_t b) {
       const auto [q0, q1] = block_range(b);
       seqslam_subtract(M, minimum, q0, q1);
     });
   }
-  // Step 4 per query column.
-  tbb::parallel_for(std::size_t{0}, count,
-                    [&](std::size_t q) { matches[q] = seqslam_match_query(M, q, config); });
+  parallel_for_with_handoff(count, [&](std::size_t q) { matches[q] = seqslam_match_query(M, q, config); });
   return matches;
 }
 
