@@ -41,30 +41,6 @@
 #include "stages/gate/pose_gate.hpp"
 #include "stages/match/sequence_matcher.hpp"
 
-#if defined(__SANITIZE_THREAD__)
-// ThreadSanitizer builds: oneTBB comes from an uninstrumented system library, so the synchronisation of
-// its scheduler (task hand-over, small-object pool reuse, the end of wait_for_all) is invisible and its
-// header-inlined internals show up as races. Only races whose top frame is inside a oneTBB header are
-// suppressed; our node bodies make their hand-overs explicit (FrameRecord::acquire/release, one mutex
-// per serial stage) and stay checked.
-extern "C" const char* __tsan_default_suppressions() {
-  // race_top: only reports whose top frame lies in a oneTBB header; and the publication of a freshly
-  // constructed node's aggregator (exact inlined frame name) to the worker that TBB spawns at make_edge.
-  // The partitioner internals of tbb::parallel_for (tree nodes on the spawning thread's stack, folded by the
-  // thieves) are joined by the library's wait, invisible too.
-  return "race_top:/usr/include/oneapi/tbb/\n"
-         "race:^aggregator_generic$\n"
-         "race:tbb::detail::d1::fold_tree\n"
-         "race:tbb::detail::d1::tree_node\n"
-         "race:tbb::detail::d1::node::node\n"
-         "race:check_being_stolen\n"
-         "race:mark_task_stolen\n"
-         // A task's read of the parallel_for body object TBB copied on the spawning thread (two pointers);
-         // everything after it goes through the body's explicit hand-over (parallel_handoff.hpp).
-         "race_top:parallel_handoff.hpp\n";
-}
-#endif
-
 namespace loopgate {
 
 namespace {
@@ -994,7 +970,7 @@ RunResult PipelineRun::run() {
   std::unique_ptr<queue_node<FramePtr>> queue;
   std::unique_ptr<limiter_node<FramePtr, int>> limiter;
   const auto seq_of = [](const FramePtr& message) { return static_cast<std::size_t>(message.seq); };
-  std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_described, seq_out;
+  std::unique_ptr<sequencer_node<FramePtr>> seq_in, seq_decoded, seq_odometry, seq_described, seq_out;
   std::unique_ptr<function_node<FramePtr, FramePtr>> sync, decode, odometry, gate, describe, match;
   std::unique_ptr<function_node<FramePtr, int>> sink;
   arena.execute([&] {
@@ -1004,6 +980,7 @@ RunResult PipelineRun::run() {
         *g, static_cast<std::size_t>(config_.run.max_in_flight));
     seq_in = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     seq_decoded = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
+    seq_odometry = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     seq_described = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     seq_out = std::make_unique<sequencer_node<FramePtr>>(*g, seq_of);
     sync = std::make_unique<function_node<FramePtr, FramePtr>>(
@@ -1039,7 +1016,10 @@ RunResult PipelineRun::run() {
     make_edge(*sync, *decode);
     make_edge(*decode, *seq_decoded);
     make_edge(*seq_decoded, *odometry);
-    make_edge(*odometry, *gate);
+    // A serial node's outputs can overtake each other (the next body may start before the previous
+    // output is put), so the gate, which needs frames in order, sits behind its own sequencer.
+    make_edge(*odometry, *seq_odometry);
+    make_edge(*seq_odometry, *gate);
     make_edge(*gate, *describe);
     make_edge(*describe, *seq_described);
     make_edge(*seq_described, *match);
@@ -1048,6 +1028,7 @@ RunResult PipelineRun::run() {
     make_edge(*sink, limiter->decrementer());
   });
 
+  tsan_suppressions_anchor();  // TSan builds: links the oneTBB suppressions (parallel_handoff.hpp)
   const double cpu_start_s = cpu_seconds();
   start_ = Clock::now();
   produce(*queue, result);

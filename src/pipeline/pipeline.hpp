@@ -1,11 +1,15 @@
 // `loopgate run`: the oneTBB flow graph (architecture.md § The graph) over one dataset.
 //
-//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► describe* ──► seq
-//   (replay clock,          (K in flight)       (serial) (parallel)          (serial)     (parallel)
-//    main thread)              ▲                                                                     │
-//                              │                         sink ◄── seq ◄── match (serial) ◄───────────┘
+//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► gate ──► describe* ──► seq
+//   (replay clock,          (K in flight)       (serial) (parallel)          (serial)            (serial)  (parallel)     │
+//    main thread)              ▲                                                                                           │
+//                              │                         sink ◄── seq ◄── match (serial) ◄─────────────────────────────────┘
 //                              └──── integer decrement (1 per frame) ◄── (serial)
 //
+// Every serial node sits behind a sequencer: a serial node's outputs can overtake each other.
+// - run.mode = gated: the gate node (PoseGate + CandidateAreaTracker) decides per frame which cells became
+//   covered and which descriptors are needed; describe computes those (past frames read again); match
+//   computes the new cells' similarities and feeds rows older than gate.row_horizon_frames to the matcher.
 // - The producer runs on the calling thread, outside the worker arena. `rate: max` waits for a free slot
 //   (back-pressure, no drops); `rate: R` releases frame i at start + (t_i - t_first) / R on a steady
 //   clock and drops it (counted, before it gets a sequence number) when K frames are in flight.

@@ -1,0 +1,35 @@
+// ThreadSanitizer suppressions for the code that runs on oneTBB (the flow graph, parallel_for_with_handoff).
+// Linked into every program that uses them through tsan_suppressions_anchor() (parallel_handoff.hpp).
+#include "pipeline/parallel_handoff.hpp"
+
+namespace loopgate {
+void tsan_suppressions_anchor() {}
+}  // namespace loopgate
+
+#if defined(__SANITIZE_THREAD__)
+// ThreadSanitizer builds: oneTBB comes from an uninstrumented system library, so the synchronisation of
+// its scheduler (task hand-over, small-object pool reuse, the end of wait_for_all) is invisible and its
+// header-inlined internals show up as races. Only races whose top frame is inside a oneTBB header are
+// suppressed; our node bodies make their hand-overs explicit (FrameRecord::acquire/release, one mutex
+// per serial stage) and stay checked.
+extern "C" const char* __tsan_default_suppressions() {
+  // race_top: only reports whose top frame lies in a oneTBB header; and the publication of a freshly
+  // constructed node's aggregator (exact inlined frame name) to the worker that TBB spawns at make_edge.
+  // The partitioner internals of tbb::parallel_for (tree nodes on the spawning thread's stack, folded by the
+  // thieves) are joined by the library's wait, invisible too.
+  return "race_top:/usr/include/oneapi/tbb/\n"
+         "race:^aggregator_generic$\n"
+         "race:tbb::detail::d1::fold_tree\n"
+         "race:tbb::detail::d1::tree_node\n"
+         "race:tbb::detail::d1::node::node\n"
+         "race:check_being_stolen\n"
+         "race:mark_task_stolen\n"
+         "race:tbb::detail::d1::task_group_context\n"
+         // OpenCV's image reading goes through GDAL, whose own mutexes TSan sees taken in both orders
+         // within one thread (a potential-deadlock report inside libgdal, not in our code).
+         "deadlock:libgdal.so\n"
+         // A task's read of the parallel_for body object TBB copied on the spawning thread (two pointers);
+         // everything after it goes through the body's explicit hand-over (parallel_handoff.hpp).
+         "race_top:parallel_handoff.hpp\n";
+}
+#endif
