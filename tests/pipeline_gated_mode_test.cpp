@@ -252,6 +252,28 @@ TEST(PipelineGatedMode, OneAndTwoThreadsGiveIdenticalOutputs) {
     EXPECT_EQ(read_file(out1 / file), read_file(out2 / file)) << file;
 }
 
+// With every frame decoded (as a visual odometry source needs), the recent images are kept: describe takes
+// the rows just behind a new area from the cache instead of reading them again; results are unchanged.
+TEST(PipelineGatedMode, ImageCacheServesRecentFramesWithIdenticalResults) {
+  const RevisitDataset dataset = detour_dataset();
+  PipelineConfig cached = gated_config();
+  cached.run.decode = "all";
+  PipelineConfig uncached = cached;
+  uncached.run.image_cache_frames = 0;
+  const auto out_cached = testing::make_temp_dir("pipeline-gated-cache");
+  const auto out_uncached = testing::make_temp_dir("pipeline-gated-nocache");
+  const RunResult a = run_pipeline(cached, dataset, out_cached);
+  const RunResult b = run_pipeline(uncached, dataset, out_uncached);
+  ASSERT_FALSE(a.failed || b.failed);
+  for (const char* file : {"loops.csv", "candidate_cells.csv", "descriptors.csv"})
+    EXPECT_EQ(read_file(out_cached / file), read_file(out_uncached / file)) << file;
+  EXPECT_GT(a.summary["image_cache_hits"].get<std::size_t>(), 0u);
+  EXPECT_EQ(b.summary["image_cache_hits"].get<std::size_t>(), 0u);
+  EXPECT_EQ(a.summary["images_read_for_description"].get<std::size_t>() +
+                a.summary["image_cache_hits"].get<std::size_t>(),
+            b.summary["images_read_for_description"].get<std::size_t>());
+}
+
 TEST(PipelineGatedMode, UnreadablePastFrameIsReportedAndTheRunCompletes) {
   RevisitDataset dataset = detour_dataset();
   dataset.corrupt_frames = {130};  // a reference the second lap's area needs

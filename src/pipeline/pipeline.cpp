@@ -261,7 +261,7 @@ class PipelineRun {
   }
 
   void stage_sync(FrameRecord& r);
-  void stage_decode(FrameRecord& r) const;
+  void stage_decode(FrameRecord& r);
   void stage_odometry(FrameRecord& r);
   void stage_gate(FrameRecord& r);
   void stage_describe(FrameRecord& r);
@@ -322,6 +322,12 @@ class PipelineRun {
   std::vector<std::uint32_t> row_cells_;
   std::size_t next_push_seq_ = 0, match_end_seq_ = 0;
   std::atomic<std::size_t> images_read_for_description_{0};
+  // Recently decoded images (gated mode, run.image_cache_frames): (seq, image), oldest first.
+  std::mutex image_cache_mutex_;
+  std::deque<std::pair<std::size_t, cv::Mat>> image_cache_;
+  std::atomic<std::size_t> image_cache_hits_{0};
+  void cache_image(std::size_t seq, const cv::Mat& image);
+  cv::Mat cached_image(std::size_t seq);
 
   // seqslam method: describe preprocesses every frame; the search runs at the end of the stream
   bool seqslam_ = false;
@@ -418,11 +424,28 @@ void PipelineRun::stage_sync(FrameRecord& r) {
   for (const auto& message : r.imu.report.messages) add_message(r.warnings, message);
 }
 
-void PipelineRun::stage_decode(FrameRecord& r) const {
+void PipelineRun::cache_image(std::size_t seq, const cv::Mat& image) {
+  const auto capacity = static_cast<std::size_t>(config_.run.image_cache_frames);
+  if (!gated_ || capacity == 0) return;
+  std::lock_guard lock(image_cache_mutex_);
+  image_cache_.emplace_back(seq, image);  // shares the pixels (reference counted)
+  while (image_cache_.size() > capacity) image_cache_.pop_front();
+}
+
+cv::Mat PipelineRun::cached_image(std::size_t seq) {
+  std::lock_guard lock(image_cache_mutex_);
+  for (const auto& [cached_seq, image] : image_cache_) {
+    if (cached_seq == seq) return image;
+  }
+  return {};
+}
+
+void PipelineRun::stage_decode(FrameRecord& r) {
   if (!r.needs_pixels) return;
   try {
     r.image = dataset_.load_image(r.frame);
     r.decoded = true;
+    cache_image(static_cast<std::size_t>(r.seq), r.image);
   } catch (const DataError& e) {
     add_message(r.errors, std::string("image: ") + e.what());
   }
@@ -520,6 +543,9 @@ void PipelineRun::describe_requested(FrameRecord& r) {
     bool ok = false;
     if (k == r.seq && r.decoded) {
       image = r.image;
+      ok = true;
+    } else if (image = cached_image(k); !image.empty()) {
+      image_cache_hits_.fetch_add(1, std::memory_order_relaxed);
       ok = true;
     } else {
       try {
@@ -1381,6 +1407,7 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
       {"end_of_stream_ms", end_of_stream_ms_},
       {"images_decoded", decoded_ + images_read_for_description_.load()},
       {"images_read_for_description", images_read_for_description_.load()},
+      {"image_cache_hits", image_cache_hits_.load()},
       {"candidate_areas", gated_ ? tracker_->areas().size() : 0},
       {"descriptors_computed", descriptors_computed_.load()},
       {"similarities_computed", similarities_computed_.load()},

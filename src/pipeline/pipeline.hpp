@@ -1,10 +1,12 @@
 // `loopgate run`: the oneTBB flow graph (architecture.md § The graph) over one dataset.
 //
-//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► gate ──► describe* ──► seq
-//   (replay clock,          (K in flight)       (serial) (parallel)          (serial)            (serial)  (parallel)     │
-//    main thread)              ▲                                                                                           │
-//                              │                         sink ◄── seq ◄── match (serial) ◄─────────────────────────────────┘
-//                              └──── integer decrement (1 per frame) ◄── (serial)
+//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► gate ──►
+//   describe* ──► seq (replay clock,          (K in flight)       (serial) (parallel)          (serial)
+//   (serial)  (parallel)     │
+//    main thread)              ▲ │
+//                              │                         sink ◄── seq ◄── match (serial)
+//                              ◄─────────────────────────────────┘ └──── integer decrement (1 per frame) ◄──
+//                              (serial)
 //
 // Every serial node sits behind a sequencer: a serial node's outputs can overtake each other.
 // - run.mode = gated: the gate node (PoseGate + CandidateAreaTracker) decides per frame which cells became

@@ -65,6 +65,7 @@ void RunConfig::validate() const {
   require_one_of("run.decode", decode, {"lazy", "all"});
   require(camera_index == 0 || camera_index == 1, "run.camera_index", "0 or 1", std::to_string(camera_index));
   require(deadline_ms >= 0, "run.deadline_ms", ">= 0", std::to_string(deadline_ms));
+  require(image_cache_frames >= 0, "run.image_cache_frames", ">= 0", std::to_string(image_cache_frames));
   if (!frames.empty()) frame_range(static_cast<std::size_t>(-1));
 }
 

@@ -37,6 +37,10 @@ struct RunConfig {
   bool strict = false;          // open the dataset strictly (first bad row fails) instead of leniently
   int camera_index = 0;         // 0 or 1 (stereo layouts)
   double deadline_ms = 0;       // rate mode: time a frame may take from release to sink; 0 = frame period
+  // gated mode: decoded images of the most recent frames kept for describe (a new candidate area asks for
+  // the descriptors of the rows just behind the current frame); older frames are read again from the
+  // dataset. 0 = no cache. Memory: this many images.
+  int image_cache_frames = 64;
 
   template <class V>
   void visit(V&& v) {
@@ -51,6 +55,7 @@ struct RunConfig {
     v("strict", strict);
     v("camera_index", camera_index);
     v("deadline_ms", deadline_ms);
+    v("image_cache_frames", image_cache_frames);
   }
   void validate() const;
 
