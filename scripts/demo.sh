@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: installs dependencies, builds, renders the synthetic `demo`
-# dataset if it is absent (a procedural street drive, two laps, the second at dusk), then runs
+# dataset if it is absent (a street drive: a block by day, new streets with an aliased copy of it, the block again at dusk), then runs
 # `loopgate compare` on it: full DIRD, gated DIRD (the paper's method) and SeqSLAM side by side, printing
 # one table (time per stage, descriptors, loops true/false, PR figures) and writing the plots.
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/demo; the comparison goes to OUT_DIR-compare)
