@@ -1264,55 +1264,22 @@ nlohmann::json PipelineRun::evaluate_loops() {
 
   std::vector<Detection> detections;
   detections.reserve(detections_.size());
-  std::size_t within = 0;
-  for (const Detection& d : detections_) {
+  for (const Detection& d : detections_)
     detections.push_back({d.query - first_frame_, d.reference - first_frame_, d.score});
-    if (truth.is_true_match(detections.back().query, detections.back().reference)) ++within;
-  }
-  PrConfig pr_config;
-  pr_config.score_order = seqslam_ ? "lower_is_better" : "higher_is_better";
   // SeqSLAM: the PR sweep runs over every query's match (accepted or not: the ratio is the threshold);
   // loop_truth counts the accepted ones (loops.csv).
   std::vector<Detection> candidates;
   for (const Detection& d : seqslam_candidates_)
     candidates.push_back({d.query - first_frame_, d.reference - first_frame_, d.score});
-  const PrResult pr = evaluate_precision_recall(seqslam_ ? candidates : detections, truth, pr_config);
-  std::size_t best_within = 0;
-  const auto best = best_detection_per_query(detections, pr_config.lower_is_better());
-  for (const Detection& d : best) best_within += truth.is_true_match(d.query, d.reference) ? 1 : 0;
-  nlohmann::json curve = nlohmann::json::array();
-  for (const PrPoint& point : pr.curve) {
-    curve.push_back({{"threshold", point.threshold},
-                     {"precision", point.precision},
-                     {"recall", point.recall},
-                     {"detections", point.detections},
-                     {"true_positives", point.true_positives}});
-  }
-  nlohmann::json out = {
-      {"available", true},
-      {"truth",
-       {{"radius_m", truth_config.radius_m},
-        {"gap_frames", truth_config.gap_frames},
-        {"plane", truth_config.plane},
-        {"accept_radius_m", truth_config.effective_accept_radius_m()},
-        {"positives", truth.positive_count()}}},
-      {"loop_truth",
-       {{"loops", detections.size()},
-        {"loops_true", within},
-        {"loops_false", detections.size() - within},
-        {"query_frames_with_loops", best.size()},
-        {"query_best_loop_true", best_within},
-        {"query_best_loop_false", best.size() - best_within}}},
-      {"precision_recall",
-       {{"score_order", pr_config.score_order},
-        {"positives", pr.positives},
-        {"queries_with_detection", pr.queries_with_detection},
-        {"average_precision", pr.average_precision},
-        {"recall_at_100", pr.recall_at_100},
-        {"recall_at_99", pr.recall_at_99},
-        {"recall_at_95", pr.recall_at_95},
-        {"curve", curve}}},
-  };
+  nlohmann::json out = {{"available", true},
+                        {"truth",
+                         {{"radius_m", truth_config.radius_m},
+                          {"gap_frames", truth_config.gap_frames},
+                          {"plane", truth_config.plane},
+                          {"accept_radius_m", truth_config.effective_accept_radius_m()},
+                          {"positives", truth.positive_count()}}}};
+  out.update(loop_evaluation_json(detections, seqslam_ ? candidates : detections, truth,
+                                  seqslam_ ? "lower_is_better" : "higher_is_better"));
   if (gated_ && tracker_) {
     // Positives the matcher could find (true reference at least match.margin frames back), and whether a
     // candidate area covers one of their true pairs.
