@@ -1,11 +1,12 @@
-// The DIRD descriptors of one run, by sequence number (full mode): written once per frame by the
-// describe node (in parallel) and read by the similarity rows of later frames.
+// The DIRD descriptors of one run, by sequence number (full and gated mode): written once per frame by the
+// describe node (in parallel) and read by the similarity rows of later frames. Frame index and time of a
+// sequence number are the run's (PipelineRun keeps them), not the store's.
 //
-// Publication: put() writes the descriptor and its frame/time, then stores the state with release;
+// Publication: publish() stores the state with release after the descriptor was written;
 // readers check state() with acquire before they read an entry (this is also the hand-over that
 // ThreadSanitizer sees). Capacity is fixed at construction (the number of frames the run may release);
-// the arrays are allocated uninitialised, so memory is committed only as frames are written: 3456 bytes
-// of descriptor + 16 bytes of frame index and time + 1 state byte per frame.
+// the descriptor array is allocated uninitialised, so memory is committed only as frames are written:
+// 3456 bytes of descriptor + 1 state byte per frame.
 #pragma once
 
 #include <atomic>
@@ -28,7 +29,6 @@ class DescriptorStore {
   explicit DescriptorStore(std::size_t capacity)
       : capacity_(capacity),
         descriptors_(new Descriptor[capacity]),
-        meta_(new Meta[capacity]),
         state_(new std::atomic<std::uint8_t>[capacity]) {
     for (std::size_t k = 0; k < capacity; ++k) state_[k].store(0, std::memory_order_relaxed);
   }
@@ -40,10 +40,9 @@ class DescriptorStore {
 
   // Publishes entry `seq`: `valid` = the slot holds the frame's descriptor; otherwise the slot is zeroed
   // (no descriptor, e.g. the image did not decode) and rows skip it.
-  void publish(std::size_t seq, std::size_t frame, Timestamp t_ns, bool valid) {
+  void publish(std::size_t seq, bool valid) {
     check(seq);
     if (!valid) std::memset(descriptors_[seq].data(), 0, kDirdBytes);
-    meta_[seq] = Meta{frame, t_ns};
     state_[seq].store(static_cast<std::uint8_t>(valid ? State::kValid : State::kNoDescriptor),
                       std::memory_order_release);
   }
@@ -53,14 +52,8 @@ class DescriptorStore {
   }
   const Descriptor* data() const { return descriptors_.get(); }
   const Descriptor& descriptor(std::size_t seq) const { return descriptors_[check(seq)]; }
-  std::size_t frame(std::size_t seq) const { return meta_[check(seq)].frame; }
-  Timestamp t_ns(std::size_t seq) const { return meta_[check(seq)].t_ns; }
 
  private:
-  struct Meta {
-    std::size_t frame;
-    Timestamp t_ns;
-  };
   std::size_t check(std::size_t seq) const {
     if (seq >= capacity_) {
       throw std::out_of_range("DescriptorStore: seq " + std::to_string(seq) + " beyond capacity " +
@@ -71,7 +64,6 @@ class DescriptorStore {
 
   std::size_t capacity_;
   std::unique_ptr<Descriptor[]> descriptors_;  // default-initialised: pages committed when written
-  std::unique_ptr<Meta[]> meta_;
   std::unique_ptr<std::atomic<std::uint8_t>[]> state_;
 };
 

@@ -560,7 +560,7 @@ void PipelineRun::describe_requested(FrameRecord& r) {
       extractor_->extract(image, store_->slot(k));
       descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
     }
-    store_->publish(k, frame, seq_t_ns_[k], ok);
+    store_->publish(k, ok);
   };
   if (seqs.size() > 1) {
     parallel_for_with_handoff(seqs.size(), describe_one);
@@ -570,7 +570,6 @@ void PipelineRun::describe_requested(FrameRecord& r) {
   for (auto& problem : problems) {
     if (!problem.empty()) add_message(r.warnings, std::move(problem));
   }
-  r.described = store_->state(r.seq) == DescriptorStore::State::kValid;
 }
 
 // describe (parallel): the frame's DIRD descriptor, and its similarities against the earlier frames
@@ -605,7 +604,7 @@ void PipelineRun::stage_describe(FrameRecord& r) {
     r.described = true;
     descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
   }
-  store_->publish(seq, r.frame, r.t_ns, r.described);
+  store_->publish(seq, r.described);
   if (!r.described) return;
   const std::size_t margin = static_cast<std::size_t>(config_.match.margin);
   const std::size_t limit = std::max(margin, static_cast<std::size_t>(config_.run.max_in_flight));
