@@ -92,7 +92,8 @@ TEST(E2eFullMode, GeneratedRevisitsGiveLoopsAndEveryFrameOneStatus) {
   const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
   EXPECT_EQ(summary["loops"].get<std::size_t>(), loops.size());
   EXPECT_EQ(summary["descriptors_computed"].get<std::size_t>(), 3u * kPeriod);
-  // Ground truth is in the dataset: every detection lies on a revisit (within the default accept radius, r_true = 2 m).
+  // Ground truth is in the dataset: every detection lies on a revisit (within the default accept radius,
+  // r_true = 2 m).
   EXPECT_EQ(summary["evaluation"]["loop_truth"]["loops_true"].get<std::size_t>(), loops.size());
   EXPECT_EQ(summary["config"]["run"]["mode"].get<std::string>(), "full");
 }

@@ -27,11 +27,7 @@ using testing::read_csv;
 using testing::read_file;
 using testing::RevisitDataset;
 
-std::size_t column(const std::vector<std::string>& header, const std::string& name) {
-  const auto it = std::find(header.begin(), header.end(), name);
-  if (it == header.end()) throw std::runtime_error("no column " + name);
-  return static_cast<std::size_t>(it - header.begin());
-}
+using testing::column_index;
 
 constexpr std::size_t kPeriod = 120;
 
@@ -118,9 +114,9 @@ TEST(PipelineFullMode, EveryFrameOnceWithExactlyOneStatus) {
   std::vector<std::string> header;
   const auto rows = read_csv(out / "frames.csv", &header);
   ASSERT_EQ(rows.size(), 2 * kPeriod);
-  const std::size_t detection = column(header, "detection");
-  const std::size_t descriptor = column(header, "descriptor");
-  const std::size_t reason = column(header, "detection_reason");
+  const std::size_t detection = column_index(header, "detection");
+  const std::size_t descriptor = column_index(header, "descriptor");
+  const std::size_t reason = column_index(header, "detection_reason");
   const std::set<std::string> outcomes = {"no candidate", "below threshold", "suppressed", "loop"};
   std::set<std::string> seen;
   std::set<std::size_t> loop_frames;

@@ -193,11 +193,9 @@ TEST(PipelineGatedMode, LoopsAreTheBatchResultOnTheCoveredCellsAndDpEqualsFullIn
   // when its row was written (a frame can be described later, as the reference of a later area).
   std::vector<std::string> header;
   const auto rows = read_csv(out / "frames.csv", &header);
-  const auto col = [&](const std::string& name) {
-    return static_cast<std::size_t>(std::find(header.begin(), header.end(), name) - header.begin());
-  };
-  ASSERT_LT(col("area_id"), header.size());
-  ASSERT_LT(col("gate_d_m"), header.size());
+  const auto col = [&](const std::string& name) { return testing::column_index(header, name); };
+  ASSERT_NO_THROW(col("area_id"));
+  ASSERT_NO_THROW(col("gate_d_m"));
   ASSERT_EQ(rows.size(), 3 * kPeriod);
   for (std::size_t k = 0; k < rows.size(); ++k) {
     const auto frame = static_cast<std::int64_t>(k);

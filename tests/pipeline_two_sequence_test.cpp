@@ -23,11 +23,7 @@ using testing::read_csv;
 using testing::read_file;
 using testing::RevisitDataset;
 
-std::size_t column(const std::vector<std::string>& header, const std::string& name) {
-  const auto it = std::find(header.begin(), header.end(), name);
-  if (it == header.end()) throw std::runtime_error("no column " + name);
-  return static_cast<std::size_t>(it - header.begin());
-}
+using testing::column_index;
 
 constexpr std::size_t kPeriod = 120;
 
@@ -74,7 +70,7 @@ TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
   std::vector<std::string> header;
   const auto rows = read_csv(out / "frames.csv", &header);
   ASSERT_EQ(rows.size(), kPeriod);
-  const std::size_t match = column(header, "match_frame");
+  const std::size_t match = column_index(header, "match_frame");
   std::size_t best_aligned = 0;
   for (std::size_t q = 0; q < rows.size(); ++q) {
     EXPECT_EQ(rows[q][0], std::to_string(q));
@@ -82,8 +78,8 @@ TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
       ++best_aligned;
     }
   }
-  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
-  EXPECT_EQ(rows[50][column(header, "status")], "error");
+  EXPECT_EQ(rows[50][column_index(header, "descriptor")], "n");
+  EXPECT_EQ(rows[50][column_index(header, "status")], "error");
   EXPECT_GE(best_aligned, kPeriod * 8 / 10);
   const nlohmann::json& summary = result.summary;
   EXPECT_EQ(summary["aligned"]["loops_within_tolerance"].get<std::size_t>(), result.loops);
@@ -122,9 +118,9 @@ TEST(PipelineTwoSequence, SeqSlamFindsTheAlignedReferences) {
   std::vector<std::string> header;
   const auto rows = read_csv(out / "frames.csv", &header);
   ASSERT_EQ(rows.size(), kPeriod);
-  const std::size_t match = column(header, "match_frame");
-  const std::size_t score = column(header, "match_score");
-  const std::size_t detection = column(header, "detection");
+  const std::size_t match = column_index(header, "match_frame");
+  const std::size_t score = column_index(header, "match_score");
+  const std::size_t detection = column_index(header, "detection");
   const std::size_t half = 5;  // ds / 2 with the default ds = 10
   std::size_t with_match = 0, aligned = 0, ranked = 0, ranked_true = 0, accepted = 0;
   for (std::size_t q = 0; q < kPeriod; ++q) {
@@ -149,8 +145,8 @@ TEST(PipelineTwoSequence, SeqSlamFindsTheAlignedReferences) {
   EXPECT_EQ(with_match, kPeriod - 2 * half);
   EXPECT_GE(aligned, with_match * 95 / 100);
   EXPECT_GE(accepted, with_match * 8 / 10);
-  EXPECT_EQ(rows[50][column(header, "descriptor")], "n");
-  EXPECT_EQ(rows[50][column(header, "status")], "error");
+  EXPECT_EQ(rows[50][column_index(header, "descriptor")], "n");
+  EXPECT_EQ(rows[50][column_index(header, "status")], "error");
 
   const auto loops = read_csv(out / "loops.csv");
   ASSERT_EQ(loops.size(), accepted);
@@ -203,7 +199,7 @@ TEST(PipelineTwoSequence, SeqSlamFrameRangeAndThreadCountIndependent) {
   EXPECT_EQ(rows.back()[0], "99");
   std::size_t aligned = 0;
   for (const auto& row : rows) {
-    const std::string& m = row[column(header, "match_frame")];
+    const std::string& m = row[column_index(header, "match_frame")];
     if (!m.empty() && std::abs(std::stol(m) - std::stol(row[0])) <= 1) ++aligned;
   }
   EXPECT_GE(aligned, 65u);  // 70 with a match (5 at either end have none)

@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <cstdlib>
@@ -10,6 +11,7 @@
 #include <mutex>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 namespace loopgate::testing {
@@ -94,6 +96,12 @@ std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file
     rows.push_back(cells);
   }
   return rows;
+}
+
+std::size_t column_index(const std::vector<std::string>& header, const std::string& name) {
+  const auto it = std::find(header.begin(), header.end(), name);
+  if (it == header.end()) throw std::runtime_error("no column " + name);
+  return static_cast<std::size_t>(it - header.begin());
 }
 
 }  // namespace loopgate::testing

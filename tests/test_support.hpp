@@ -22,6 +22,8 @@ std::string read_file(const std::filesystem::path& file);
 // row, which goes to *header when given.
 std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file,
                                                std::vector<std::string>* header = nullptr);
+// Index of column `name` in a CSV header; throws std::runtime_error naming it when absent.
+std::size_t column_index(const std::vector<std::string>& header, const std::string& name);
 
 }  // namespace loopgate::testing
 
