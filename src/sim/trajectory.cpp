@@ -412,6 +412,21 @@ void ProceduralRouteConfig::validate() const {
 
 namespace {
 
+// The body pose at time t_s on a procedural route: the route point p with its heading, shifted left by the
+// lateral offset grown to `offset_fraction` of lap_lateral_offset_m, camera height, heading wobble.
+StampedPose route_pose(const ProceduralRouteConfig& config, double t_s, double offset_fraction,
+                       Eigen::Vector2d p, double heading) {
+  const Eigen::Vector2d left(-std::sin(heading), std::cos(heading));
+  p += config.lap_lateral_offset_m * offset_fraction * left;
+  const double yaw = heading + config.heading_wobble_rad *
+                                   std::sin(2.0 * std::numbers::pi * t_s / config.heading_wobble_period_s);
+  StampedPose pose;
+  pose.t_ns = config.start_t_ns + s_to_ns(t_s);
+  pose.T_w_b.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  pose.T_w_b.translation() = Eigen::Vector3d(p.x(), p.y(), config.camera_height_m);
+  return pose;
+}
+
 std::vector<StampedPose> make_waypoint_route(const ProceduralRouteConfig& config) {
   const std::vector<RoutePiece> pieces =
       waypoint_pieces(parse_route_waypoints(config.waypoints), config.corner_radius_m);
@@ -446,15 +461,7 @@ std::vector<StampedPose> make_waypoint_route(const ProceduralRouteConfig& config
     Eigen::Vector2d p;
     double heading = 0.0;
     route_point(s, &p, &heading);
-    const Eigen::Vector2d left(-std::sin(heading), std::cos(heading));
-    p += config.lap_lateral_offset_m * (s / total_m) * left;
-    const double yaw = heading + config.heading_wobble_rad *
-                                     std::sin(2.0 * std::numbers::pi * t_s / config.heading_wobble_period_s);
-    StampedPose pose;
-    pose.t_ns = config.start_t_ns + s_to_ns(t_s);
-    pose.T_w_b.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    pose.T_w_b.translation() = Eigen::Vector3d(p.x(), p.y(), config.camera_height_m);
-    poses.push_back(pose);
+    poses.push_back(route_pose(config, t_s, s / total_m, p, heading));
   }
   return poses;
 }
@@ -514,16 +521,7 @@ std::vector<StampedPose> make_procedural_route(const ProceduralRouteConfig& conf
     Eigen::Vector2d p;
     double heading = 0.0;
     circuit(start_offset_m + s, &p, &heading);
-    const double lap_progress = s / perimeter;
-    const Eigen::Vector2d left(-std::sin(heading), std::cos(heading));
-    p += config.lap_lateral_offset_m * lap_progress * left;
-    const double yaw = heading + config.heading_wobble_rad *
-                                     std::sin(2.0 * std::numbers::pi * t_s / config.heading_wobble_period_s);
-    StampedPose pose;
-    pose.t_ns = config.start_t_ns + s_to_ns(t_s);
-    pose.T_w_b.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    pose.T_w_b.translation() = Eigen::Vector3d(p.x(), p.y(), config.camera_height_m);
-    poses.push_back(pose);
+    poses.push_back(route_pose(config, t_s, s / perimeter, p, heading));
   }
   return poses;
 }
