@@ -24,7 +24,6 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/pipeline.hpp"
-#include "stages/dird/dird_extractor.hpp"
 
 namespace loopgate::app {
 
@@ -158,15 +157,10 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
   return out;
 }
 
-// A DIRD descriptor of one frame (the gated run's first loop query, else the middle frame), for the plots.
-void write_descriptor_example(const PipelineConfig& config, const Dataset& dataset, const fs::path& run_dir) {
-  std::size_t frame = dataset.frame_count() / 2;
-  std::ifstream loops(run_dir / "loops.csv");
-  std::string line;
-  if (std::getline(loops, line) && std::getline(loops, line))
-    frame = std::stoul(line.substr(0, line.find(',')));
-  const DirdExtractor extractor(config.dird);
-  const Descriptor d = extractor.extract(dataset.load_image(frame));
+// The run's example descriptor (DIRD: its first loop's query frame, else the middle frame) for the plots.
+void write_descriptor_example(const RunResult& result, const fs::path& run_dir) {
+  if (!result.example_descriptor) return;
+  const auto& [frame, d] = *result.example_descriptor;
   std::ofstream out(run_dir / "descriptor.csv");
   out << frame;
   for (const std::uint8_t v : d) out << ',' << static_cast<int>(v);
@@ -227,7 +221,7 @@ int compare_command(const CompareOptions& options) {
       break;
     }
     if (result.interrupted) break;
-    if (method == "gated") write_descriptor_example(config, *dataset, out_dir / method);
+    if (method == "gated") write_descriptor_example(result, out_dir / method);
   }
   std::signal(SIGINT, previous);
 

@@ -4,13 +4,25 @@
 
 namespace loopgate {
 
-Timestamp s_to_ns(double t_s) { return static_cast<Timestamp>(std::llround(t_s * kNsPerS)); }
+Timestamp s_to_ns(double t_s) {
+  return static_cast<Timestamp>(std::llround(t_s * kNsPerS));
+}
 
 const char* to_string(OdometryStatus status) {
   switch (status) {
     case OdometryStatus::kInitialising: return "initialising";
     case OdometryStatus::kTracking: return "tracking";
     case OdometryStatus::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+const char* to_string(FrameOutcome outcome) {
+  switch (outcome) {
+    case FrameOutcome::kNoCandidate: return "no candidate";
+    case FrameOutcome::kBelowThreshold: return "below threshold";
+    case FrameOutcome::kSuppressed: return "suppressed";
+    case FrameOutcome::kLoop: return "loop";
   }
   return "unknown";
 }

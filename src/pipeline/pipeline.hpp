@@ -41,9 +41,12 @@
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
+#include <utility>
 
 #include "pipeline/pipeline_config.hpp"
+#include "stages/dird/dird_extractor.hpp"
 
 namespace loopgate {
 
@@ -61,6 +64,9 @@ struct RunResult {
   std::string error;          // the failure, naming stage, seq and frame
   std::string profile_table;  // the profiler table (also in summary.json as numbers)
   nlohmann::json summary;     // what summary.json holds
+  // A descriptor for the plots' picture (DIRD methods: the first loop's query frame, else the middle
+  // frame), with its dataset frame index.
+  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor;
 };
 
 // Runs the graph over `dataset` and writes frames.csv, trajectory.tum, timing.csv, summary.json (and

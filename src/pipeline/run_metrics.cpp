@@ -68,40 +68,4 @@ nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_
           {"se3_rmse_m", ate_se3.rmse_m}};
 }
 
-nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
-                                    const LoopGroundTruth& truth, const std::string& score_order) {
-  PrConfig pr_config;
-  pr_config.score_order = score_order;
-  pr_config.validate();
-  const PrResult pr = evaluate_precision_recall(ranked, truth, pr_config);
-  std::size_t loops_true = 0, best_true = 0;
-  for (const Detection& d : loops) loops_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
-  const std::vector<Detection> best = best_detection_per_query(loops, pr_config.lower_is_better());
-  for (const Detection& d : best) best_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
-  nlohmann::json curve = nlohmann::json::array();
-  for (const PrPoint& point : pr.curve) {
-    curve.push_back({{"threshold", point.threshold},
-                     {"precision", point.precision},
-                     {"recall", point.recall},
-                     {"detections", point.detections},
-                     {"true_positives", point.true_positives}});
-  }
-  return {{"loop_truth",
-           {{"loops", loops.size()},
-            {"loops_true", loops_true},
-            {"loops_false", loops.size() - loops_true},
-            {"query_frames_with_loops", best.size()},
-            {"query_best_loop_true", best_true},
-            {"query_best_loop_false", best.size() - best_true}}},
-          {"precision_recall",
-           {{"score_order", pr_config.score_order},
-            {"positives", pr.positives},
-            {"queries_with_detection", pr.queries_with_detection},
-            {"average_precision", pr.average_precision},
-            {"recall_at_100", pr.recall_at_100},
-            {"recall_at_99", pr.recall_at_99},
-            {"recall_at_95", pr.recall_at_95},
-            {"curve", curve}}}};
-}
-
 }  // namespace loopgate

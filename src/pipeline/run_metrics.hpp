@@ -1,14 +1,11 @@
-// Accuracy figures of a run for summary.json: the trajectory (the odometry poses reported as tracking,
-// against the dataset's ground truth interpolated to the same times, with the ATE of src/eval) and the loop
-// detections (scored against ground-truth loops, with the PR evaluation of src/eval).
+// Accuracy of a run's trajectory for summary.json: the odometry poses reported as tracking, against the
+// dataset's ground truth interpolated to the same times, with the ATE of src/eval.
 #pragma once
 
 #include <nlohmann/json.hpp>
 #include <vector>
 
 #include "core/types.hpp"
-#include "eval/ground_truth.hpp"
-#include "eval/precision_recall.hpp"
 
 namespace loopgate {
 
@@ -24,15 +21,5 @@ class Dataset;
 // `tracked_poses` must be sorted by time.
 nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_poses,
                                         const Dataset& dataset);
-
-// {"loop_truth": {loops, loops_true, loops_false, query_frames_with_loops, query_best_loop_true,
-//                 query_best_loop_false},
-//  "precision_recall": {score_order, positives, queries_with_detection, average_precision, recall_at_100,
-//                       recall_at_99, recall_at_95, curve: [{threshold, precision, recall, detections,
-//                       true_positives}, ...]}}
-// `loops`: the reported detections (loops.csv); `ranked`: the detections the PR sweep runs over (DIRD: the
-// loops; SeqSLAM: every query's match, accepted or not). Indices as `truth` expects them.
-nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
-                                    const LoopGroundTruth& truth, const std::string& score_order);
 
 }  // namespace loopgate

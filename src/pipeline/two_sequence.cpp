@@ -20,16 +20,17 @@
 #include <vector>
 
 #include "core/error.hpp"
-#include "eval/ground_truth.hpp"
-#include "eval/precision_recall.hpp"
+#include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
-#include "pipeline/run_metrics.hpp"
+#include "pipeline/loops_writer.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_similarity.hpp"
+#include "stages/match/match_outcome.hpp"
 #include "stages/match/sequence_matcher.hpp"
+#include "stages/seqslam/seqslam_outcome.hpp"
 
 namespace loopgate {
 
@@ -221,17 +222,15 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   matcher.flush(output);
   const double match_s = seconds_since(t0);
 
-  CsvWriter loops_csv(out_dir / "loops.csv", {"i", "j", "t_i", "t_j", "score"});
+  LoopsWriter loops_csv;
+  loops_csv.open(out_dir / "loops.csv");
   std::size_t loops_aligned = 0;
   std::vector<Detection> detections;  // indices within the ranges, score = DP
   for (const LoopClosure& loop : output.loops) {
     const auto q = static_cast<std::size_t>(loop.i);
     const auto r = static_cast<std::size_t>(loop.j);
-    const std::size_t qi = query_first + q;
-    const std::size_t rj = ref_first + r;
-    loops_csv.write_row({std::to_string(qi), std::to_string(rj),
-                         format_fixed(ns_to_s(query.frame_t_ns(qi)), 9),
-                         format_fixed(ns_to_s(reference.frame_t_ns(rj)), 9), format_fixed(loop.score, 6)});
+    loops_csv.write(query_first + q, ref_first + r, query.frame_t_ns(query_first + q),
+                    reference.frame_t_ns(ref_first + r), loop.score);
     if (setup.aligned(q, r)) ++loops_aligned;
     detections.push_back(Detection{q, r, loop.score});
   }
@@ -242,33 +241,24 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
                         "best_similarity", "candidates", "status", "reason"});
   std::array<std::size_t, 4> outcome_counts{};
   std::size_t best_aligned = 0, frame_errors = 0;
-  const double threshold = config.match.dp_threshold();
   for (const FrameMatchStatus& status : output.frames) {
     const auto q = static_cast<std::size_t>(status.i);
     const std::size_t frame = query_first + q;
     ++outcome_counts[static_cast<std::size_t>(status.outcome)];
-    std::string reason;
-    switch (status.outcome) {
-      case FrameOutcome::kNoCandidate:
-        reason = qry.valid[q] ? fmt::format("no similarity above tau1 = {}", config.dird.tau1)
-                              : "no descriptor (image not decoded)";
-        break;
-      case FrameOutcome::kBelowThreshold:
-        reason = fmt::format("best DP {:.4f} <= {:.4f}", status.best_score, threshold);
-        break;
-      case FrameOutcome::kSuppressed:
-        reason = fmt::format("{} DP values above {:.4f}, all suppressed by NMS", status.above_threshold,
-                             threshold);
-        break;
-      case FrameOutcome::kLoop: reason = fmt::format("{} loop closure(s)", status.loops); break;
-    }
+    MatchOutcomeContext context;
+    context.two_sequence = true;
+    context.described = qry.valid[q] != 0;
+    context.tau1 = config.dird.tau1;
+    context.dp_threshold = config.match.dp_threshold();
+    const FrameDetection detection = match_detection(status, context);
+    const std::string& reason = detection.reason;
     const bool has_best = status.best_j >= 0;
     if (has_best && setup.aligned(q, static_cast<std::size_t>(status.best_j))) ++best_aligned;
     const bool error = !qry.errors[q].empty();
     frame_errors += error ? 1 : 0;
     frames_csv.write_row({std::to_string(frame), std::to_string(query.frame_t_ns(frame)),
                           format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n",
-                          to_string(status.outcome),
+                          detection.label,
                           has_best ? std::to_string(ref_first + static_cast<std::size_t>(status.best_j)) : "",
                           has_best ? format_fixed(status.best_score, 6) : "",
                           format_fixed(status.best_similarity, 6), std::to_string(status.candidates),
@@ -359,60 +349,42 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
   arena.execute([&] { matches = batch.run_two_sequence(ref_count, query_count); });
   const double search_s = seconds_since(t0);
 
-  const std::size_t half = static_cast<std::size_t>(seqslam.sequence_length_frames / 2);
-  const double threshold = seqslam.ratio_threshold;
-  CsvWriter loops_csv(out_dir / "loops.csv", {"i", "j", "t_i", "t_j", "score"});
+  LoopsWriter loops_csv;
+  loops_csv.open(out_dir / "loops.csv");
   CsvWriter frames_csv(out_dir / "frames.csv",
                        {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
                         "best_score", "second_score", "status", "reason"});
   std::vector<Detection> loops, ranked;  // indices within the ranges, score = ratio
   std::array<std::size_t, 4> outcome_counts{};
   std::size_t loops_aligned = 0, best_aligned = 0, frame_errors = 0;
+  SeqSlamOutcomeContext context;
+  context.two_sequence = true;
+  context.query_count = query_count;
+  context.reference_count = ref_count;
+  context.reference_first = ref_first;
   for (std::size_t q = 0; q < query_count; ++q) {
     const SeqSlamMatch& m = matches.at(q);
     const std::size_t frame = query_first + q;
-    const bool has_match = m.has_match && m.reference < ref_count;
-    FrameOutcome outcome = FrameOutcome::kNoCandidate;
-    std::string detection, reason;
-    if (!has_match) {
-      detection = "no match";
-      if (q < half || q + half >= query_count) {
-        reason = fmt::format("within ds/2 = {} frames of an end of the query sequence", half);
-      } else if (m.has_match) {
-        reason = fmt::format("best sequence centred on reference {} beyond the last reference frame",
-                             ref_first + m.reference);
-      } else {
-        reason = "no sequence with a finite score";
-      }
-    } else {
-      const std::size_t rj = ref_first + m.reference;
+    const FrameDetection detection = seqslam_detection(m, seqslam, context);
+    const bool has_match = detection.match >= 0;
+    if (has_match) {
       if (std::isfinite(m.ratio)) ranked.push_back(Detection{q, m.reference, m.ratio});
       if (setup.aligned(q, m.reference)) ++best_aligned;
-      if (m.accepted) {
-        detection = "loop";
-        outcome = FrameOutcome::kLoop;
-        reason = fmt::format("ratio {:.4f} <= {:.4f}", m.ratio, threshold);
-        loops_csv.write_row({std::to_string(frame), std::to_string(rj),
-                             format_fixed(ns_to_s(query.frame_t_ns(frame)), 9),
-                             format_fixed(ns_to_s(reference.frame_t_ns(rj)), 9), format_fixed(m.ratio, 6)});
+      if (detection.outcome == FrameOutcome::kLoop) {
+        const std::size_t rj = ref_first + m.reference;
+        loops_csv.write(frame, rj, query.frame_t_ns(frame), reference.frame_t_ns(rj), m.ratio);
         loops.push_back(Detection{q, m.reference, m.ratio});
         if (setup.aligned(q, m.reference)) ++loops_aligned;
-      } else {
-        detection = "rejected";
-        outcome = FrameOutcome::kBelowThreshold;
-        reason = std::isfinite(m.ratio)
-                     ? fmt::format("ratio {:.4f} > {:.4f}", m.ratio, threshold)
-                     : fmt::format("no sequence outside best +- {} rows: no second best, no support",
-                                   seqslam.second_best_window_rows / 2);
       }
     }
-    ++outcome_counts[static_cast<std::size_t>(outcome)];
+    ++outcome_counts[static_cast<std::size_t>(detection.outcome)];
     const bool error = !qry.errors[q].empty();
     frame_errors += error ? 1 : 0;
-    if (error) reason = qry.errors[q] + " (took part as an all-zero image); " + reason;
+    const std::string reason =
+        error ? qry.errors[q] + " (took part as an all-zero image); " + detection.reason : detection.reason;
     frames_csv.write_row({std::to_string(frame), std::to_string(query.frame_t_ns(frame)),
                           format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n",
-                          detection, has_match ? std::to_string(ref_first + m.reference) : "",
+                          detection.label, has_match ? std::to_string(ref_first + m.reference) : "",
                           has_match ? format_fixed(m.ratio, 6) : "",
                           has_match ? format_fixed(m.best_score, 6) : "",
                           has_match ? format_fixed(m.second_score, 6) : "", error ? "error" : "ok", reason});
@@ -460,36 +432,6 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
 }
 
 }  // namespace
-
-bool AlignedSequences::aligned(std::size_t q, std::size_t r) const {
-  return tolerance_frames >= 0 && std::llabs(static_cast<long long>(query_first + q) -
-                                             static_cast<long long>(reference_first + r)) <= tolerance_frames;
-}
-
-std::vector<std::pair<std::size_t, std::size_t>> AlignedSequences::pairs() const {
-  std::vector<std::pair<std::size_t, std::size_t>> out;
-  if (tolerance_frames < 0) return out;
-  const auto tolerance = static_cast<std::size_t>(tolerance_frames);
-  for (std::size_t q = 0; q < query_count; ++q) {
-    const std::size_t frame = query_first + q;
-    const std::size_t lo = std::max(reference_first, frame >= tolerance ? frame - tolerance : 0);
-    const std::size_t hi = std::min(reference_first + reference_count, frame + tolerance + 1);
-    for (std::size_t rj = lo; rj < hi; ++rj) out.emplace_back(q, rj - reference_first);
-  }
-  return out;
-}
-
-nlohmann::json evaluate_aligned(const AlignedSequences& sequences, const std::vector<Detection>& loops,
-                                const std::vector<Detection>& ranked, const std::string& score_order) {
-  const LoopGroundTruth truth = LoopGroundTruth::from_pairs(
-      std::max(sequences.query_count, sequences.reference_count), sequences.pairs());
-  nlohmann::json out = {
-      {"available", true},
-      {"truth",
-       {{"aligned_tolerance_frames", sequences.tolerance_frames}, {"positives", truth.positive_count()}}}};
-  out.update(loop_evaluation_json(loops, ranked, truth, score_order));
-  return out;
-}
 
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
                                     const Dataset& query, const std::filesystem::path& out_dir) {

@@ -19,7 +19,8 @@
 // best reference match and its ratio, accepted or not; loops.csv the accepted ones, score = ratio).
 // summary.json has "mode": "two-sequence", "method", "score_order" (DIRD higher_is_better, SeqSLAM
 // lower_is_better) and "evaluation" (evaluate_aligned below; {"available": false} when
-// eval.aligned_tolerance_frames < 0); with a tolerance, truth_loops.csv lists the aligned pairs (i query,
+// eval.aligned_tolerance_frames < 0; AlignedSequences and evaluate_aligned are in
+// eval/run_evaluation.hpp); with a tolerance, truth_loops.csv lists the aligned pairs (i query,
 // j reference frame).
 #pragma once
 
@@ -30,7 +31,7 @@
 #include <utility>
 #include <vector>
 
-#include "eval/precision_recall.hpp"
+#include "eval/run_evaluation.hpp"
 #include "pipeline/pipeline_config.hpp"
 
 namespace loopgate {
@@ -43,29 +44,6 @@ struct TwoSequenceResult {
   double wall_s = 0;
   nlohmann::json summary;
 };
-
-// Aligned sequences: query frame k and reference frame k show the same place. The frame ranges of a run
-// (dataset frame indices [first, first + count)) and the tolerance (>= 0).
-struct AlignedSequences {
-  std::size_t reference_first = 0, reference_count = 0;
-  std::size_t query_first = 0, query_count = 0;
-  int tolerance_frames = 0;
-
-  // Query q and reference r (indices within their ranges) are a true match: |frame(q) - frame(r)| <= T.
-  bool aligned(std::size_t q, std::size_t r) const;
-  // Every true pair (q, r), indices within the ranges, q ascending.
-  std::vector<std::pair<std::size_t, std::size_t>> pairs() const;
-};
-
-// The "evaluation" block of a two-sequence run against the aligned ground truth (LoopGroundTruth::
-// from_pairs of pairs(); a query is positive when a reference frame lies within the tolerance), in the
-// shape of the single-sequence runs: {"available": true, "truth": {"aligned_tolerance_frames", "positives"},
-// "loop_truth": {...}, "precision_recall": {..., "curve": [...]}}. `loops`: the accepted detections
-// (loops.csv), counted in loop_truth; `ranked`: the detections the PR sweep runs over (DIRD: the loops,
-// score DP; SeqSLAM: every query's match, score ratio); indices within the ranges. `score_order`:
-// "higher_is_better" | "lower_is_better".
-nlohmann::json evaluate_aligned(const AlignedSequences& sequences, const std::vector<Detection>& loops,
-                                const std::vector<Detection>& ranked, const std::string& score_order);
 
 // `config` must be valid (run.mode is not used). Throws ConfigError/DataError for bad input found before
 // the run (no frames, no images, an empty frame range).

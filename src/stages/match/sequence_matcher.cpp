@@ -55,16 +55,6 @@ struct TopTwo {
 
 }  // namespace
 
-const char* to_string(FrameOutcome outcome) {
-  switch (outcome) {
-    case FrameOutcome::kNoCandidate: return "no candidate";
-    case FrameOutcome::kBelowThreshold: return "below threshold";
-    case FrameOutcome::kSuppressed: return "suppressed";
-    case FrameOutcome::kLoop: return "loop";
-  }
-  return "unknown";
-}
-
 SequenceMatcher::SequenceMatcher(const MatchConfig& config, Mode mode, std::int64_t first_frame)
     : config_(config), mode_(mode), next_frame_(first_frame), next_visit_(first_frame) {
   config_.validate();

@@ -30,6 +30,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/types.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/match_config.hpp"
 
@@ -43,16 +44,6 @@ struct LoopClosure {
   double score = 0.0;
   bool operator==(const LoopClosure&) const = default;
 };
-
-// Why a current frame did or did not produce a loop closure.
-enum class FrameOutcome {
-  kNoCandidate,     // no similarity above tau1 for this frame
-  kBelowThreshold,  // candidates, but no DP value above tau3 * L
-  kSuppressed,      // DP values above the threshold, all removed by NMS
-  kLoop,            // at least one loop closure emitted
-};
-// "no candidate", "below threshold", "suppressed", "loop".
-const char* to_string(FrameOutcome outcome);
 
 struct FrameMatchStatus {
   std::int64_t i = 0;

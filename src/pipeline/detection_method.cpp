@@ -1,0 +1,48 @@
+#include "pipeline/detection_method.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+namespace {
+
+// run.mode odometry: sync, decode, odometry only.
+class NoDetection final : public DetectionMethod {
+ public:
+  explicit NoDetection(const PipelineConfig& config) : mode_(config.run.mode) {}
+  std::string name() const override { return "dird"; }
+  std::string mode() const override { return mode_; }
+  bool detects() const override { return false; }
+
+ private:
+  std::string mode_;
+};
+
+}  // namespace
+
+std::unique_ptr<DetectionMethod> make_no_detection(const MethodContext& context) {
+  return std::make_unique<NoDetection>(context.config);
+}
+
+std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& context, bool dataset_has_images,
+                                                       const std::filesystem::path& dataset_root) {
+  const RunConfig& run = context.config.run;
+  if (run.seqslam()) {
+    if (!dataset_has_images)
+      throw DataError(dataset_root, "run.method seqslam needs images, and this dataset has none");
+    spdlog::info(
+        "run: SeqSLAM on every frame (run.mode {} does not apply to it); matches at the end of the stream",
+        run.mode);
+    return make_seqslam(context);
+  }
+  if (!run.detects_loops()) return make_no_detection(context);
+  if (!dataset_has_images) {
+    throw DataError(dataset_root, "run.mode " + run.mode +
+                                      " needs images, and this dataset has none (use --mode odometry)");
+  }
+  return run.mode == "full" ? make_dird_full(context) : make_dird_gated(context);
+}
+
+}  // namespace loopgate

@@ -1,0 +1,432 @@
+// DIRD as a detection method, full (every frame described and compared with every earlier frame beyond the
+// margin: the paper's pure-DIRD baseline) and gated (the paper's method: only inside the pose gate's
+// candidate areas). Both share DirdMatching: the descriptor store, the similarity rows, the streaming
+// sequence matcher and the frames' detection rows; they differ in which descriptors and similarities
+// they compute.
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <deque>
+#include <mutex>
+#include <stdexcept>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "io/writers.hpp"
+#include "pipeline/descriptor_store.hpp"
+#include "pipeline/detection_method.hpp"
+#include "pipeline/frame_steps.hpp"
+#include "pipeline/loops_writer.hpp"
+#include "pipeline/parallel_handoff.hpp"
+#include "stages/dird/dird_similarity.hpp"
+#include "stages/gate/candidate_areas.hpp"
+#include "stages/gate/pose_gate.hpp"
+#include "stages/match/match_outcome.hpp"
+#include "stages/match/row_assembler.hpp"
+#include "stages/match/sequence_matcher.hpp"
+
+namespace loopgate {
+
+namespace {
+
+// What full and gated DIRD share: descriptors by sequence number, similarity rows, the matcher, and the
+// statuses the matcher finalised (written by match, read by the sink).
+class DirdMatching {
+ public:
+  explicit DirdMatching(const MethodContext& context)
+      : context_(context),
+        extractor_(context.config.dird),
+        similarity_(context.config.dird),
+        store_(context.capacity),
+        matcher_(context.config.match, SequenceMatcher::Mode::kSingleSequence, 0) {}
+
+  void describe(std::size_t seq, const cv::Mat& image) {
+    extractor_.extract(image, store_.slot(seq));
+    descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
+  }
+  DescriptorStore& store() { return store_; }
+  const DescriptorStore& store() const { return store_; }
+  SequenceMatcher& matcher() { return matcher_; }
+
+  // Appends to `out` the similarities of frame `seq` against the earlier frames [j_begin, j_end) of the
+  // store (each must be published), skipping frames without a descriptor; returns the comparisons made.
+  std::size_t similarity_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
+                               std::vector<SimilarityEntry>& out) const {
+    if (j_begin >= j_end) return 0;
+    bool any_missing = false;
+    for (std::size_t j = j_begin; j < j_end; ++j) {
+      const auto state = store_.state(j);
+      if (state == DescriptorStore::State::kEmpty) {
+        throw std::logic_error(fmt::format("similarity of seq {}: earlier seq {} not described yet", seq, j));
+      }
+      any_missing = any_missing || state == DescriptorStore::State::kNoDescriptor;
+    }
+    const std::size_t first_new = out.size();
+    similarity_.sparse_row(store_.descriptor(seq), store_.data() + j_begin, j_end - j_begin,
+                           static_cast<std::int64_t>(j_begin), out);
+    std::size_t compared = j_end - j_begin;
+    if (any_missing) {
+      const auto is_missing = [this](const SimilarityEntry& e) {
+        return store_.state(static_cast<std::size_t>(e.j)) != DescriptorStore::State::kValid;
+      };
+      out.erase(std::remove_if(out.begin() + static_cast<std::ptrdiff_t>(first_new), out.end(), is_missing),
+                out.end());
+      compared = 0;
+      for (std::size_t j = j_begin; j < j_end; ++j)
+        compared += store_.state(j) == DescriptorStore::State::kValid ? 1 : 0;
+    }
+    similarities_computed_.fetch_add(compared, std::memory_order_relaxed);
+    return compared;
+  }
+
+  // Loop closures to loops.csv; finalised frame statuses to the queue the sink reads.
+  void handle(const MatchOutput& output) {
+    LoopsWriter& loops = context_.loops;
+    for (const LoopClosure& loop : output.loops) {
+      if (!first_loop_seq_) first_loop_seq_ = loop.i;
+      loops.write(context_.seqs.frame(loop.i), context_.seqs.frame(loop.j), context_.seqs.t_ns(loop.i),
+                  context_.seqs.t_ns(loop.j), loop.score);
+    }
+    if (!output.loops.empty()) loops.flush();
+    if (output.frames.empty()) return;
+    std::lock_guard lock(finished_mutex_);
+    for (const FrameMatchStatus& status : output.frames) finished_.push_back(status);
+  }
+
+  // The detection row of `seq` when the matcher has finalised it; `outside_areas(seq)` (gated) says
+  // whether its row had no cell.
+  template <class OutsideAreas>
+  std::optional<FrameVerdict> detection(std::size_t seq, OutsideAreas outside_areas) {
+    std::lock_guard lock(finished_mutex_);
+    while (!finished_.empty() && static_cast<std::size_t>(finished_.front().i) < seq) finished_.pop_front();
+    if (finished_.empty()) return std::nullopt;
+    const FrameMatchStatus status = finished_.front();
+    if (static_cast<std::size_t>(status.i) != seq) {
+      throw std::logic_error(fmt::format("match status of seq {} while seq {} waits", status.i, seq));
+    }
+    finished_.pop_front();
+    const MatchConfig& match = context_.config.match;
+    MatchOutcomeContext c;
+    c.described = store_.state(seq) == DescriptorStore::State::kValid;
+    c.outside_areas = outside_areas(seq);
+    c.before_margin = seq < static_cast<std::size_t>(match.margin);
+    c.margin_frames = match.margin;
+    c.tau1 = context_.config.dird.tau1;
+    c.dp_threshold = match.dp_threshold();
+    return FrameVerdict{c.described, match_detection(status, c)};
+  }
+
+  nlohmann::json summary() const {
+    return {{"descriptors_computed", descriptors_computed_.load()},
+            {"similarities_computed", similarities_computed_.load()},
+            {"detection", {{"nms_delay_frames", matcher_.emission_delay()}}}};
+  }
+
+  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const {
+    if (first_loop_seq_) {
+      const auto seq = static_cast<std::size_t>(*first_loop_seq_);
+      return std::pair{context_.seqs.frame(*first_loop_seq_), store_.descriptor(seq)};
+    }
+    const Dataset& dataset = context_.images.dataset();
+    const std::size_t frame = dataset.frame_count() / 2;
+    return std::pair{frame, extractor_.extract(dataset.load_image(frame))};
+  }
+
+ private:
+  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  DirdExtractor extractor_;
+  DirdSimilarity similarity_;
+  DescriptorStore store_;
+  SequenceMatcher matcher_;
+  std::atomic<std::size_t> descriptors_computed_{0};
+  mutable std::atomic<std::size_t> similarities_computed_{0};  // counted by the const similarity_range
+  std::optional<std::int64_t> first_loop_seq_;
+  std::mutex finished_mutex_;
+  std::deque<FrameMatchStatus> finished_;
+};
+
+// run.mode full. describe extracts the frame's descriptor and computes its similarities against the frames
+// j <= i - max(margin, K), which have certainly left the sink (the producer releases seq i only when at most
+// K - 1 frames are in flight, and the sink retires frames in order); match adds the pairs i - K < j <= i -
+// margin (only when margin < K) and feeds the matcher. The row is the same set of pairs whatever the timing.
+class DirdFull final : public DetectionMethod {
+ public:
+  explicit DirdFull(const MethodContext& context)
+      : context_(context), dird_(context), rows_(context.capacity), described_(context.capacity, 0) {
+    const RunConfig& run = context.config.run;
+    if (run.max_in_flight > context.config.match.margin) {
+      spdlog::info(
+          "run: match.margin {} < run.max_in_flight {}: the similarities against the last {} frames before "
+          "the "
+          "margin are computed in the (serial) match node",
+          context.config.match.margin, run.max_in_flight, run.max_in_flight - context.config.match.margin);
+    }
+  }
+  std::string name() const override { return "dird"; }
+  std::string mode() const override { return "full"; }
+  bool needs_every_image() const override { return true; }
+
+  void describe(FrameRecord& r) override {
+    const auto seq = static_cast<std::size_t>(r.seq);
+    const bool described = r.decoded;
+    if (described) dird_.describe(seq, r.image);
+    described_[seq] = described ? 1 : 0;
+    dird_.store().publish(seq, described);
+    if (!described) return;
+    const std::size_t limit = std::max(margin(), in_flight());
+    if (seq >= limit) dird_.similarity_range(seq, 0, seq - limit + 1, rows_[seq]);
+  }
+
+  void match(FrameRecord& r) override {
+    const auto seq = static_cast<std::size_t>(r.seq);
+    std::vector<SimilarityEntry>& row = rows_[seq];
+    if (described_[seq] && margin() < in_flight() && seq >= margin()) {
+      const std::size_t j_begin = seq + 1 >= in_flight() ? seq + 1 - in_flight() : 0;
+      dird_.similarity_range(seq, j_begin, seq - margin() + 1, row);
+    }
+    MatchOutput output;
+    dird_.matcher().push(static_cast<std::int64_t>(seq), row, output);
+    std::vector<SimilarityEntry>().swap(row);
+    dird_.handle(output);
+  }
+
+  void finish() override {
+    MatchOutput output;
+    dird_.matcher().flush(output);
+    dird_.handle(output);
+  }
+
+  std::optional<FrameVerdict> detection(std::size_t seq) override {
+    return dird_.detection(seq, [](std::size_t) { return false; });
+  }
+  nlohmann::json summary() const override { return dird_.summary(); }
+  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
+    return dird_.example_descriptor();
+  }
+
+ private:
+  std::size_t margin() const { return static_cast<std::size_t>(context_.config.match.margin); }
+  std::size_t in_flight() const { return static_cast<std::size_t>(context_.config.run.max_in_flight); }
+
+  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  DirdMatching dird_;
+  std::vector<std::vector<SimilarityEntry>> rows_;  // S(., seq): describe fills j <= seq - K, match the rest
+  std::vector<std::uint8_t> described_;
+};
+
+// run.mode gated. gate runs the pose gate (eq. 8-10) and the candidate-area tracker: the cells newly covered
+// and the frames newly needing a descriptor; describe computes exactly those descriptors (past frames read
+// again, several in parallel, each at most once); match computes the new cells' similarities into rows kept
+// open for gate.row_horizon_frames (RowAssembler), then final rows go to the matcher.
+class DirdGated final : public DetectionMethod {
+ public:
+  explicit DirdGated(const MethodContext& context)
+      : context_(context),
+        dird_(context),
+        pose_gate_(context.config.gate, "odometry (gate)"),
+        tracker_(context.config.gate, context.config.match.sequence_length, context.config.match.margin),
+        rows_(context.config.gate.row_horizon_frames),
+        frames_(context.capacity),
+        row_cells_(context.capacity, 0) {
+    context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
+  }
+  std::string name() const override { return "dird"; }
+  std::string mode() const override { return "gated"; }
+
+  // The gate's decision for this frame (frames without a usable pose are not gated and not stored) and the
+  // candidate-area update. All indices are sequence numbers.
+  void gate(FrameRecord& r) override {
+    const auto seq = static_cast<std::int64_t>(r.seq);
+    GateFrame& g = frames_[r.seq];
+    g.decision.frame = seq;
+    if (r.usable_pose()) {
+      try {
+        g.decision = pose_gate_.process(seq, r.odometry.pose);
+        g.ran = true;
+        ++frames_gate_ran_;
+        if (g.decision.gated) ++frames_gated_;
+      } catch (const DataError& e) {
+        add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
+        ++gate_errors_;
+        g.decision = GateDecision{};
+        g.decision.frame = seq;
+      }
+    }
+    AreaUpdate update = tracker_.update(g.decision);
+    g.area_id = update.joined_area;
+    g.cells = std::move(update.new_cells);
+    g.describe = std::move(update.new_descriptor_frames);
+    for (const std::int64_t k : g.describe) describe_requests_.emplace_back(k, seq);
+  }
+
+  // The descriptors the gate asked for, each computed once: the current frame's from its decoded image when
+  // decode has it, every other read again (recent frames from the image cache). Several in parallel.
+  void describe(FrameRecord& r) override {
+    const std::vector<std::int64_t>& seqs = frames_[r.seq].describe;
+    std::vector<std::string> problems(seqs.size());
+    const auto describe_one = [&](std::size_t index) {
+      const auto k = static_cast<std::size_t>(seqs[index]);
+      cv::Mat image;
+      bool ok = true;
+      if (k == r.seq && r.decoded) {
+        image = r.image;
+      } else {
+        try {
+          image = context_.images.read_again(k);
+        } catch (const DataError& e) {
+          ok = false;
+          problems[index] = fmt::format("describe: frame {} could not be read: {}",
+                                        context_.seqs.frame(seqs[index]), e.what());
+        }
+      }
+      if (ok) dird_.describe(k, image);
+      dird_.store().publish(k, ok);
+    };
+    if (seqs.size() > 1) {
+      parallel_for_with_handoff(seqs.size(), describe_one);
+    } else if (seqs.size() == 1) {
+      describe_one(0);
+    }
+    for (auto& problem : problems) {
+      if (!problem.empty()) add_message(r.warnings, std::move(problem));
+    }
+  }
+
+  // The similarities of the cells this frame's gate update covered (every descriptor they need was requested
+  // at this frame or earlier, so it has passed describe), into rows still open; rows older than the horizon
+  // go to the matcher.
+  void match(FrameRecord& r) override {
+    GateFrame& g = frames_[r.seq];
+    for (const CellSpan& span : g.cells) {
+      std::vector<SimilarityEntry>& row = rows_.row(span.i);
+      row_cells_[static_cast<std::size_t>(span.i)] += static_cast<std::uint32_t>(span.j1 - span.j0 + 1);
+      if (dird_.store().state(static_cast<std::size_t>(span.i)) != DescriptorStore::State::kValid) continue;
+      dird_.similarity_range(static_cast<std::size_t>(span.i), static_cast<std::size_t>(span.j0),
+                             static_cast<std::size_t>(span.j1) + 1, row);
+    }
+    std::vector<CellSpan>().swap(g.cells);
+    std::vector<std::int64_t>().swap(g.describe);
+    match_end_seq_ = r.seq + 1;
+    MatchOutput output;
+    rows_.advance(static_cast<std::int64_t>(r.seq), dird_.matcher(), output);
+    dird_.handle(output);
+  }
+
+  void finish() override {
+    tracker_.finish();
+    MatchOutput output;
+    rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.matcher(), output);
+    dird_.matcher().flush(output);
+    dird_.handle(output);
+  }
+
+  // The gate: nearest past frame under the combined distance, d, threshold, decision, area joined.
+  void add_frame_cells(const FrameRecord& r, CsvRow& row) const override {
+    const GateFrame& g = frames_[r.seq];
+    const bool has_nearest = g.ran && g.decision.has_nearest;
+    row.add("nearest_frame",
+            has_nearest ? std::to_string(context_.seqs.frame(g.decision.nearest_frame)) : "");
+    row.add("gate_d_m", has_nearest ? format_fixed(g.decision.distance_m, 6) : "");
+    row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
+    row.add("gated", g.decision.gated ? "y" : "n");
+    row.add("area_id", std::to_string(g.area_id));
+  }
+
+  std::optional<FrameVerdict> detection(std::size_t seq) override {
+    return dird_.detection(seq, [this](std::size_t s) { return row_cells_[s] == 0; });
+  }
+
+  // candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
+  // columns = reference frames j, inclusive); candidate_cells.csv: the cells actually compared, per row as
+  // disjoint column intervals; descriptors.csv: every frame described, with the frame whose gate update asked
+  // for it. Dataset frame indices.
+  void write_files(const std::filesystem::path& out_dir) const override {
+    if (match_end_seq_ == 0) return;
+    const auto last_seq = static_cast<std::int64_t>(match_end_seq_) - 1;
+    const auto frame = [&](std::int64_t seq) {
+      return std::to_string(context_.seqs.frame(std::min(seq, last_seq)));
+    };
+    CsvWriter areas(out_dir / "candidate_areas.csv", {"id", "row_begin", "row_end", "col_begin", "col_end",
+                                                      "i_first", "i_last", "j_min", "j_max", "gated_frames"});
+    for (const CandidateArea& a : tracker_.areas()) {
+      areas.write_row({std::to_string(a.id), frame(a.row_begin), frame(a.row_end), frame(a.col_begin),
+                       frame(a.col_end), frame(a.i_first), frame(a.i_last), frame(a.j_min), frame(a.j_max),
+                       std::to_string(a.gated_frames)});
+    }
+    areas.close();
+    CsvWriter cells(out_dir / "candidate_cells.csv", {"i", "j_first", "j_last"});
+    for (std::int64_t i = 0; i <= last_seq; ++i) {
+      for (const RowColumns& span : tracker_.covered_columns(i))
+        cells.write_row({frame(i), frame(span.j0), frame(span.j1)});
+    }
+    cells.close();
+    CsvWriter described(out_dir / "descriptors.csv", {"frame", "requested_by_frame", "computed"});
+    for (const auto& [k, by] : describe_requests_) {
+      const bool valid = dird_.store().state(static_cast<std::size_t>(k)) == DescriptorStore::State::kValid;
+      described.write_row({frame(k), frame(by), valid ? "y" : "n"});
+    }
+    described.close();
+  }
+
+  nlohmann::json summary() const override {
+    std::size_t cells = 0, rows = 0;
+    for (std::size_t seq = 0; seq < match_end_seq_; ++seq) {
+      cells += row_cells_[seq];
+      rows += row_cells_[seq] > 0 ? 1 : 0;
+    }
+    nlohmann::json out = dird_.summary();
+    out["candidate_areas"] = tracker_.areas().size();
+    out["gate"] = {
+        {"enabled", true},
+        {"frames_with_pose", frames_gate_ran_},
+        {"frames_gated", frames_gated_},
+        {"pass_rate", frames_gate_ran_ ? static_cast<double>(frames_gated_) / frames_gate_ran_ : 0.0},
+        {"pose_errors", gate_errors_},
+        {"candidate_areas", tracker_.areas().size()},
+        {"cells", cells},
+        {"rows_with_cells", rows},
+        {"kdtree_frames", pose_gate_.frames_in_tree()}};
+    return out;
+  }
+
+  MethodEvaluation evaluation() const override {
+    MethodEvaluation e;
+    e.covers = [this](std::int64_t i, std::int64_t j) { return tracker_.covers(i, j); };
+    return e;
+  }
+  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
+    return dird_.example_descriptor();
+  }
+
+ private:
+  struct GateFrame {  // per sequence number
+    bool ran = false;
+    GateDecision decision;
+    int area_id = -1;
+    std::vector<std::int64_t> describe;  // seqs whose descriptors this frame's describe computes
+    std::vector<CellSpan> cells;         // cells its match computes
+  };
+
+  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  DirdMatching dird_;
+  PoseGate pose_gate_;
+  CandidateAreaTracker tracker_;
+  RowAssembler rows_;
+  std::vector<GateFrame> frames_;
+  std::vector<std::uint32_t> row_cells_;  // cells per row (match node)
+  std::size_t match_end_seq_ = 0;
+  std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
+};
+
+}  // namespace
+
+std::unique_ptr<DetectionMethod> make_dird_full(const MethodContext& context) {
+  return std::make_unique<DirdFull>(context);
+}
+std::unique_ptr<DetectionMethod> make_dird_gated(const MethodContext& context) {
+  return std::make_unique<DirdGated>(context);
+}
+
+}  // namespace loopgate

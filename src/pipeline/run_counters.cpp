@@ -1,0 +1,36 @@
+#include "pipeline/run_counters.hpp"
+
+namespace loopgate {
+
+void RunCounters::count(const FrameRecord& r, const std::string& status, const std::string& reason) {
+  ++processed;
+  (status == "ok" ? frames_ok : status == "warning" ? frames_warning : frames_error)++;
+  if (r.decoded) ++decoded;
+  if (r.needs_pixels && !r.decoded) ++image_errors;
+  if (r.has_pose && r.odometry.pose.status == OdometryStatus::kLost) ++odometry_lost;
+  imu_gaps += static_cast<std::size_t>(r.imu.report.gaps);
+  imu_out_of_order += static_cast<std::size_t>(r.imu.report.out_of_order);
+  imu_duplicates += static_cast<std::size_t>(r.imu.report.duplicates);
+  if (r.imu.report.imu_missing) ++imu_missing_frames;
+  if (!have_first_t) {
+    have_first_t = true;
+    first_t_ns = r.t_ns;
+  }
+  last_t_ns = r.t_ns;
+  if (status != "ok") {
+    if (problem_frames.size() < kMaxListedProblems) {
+      problem_frames.push_back({{"seq", r.seq}, {"frame", r.frame}, {"status", status}, {"reason", reason}});
+    }
+    ++problem_frame_count;
+  }
+}
+
+nlohmann::json RunCounters::outcomes_json() const {
+  const auto n = [this](FrameOutcome o) { return outcomes[static_cast<std::size_t>(o)]; };
+  return {{"no_candidate", n(FrameOutcome::kNoCandidate)},
+          {"below_threshold", n(FrameOutcome::kBelowThreshold)},
+          {"suppressed", n(FrameOutcome::kSuppressed)},
+          {"loop", n(FrameOutcome::kLoop)}};
+}
+
+}  // namespace loopgate

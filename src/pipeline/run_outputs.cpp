@@ -1,0 +1,214 @@
+#include "pipeline/run_outputs.hpp"
+
+#include <spdlog/fmt/fmt.h>
+#include <unistd.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+namespace loopgate {
+
+namespace {
+
+constexpr std::size_t kMaxMessagesPerFrame = 4;  // per-frame reasons kept in frames.csv
+constexpr double kProgressPeriodS = 0.25;
+
+std::string join_messages(const std::vector<std::string>& messages) {
+  std::string out;
+  const std::size_t shown = std::min(messages.size(), kMaxMessagesPerFrame);
+  for (std::size_t i = 0; i < shown; ++i) out += (i ? "; " : "") + messages[i];
+  if (messages.size() > shown) out += fmt::format("; ... {} more", messages.size() - shown);
+  return out;
+}
+
+}  // namespace
+
+RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
+                       DetectionMethod& method, const SeqIndex& seqs, const RunClock& clock,
+                       bool visual_odometry, std::size_t total_frames)
+    : config_(config),
+      out_dir_(out_dir),
+      method_(method),
+      seqs_(seqs),
+      clock_(clock),
+      visual_odometry_(visual_odometry),
+      total_frames_(total_frames),
+      profiler_({kStageNames.begin(), kStageNames.end()}) {
+  const std::string& progress = config.output.progress;
+  show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
+}
+
+// frames.csv: the frame, its pose (x..qw, sigma_m = sqrt of the largest eigenvalue of the position
+// covariance), odometry status, IMU samples, decode, status and reason; the method's columns; a detecting
+// run's descriptor, detection, match_frame, match_score and detection_reason.
+void RunOutputs::add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
+                                 CsvRow& row) const {
+  row.add("seq", std::to_string(r.seq));
+  row.add("frame", std::to_string(r.frame));
+  row.add("t_ns", std::to_string(r.t_ns));
+  row.add("t_s", format_fixed(ns_to_s(r.t_ns), 9));
+  const PoseEstimate& pose = r.odometry.pose;
+  const Eigen::Vector3d p = pose.T_w_b.translation();
+  const Eigen::Quaterniond q(pose.T_w_b.rotation());
+  const auto cell = [&](double value) { return r.has_pose ? format_fixed(value, 9) : std::string(); };
+  row.add("x_m", cell(p.x()));
+  row.add("y_m", cell(p.y()));
+  row.add("z_m", cell(p.z()));
+  row.add("qx", cell(q.x()));
+  row.add("qy", cell(q.y()));
+  row.add("qz", cell(q.z()));
+  row.add("qw", cell(q.w()));
+  double sigma_m = 0;
+  if (r.has_pose) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(pose.position_cov_m2(),
+                                                                Eigen::EigenvaluesOnly);
+    sigma_m = std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
+  }
+  row.add("sigma_m", cell(sigma_m));
+  row.add("odom_status", r.has_pose ? to_string(pose.status) : "none");
+  row.add("imu_samples", std::to_string(r.imu.samples.size()));
+  row.add("decoded", r.decoded ? "y" : "n");
+  row.add("status", status);
+  row.add("reason", reason);
+  if (visual_odometry_)  // features the tracker followed into this image
+    row.add("tracked_features", r.has_pose ? std::to_string(std::max(0, r.odometry.tracked_features)) : "");
+  method_.add_frame_cells(r, row);
+}
+
+void RunOutputs::add_detection_cells(const std::optional<FrameVerdict>& verdict, CsvRow& row) const {
+  const FrameDetection* d = verdict ? &verdict->detection : nullptr;
+  const bool has_match = d && d->match >= 0;
+  row.add("descriptor", verdict ? (verdict->described ? "y" : "n") : "");
+  row.add("detection", d ? d->label : "");
+  row.add("match_frame", has_match ? std::to_string(seqs_.frame(d->match)) : "");
+  row.add("match_score", has_match ? format_fixed(d->score, 6) : "");
+  row.add("detection_reason", d ? d->reason : "");
+}
+
+void RunOutputs::open() {
+  std::filesystem::create_directories(out_dir_);
+  CsvRow header;
+  add_frame_cells(FrameRecord{}, "", "", header);
+  if (method_.detects()) add_detection_cells(std::nullopt, header);
+  frames_csv_.open(out_dir_ / "frames.csv", header.names());
+  std::vector<std::string> timing_columns = {"seq", "frame"};
+  for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
+  timing_columns.emplace_back("latency_ms");
+  timing_columns.emplace_back("total_ms");
+  timing_csv_.open(out_dir_ / "timing.csv", timing_columns);
+  trajectory_.open(out_dir_ / "trajectory.tum");
+}
+
+void RunOutputs::sink(FrameRecord& r) {
+  if (r.seq != next_seq_) {
+    throw std::logic_error(fmt::format("sink received seq {} while expecting {}", r.seq, next_seq_));
+  }
+  ++next_seq_;
+  const std::string status = !r.errors.empty() ? "error" : !r.warnings.empty() ? "warning" : "ok";
+  std::vector<std::string> messages = r.errors;
+  messages.insert(messages.end(), r.warnings.begin(), r.warnings.end());
+  const std::string reason = join_messages(messages);
+
+  CsvRow row;
+  add_frame_cells(r, status, reason, row);
+  if (method_.detects()) {
+    held_.push_back(HeldRow{static_cast<std::size_t>(r.seq), std::move(row)});
+    write_ready_rows(false);
+  } else {
+    frames_csv_.write_row(row.values());
+  }
+  if (r.has_pose) {
+    const PoseEstimate& pose = r.odometry.pose;
+    if (pose.status != OdometryStatus::kLost) trajectory_.write(r.t_ns, pose.T_w_b);
+    if (pose.status == OdometryStatus::kTracking) tracked_poses_.push_back({r.t_ns, pose.T_w_b});
+  }
+  counters_.count(r, status, reason);
+  r.image.release();
+
+  const std::int64_t exit_ns = clock_.now_ns();
+  r.stamps[kSink].exit_ns = exit_ns;
+  if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) ++counters_.deadline_misses;
+  timing(r, exit_ns);
+  if (counters_.processed % static_cast<std::size_t>(config_.output.flush_every) == 0) {
+    frames_csv_.flush();
+    timing_csv_.flush();
+    trajectory_.flush();
+  }
+  if (show_progress_ && exit_ns - last_progress_ns_ > static_cast<std::int64_t>(kProgressPeriodS * 1e9)) {
+    last_progress_ns_ = exit_ns;
+    show_progress(false);
+  }
+}
+
+// timing.csv (service time per stage, end-to-end latency, their sum), the profiler and the trace.
+void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
+  std::vector<std::string> cells = {std::to_string(r.seq), std::to_string(r.frame)};
+  double total_ms = 0;
+  std::int64_t previous_exit_ns = r.release_ns;
+  for (std::size_t s = 0; s < kStageCount; ++s) {
+    const StageStamp& stamp = r.stamps[s];
+    const double service_ms = 1e-6 * static_cast<double>(stamp.exit_ns - stamp.enter_ns);
+    const double wait_ms = 1e-6 * static_cast<double>(stamp.enter_ns - previous_exit_ns);
+    previous_exit_ns = stamp.exit_ns;
+    profiler_.add(s, service_ms, wait_ms);
+    total_ms += service_ms;
+    cells.push_back(format_fixed(service_ms, 4));
+    if (config_.output.trace) {
+      trace_.add(TraceEvent{kStageNames[s], "stage", 1e-3 * static_cast<double>(stamp.enter_ns),
+                            1e-3 * static_cast<double>(stamp.exit_ns - stamp.enter_ns), stamp.thread,
+                            static_cast<std::int64_t>(r.seq), static_cast<std::int64_t>(r.frame)});
+    }
+  }
+  const double latency_ms = 1e-6 * static_cast<double>(exit_ns - r.release_ns);
+  profiler_.add_latency(latency_ms);
+  cells.push_back(format_fixed(latency_ms, 4));
+  cells.push_back(format_fixed(total_ms, 4));
+  timing_csv_.write_row(cells);
+}
+
+// Writes the held frames.csv rows whose detection is final, in order. At the end of the stream a row
+// without one (a failed run) is written with empty detection cells.
+void RunOutputs::write_ready_rows(bool end_of_stream) {
+  while (!held_.empty()) {
+    HeldRow& held = held_.front();
+    const std::optional<FrameVerdict> verdict = method_.detection(held.seq);
+    if (!verdict && !end_of_stream) return;
+    if (verdict) counters_.count(verdict->detection.outcome);
+    add_detection_cells(verdict, held.row);
+    frames_csv_.write_row(held.row.values());
+    held_.pop_front();
+  }
+}
+
+void RunOutputs::finish(bool show_final_progress) {
+  if (method_.detects()) write_ready_rows(true);
+  if (show_progress_ && show_final_progress) show_progress(true);
+  frames_csv_.close();
+  timing_csv_.close();
+  trajectory_.close();
+}
+
+void RunOutputs::write_trace(const std::filesystem::path& file, int threads) {
+  trace_.name_thread(0, "producer");
+  for (int t = 1; t <= threads + 1; ++t) trace_.name_thread(t, fmt::format("thread {}", t));
+  trace_.write(file);
+}
+
+void RunOutputs::show_progress(bool final) {
+  const double elapsed_s = 1e-9 * static_cast<double>(clock_.now_ns());
+  const std::size_t processed = counters_.processed;
+  const double fps = elapsed_s > 0 ? static_cast<double>(processed) / elapsed_s : 0.0;
+  const double rtf = elapsed_s > 0 ? counters_.data_s() / elapsed_s : 0.0;
+  const double eta_s =
+      fps > 0 ? static_cast<double>(total_frames_ - std::min(total_frames_, processed)) / fps : 0.0;
+  const std::string line = fmt::format("\r[run] {}/{} frames  {:.1f} frames/s  rtf {:.2f}x  ETA {:.0f} s   ",
+                                       processed, total_frames_, fps, rtf, eta_s);
+  std::fputs(line.c_str(), stderr);
+  if (final) std::fputs("\n", stderr);
+  std::fflush(stderr);
+}
+
+}  // namespace loopgate

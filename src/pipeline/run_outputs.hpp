@@ -1,0 +1,75 @@
+// The sink's outputs: frames.csv (one row per frame, in order; a detecting run holds a row until its
+// method's detection of the frame is final), trajectory.tum, timing.csv (a column per stage), the profiler,
+// the trace events and the progress line, plus the counters. Serial: the sink calls sink(), then the run
+// calls finish() after the drain.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "io/writers.hpp"
+#include "pipeline/csv_row.hpp"
+#include "pipeline/detection_method.hpp"
+#include "pipeline/frame_record.hpp"
+#include "pipeline/run_clock.hpp"
+#include "pipeline/run_counters.hpp"
+#include "pipeline/stage_profiler.hpp"
+
+namespace loopgate {
+
+class RunOutputs {
+ public:
+  // `visual_odometry`: frames.csv gets tracked_features; `total_frames`: for the progress line.
+  RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir, DetectionMethod& method,
+             const SeqIndex& seqs, const RunClock& clock, bool visual_odometry, std::size_t total_frames);
+
+  void open();
+  // The frame leaving the graph: its frames.csv row (or held), trajectory, counters, timing, trace.
+  void sink(FrameRecord& r);
+  // After the drain (and the method's finish()): every held row, with empty detection cells when the method
+  // gave none (a failed run); closes the files.
+  void finish(bool show_final_progress);
+  void write_trace(const std::filesystem::path& file, int threads);
+
+  const RunCounters& counters() const { return counters_; }
+  const StageProfiler& profiler() const { return profiler_; }
+  const std::vector<StampedPose>& tracked_poses() const { return tracked_poses_; }
+  std::uint64_t frames_through() const { return next_seq_; }
+
+ private:
+  void add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
+                       CsvRow& row) const;
+  void add_detection_cells(const std::optional<FrameVerdict>& verdict, CsvRow& row) const;
+  void write_ready_rows(bool end_of_stream);
+  void timing(FrameRecord& r, std::int64_t exit_ns);
+  void show_progress(bool final);
+
+  const PipelineConfig& config_;
+  std::filesystem::path out_dir_;
+  DetectionMethod& method_;
+  const SeqIndex& seqs_;
+  const RunClock& clock_;
+  bool visual_odometry_;
+  std::size_t total_frames_;
+  bool show_progress_ = false;
+  std::int64_t last_progress_ns_ = 0;
+
+  CsvWriter frames_csv_;
+  CsvWriter timing_csv_;
+  TumWriter trajectory_;
+  TraceWriter trace_;
+  StageProfiler profiler_;
+  RunCounters counters_;
+  std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
+  std::uint64_t next_seq_ = 0;
+  struct HeldRow {  // a frames.csv row waiting for its detection
+    std::size_t seq = 0;
+    CsvRow row;
+  };
+  std::deque<HeldRow> held_;
+};
+
+}  // namespace loopgate

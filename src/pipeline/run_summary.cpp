@@ -1,0 +1,154 @@
+#include "pipeline/run_summary.hpp"
+
+#include <limits>
+
+#include "eval/run_evaluation.hpp"
+#include "io/config.hpp"
+#include "io/dataset.hpp"
+#include "io/writers.hpp"
+#include "pipeline/frame_steps.hpp"
+#include "pipeline/loops_writer.hpp"
+#include "pipeline/run_metrics.hpp"
+#include "pipeline/run_outputs.hpp"
+
+namespace loopgate {
+
+namespace {
+nlohmann::json config_echo(PipelineConfig config) {
+  return config_to_json(config);
+}
+}  // namespace
+
+nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
+  const Dataset& dataset = parts.dataset;
+  if (!parts.method.detects() || !dataset.has_ground_truth()) return {{"available", false}};
+  const std::size_t first = parts.first_frame;
+  const std::size_t n = parts.last_frame - first;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  SequenceEvaluationInput input;
+  input.p_w.assign(n, Eigen::Vector3d::Constant(nan));
+  TumWriter truth_tum(out_dir / "ground_truth.tum");
+  for (std::size_t k = 0; k < n; ++k) {
+    if (const auto T_w_b = dataset.ground_truth_T_w_b(first + k)) {
+      input.p_w[k] = T_w_b->translation();
+      truth_tum.write(dataset.frame_t_ns(first + k), *T_w_b);
+    }
+  }
+  truth_tum.close();
+  const EvalConfig& eval = parts.config.eval;
+  input.truth.radius_m = eval.truth_radius_m;
+  input.truth.gap_frames = eval.truth_gap_frames;
+  input.truth.plane = eval.plane != "auto" ? eval.plane : dataset.layout() == "kitti" ? "xz" : "xyz";
+  input.truth.accept_radius_m = eval.effective_accept_radius_m();
+  const MethodEvaluation method = parts.method.evaluation();
+  const auto within_range = [first](const std::vector<Detection>& detections) {
+    std::vector<Detection> out;
+    out.reserve(detections.size());
+    for (const Detection& d : detections) out.push_back({d.query - first, d.reference - first, d.score});
+    return out;
+  };
+  input.loops = within_range(parts.loops.loops());
+  input.ranked = method.ranked ? within_range(*method.ranked) : input.loops;
+  input.score_order = method.score_order;
+  SequenceEvaluation evaluation = evaluate_sequence(input);
+  CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
+  for (const auto& [q, r] : evaluation.truth_pairs)
+    truth_loops.write_row({std::to_string(first + q), std::to_string(first + r)});
+  truth_loops.close();
+
+  if (method.covers) {
+    const std::size_t processed = parts.outputs.frames_through();
+    std::vector<std::int64_t> seq_of_index(n, -1);
+    for (std::size_t seq = 0; seq < processed; ++seq)
+      seq_of_index[parts.seqs.frame(static_cast<std::int64_t>(seq)) - first] = static_cast<std::int64_t>(seq);
+    evaluation.json["gate_coverage"] = gate_coverage_json(
+        input.p_w, input.truth, parts.config.match.margin,
+        [&](std::size_t q) { return seq_of_index[q] >= 0; },
+        [&](std::size_t q, std::size_t r) { return method.covers(seq_of_index[q], seq_of_index[r]); });
+  }
+  return evaluation.json;
+}
+
+nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, nlohmann::json evaluation) {
+  const Dataset& dataset = parts.dataset;
+  const RunCounters& c = parts.outputs.counters();
+  nlohmann::json issues = nlohmann::json::array();
+  for (const auto& issue : dataset.issues()) {
+    if (issues.size() >= RunCounters::kMaxListedProblems) break;
+    issues.push_back(issue.file.string() + (issue.line ? ":" + std::to_string(issue.line) : "") + ": " +
+                     issue.message);
+  }
+  const std::size_t reads = parts.images.reads_for_description();
+  nlohmann::json summary = {
+      {"config", config_echo(parts.config)},
+      {"dataset",
+       {{"root", dataset.root().string()},
+        {"layout", dataset.layout()},
+        {"frame_count", dataset.frame_count()},
+        {"first_frame", parts.first_frame},
+        {"last_frame", parts.last_frame},
+        {"has_images", dataset.has_images()},
+        {"has_imu", dataset.has_imu()},
+        {"has_ground_truth", dataset.has_ground_truth()}}},
+      {"frames_in", result.frames_in},
+      {"frames_processed", result.frames_processed},
+      {"frames_dropped", result.frames_dropped},
+      {"deadline_misses", result.deadline_misses},
+      {"wall_s", result.wall_s},
+      {"data_s", result.data_s},
+      {"realtime_factor", result.realtime_factor},
+      {"throughput_fps",
+       result.wall_s > 0 ? static_cast<double>(result.frames_processed) / result.wall_s : 0.0},
+      {"cpu_s", result.cpu_s},
+      {"cpu_wall_ratio", result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0},
+      {"peak_rss_mb", result.peak_rss_mb},
+      {"threads", parts.config.run.threads},
+      {"interrupted", result.interrupted},
+      {"failed", result.failed},
+      {"error", result.error},
+      {"counts",
+       {{"frames_ok", result.frames_ok},
+        {"frames_warning", result.frames_warning},
+        {"frames_error", result.frames_error},
+        {"decoded", c.decoded},
+        {"odometry_lost", c.odometry_lost}}},
+      {"mode", parts.method.mode()},
+      {"method", parts.method.name()},
+      {"score_order", "higher_is_better"},
+      {"end_of_stream_ms", parts.end_of_stream_ms},
+      {"images_decoded", c.decoded + reads},
+      {"images_read_for_description", reads},
+      {"image_cache_hits", parts.images.cache_hits()},
+      {"candidate_areas", 0},
+      {"descriptors_computed", 0},
+      {"similarities_computed", 0},
+      {"loops", parts.loops.count()},
+      {"evaluation", std::move(evaluation)},
+      {"gate", {{"enabled", false}}},
+      {"trajectory_accuracy", trajectory_accuracy_json(parts.outputs.tracked_poses(), dataset)},
+      {"stages", parts.outputs.profiler().to_json()},
+      {"data_issues",
+       {{"dataset_issue_count", dataset.issues().size()},
+        {"dataset_issues", issues},
+        {"image_errors", c.image_errors},
+        {"imu_gaps", c.imu_gaps},
+        {"imu_out_of_order", c.imu_out_of_order},
+        {"imu_duplicates", c.imu_duplicates},
+        {"imu_missing_frames", c.imu_missing_frames},
+        {"imu_anomalies_in_stream", parts.synchronizer ? parts.synchronizer->anomalies().size() : 0},
+        {"frames_with_issues", c.problem_frame_count},
+        {"frames", c.problem_frames}}},
+  };
+  nlohmann::json detection = c.outcomes_json();
+  detection["nms_delay_frames"] = 0;
+  nlohmann::json method = parts.method.summary();
+  if (method.contains("detection")) {
+    detection.update(method["detection"]);
+    method.erase("detection");
+  }
+  summary["detection"] = std::move(detection);
+  summary.update(method);
+  return summary;
+}
+
+}  // namespace loopgate
