@@ -13,7 +13,8 @@ namespace {
 // A straight drive out and back: frame k at x = k for k < 50, then x = 99 - k (frame 99 - k revisits k).
 std::vector<Eigen::Vector3d> out_and_back() {
   std::vector<Eigen::Vector3d> p(100);
-  for (int k = 0; k < 100; ++k) p[static_cast<std::size_t>(k)] = {static_cast<double>(k < 50 ? k : 99 - k), 0.0, 0.0};
+  for (int k = 0; k < 100; ++k)
+    p[static_cast<std::size_t>(k)] = {static_cast<double>(k < 50 ? k : 99 - k), 0.0, 0.0};
   return p;
 }
 
@@ -63,7 +64,8 @@ TEST(RunEvaluation, GateCoverageCountsReachablePositivesInsideAreas) {
   EXPECT_EQ(c["positive_query_frames"], 35);
   EXPECT_EQ(c["covered_query_frames"], 20);  // 80..99
   // frames the run did not process take no part
-  c = gate_coverage_json(p, truth_config(), 30, [](std::size_t q) { return q < 90; }, covers);
+  c = gate_coverage_json(
+      p, truth_config(), 30, [](std::size_t q) { return q < 90; }, covers);
   EXPECT_EQ(c["positive_query_frames"], 25);
   EXPECT_EQ(c["covered_query_frames"], 10);  // 80..89
 }

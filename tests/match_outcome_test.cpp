@@ -1,7 +1,7 @@
 // The matcher's per-frame status in the outputs' words (frames.csv detection, match, score, reason).
-#include <gtest/gtest.h>
-
 #include "stages/match/match_outcome.hpp"
+
+#include <gtest/gtest.h>
 
 namespace loopgate {
 namespace {

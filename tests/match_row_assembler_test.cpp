@@ -52,7 +52,9 @@ TEST(RowAssembler, CellsForAReleasedRowAreALogicError) {
   EXPECT_EQ(matcher.next_frame(), 6);
 }
 
-TEST(RowAssembler, RejectsAHorizonBelowOne) { EXPECT_THROW(RowAssembler(0), std::invalid_argument); }
+TEST(RowAssembler, RejectsAHorizonBelowOne) {
+  EXPECT_THROW(RowAssembler(0), std::invalid_argument);
+}
 
 // Cells arriving late (up to the horizon after their row) give the same loops as the batch matcher on the
 // complete rows.

@@ -1,9 +1,9 @@
 // SeqSLAM's per-query result in the outputs' words, single- and two-sequence.
+#include "stages/seqslam/seqslam_outcome.hpp"
+
 #include <gtest/gtest.h>
 
 #include <limits>
-
-#include "stages/seqslam/seqslam_outcome.hpp"
 
 namespace loopgate {
 namespace {
@@ -61,7 +61,8 @@ TEST(SeqSlamOutcome, TwoSequences) {
   const FrameDetection beyond = seqslam_detection(match(500, true, 805, 0.5), config(), c);
   EXPECT_EQ(beyond.label, "no match");
   EXPECT_EQ(beyond.reason, "best sequence centred on reference 815 beyond the last reference frame");
-  EXPECT_EQ(seqslam_detection(match(500, false, 0, 0), config(), c).reason, "no sequence with a finite score");
+  EXPECT_EQ(seqslam_detection(match(500, false, 0, 0), config(), c).reason,
+            "no sequence with a finite score");
   const double inf = std::numeric_limits<double>::infinity();
   EXPECT_EQ(seqslam_detection(match(500, true, 100, inf), config(), c).reason,
             "no sequence outside best +- 5 rows: no second best, no support");
