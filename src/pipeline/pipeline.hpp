@@ -1,39 +1,37 @@
 // `loopgate run`: the oneTBB flow graph (architecture.md § The graph) over one dataset.
 //
-//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► gate ──►
-//   describe* ──► seq (replay clock,          (K in flight)       (serial) (parallel)          (serial)
-//   (serial)  (parallel)     │
-//    main thread)              ▲ │
-//                              │                         sink ◄── seq ◄── match (serial)
-//                              ◄─────────────────────────────────┘ └──── integer decrement (1 per frame) ◄──
-//                              (serial)
+// clang-format off
+//
+//   producer ──► queue ──► limiter ──► seq ──► sync ──► decode* ──► seq ──► odometry ──► seq ──► gate ──► describe* ──► seq ──► match ──► seq ──► sink
+//   (replay clock,          (K in flight)      (serial) (parallel)          (serial)            (serial)  (parallel)           (serial)          (serial)
+//    calling thread)            ▲                                                                                                                  │
+//                               └──────────────────────────────── integer decrement (one per frame) ◄─────────────────────────────────────────────┘
+//
+//   node        one call on                   what it does
+//   sync        FrameSteps::sync              IMU samples between this frame and the previous one; decide whether to decode
+//   decode      FrameSteps::decode            the frame's pixels, when a later stage needs them now (lazy)
+//   odometry    FrameSteps::odometry          pose + covariance from the odometry source (drift, file, ekf)
+//   gate        DetectionMethod::gate         gated DIRD: the pose gate and the candidate areas; others: nothing
+//   describe    DetectionMethod::describe     DIRD descriptors / SeqSLAM preprocessing (parallel)
+//   match       DetectionMethod::match        similarities, sequence DP + NMS, loops.csv (serial, in order)
+//   sink        RunOutputs::sink              frames.csv, trajectory.tum, timing.csv, counters, trace
+//
+// clang-format on
 //
 // Every serial node sits behind a sequencer: a serial node's outputs can overtake each other.
-// - run.mode = gated: the gate node (PoseGate + CandidateAreaTracker) decides per frame which cells became
-//   covered and which descriptors are needed; describe computes those (past frames read again); match
-//   computes the new cells' similarities and feeds rows older than gate.row_horizon_frames to the matcher.
-// - The producer runs on the calling thread, outside the worker arena. `rate: max` waits for a free slot
-//   (back-pressure, no drops); `rate: R` releases frame i at start + (t_i - t_first) / R on a steady
-//   clock and drops it (counted, before it gets a sequence number) when K frames are in flight.
-// - Every released frame gets the next contiguous sequence number and passes every node, whatever
-//   happens to it; sequencers restore the order after the parallel node (and guard the serial ones).
-// - decode is lazy: it decodes only when a later stage needs the pixels of this frame now (run.decode
-//   = all forces it; a visual odometry source needs every frame, and so does describe in full mode).
-// - run.mode = odometry: describe and match pass frames through. run.mode = full (the pure-DIRD
-//   baseline): describe extracts the frame's DIRD descriptor into a store owned by the run (3456 bytes
-//   per frame, DescriptorStore) and computes its similarities against the frames j <= i - max(margin, K)
-//   (certainly through the sink: the producer releases seq i only when at most K - 1 frames are in
-//   flight); match, in order, adds the pairs i - K < j <= i - margin (only when margin < K), feeds the
-//   streaming SequenceMatcher and writes loops.csv (i,j,t_i,t_j,score; dataset frame indices, times in
-//   s). The sink holds each frames.csv row until the matcher has finalised the frame (NMS delay 2 W
-//   frames); the matcher is flushed at the end of the stream. frames.csv then gains the columns
-//   descriptor (y/n), detection (no candidate | below threshold | suppressed | loop), match_frame and
-//   match_score (the frame's largest DP value, accepted or not) and detection_reason. The matcher indexes
-//   frames by sequence number (contiguous also when rate mode drops frames; match.margin counts them).
-// - Bad data in one frame (image that fails to decode, IMU gap/out-of-order/duplicates, odometry lost)
-//   is recorded in that frame's status and in the summary; the run goes on. Any other exception escaping
-//   a node cancels the graph; it is reported once with its stage and frame, the outputs of the frames
-//   already through the sink are written, and the result is `failed`.
+// - The detection method is chosen once (pipeline/detection_method.hpp): none (run.mode odometry), DIRD full,
+//   DIRD gated (default), SeqSLAM (run.method seqslam). After the drain its finish() runs (matcher flush,
+//   SeqSLAM's search), then the rows held for their detection are written and summary.json.
+// - The producer runs on the calling thread, outside the worker arena (ReplayClock: `rate: max` waits for a
+// free
+//   slot, `rate: R` releases frame i at start + (t_i - t_first) / R and drops it when K frames are in
+//   flight).
+// - Every released frame gets the next contiguous sequence number and passes every node, whatever happens to
+// it.
+// - Bad data in one frame (image that fails to decode, IMU gap/out-of-order/duplicates, odometry lost) is
+//   recorded in that frame's status and in the summary; the run goes on. Any other exception escaping a node
+//   cancels the graph; it is reported once with its stage and frame, the outputs of the frames already
+//   through the sink are written, and the result is `failed`.
 // - A stop request (SIGINT) stops the producer; the graph drains and every output is written.
 #pragma once
 

@@ -2,7 +2,6 @@
 
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
-#include <sys/resource.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -25,6 +24,7 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loops_writer.hpp"
+#include "pipeline/run_resources.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_similarity.hpp"
@@ -40,12 +40,6 @@ using Clock = std::chrono::steady_clock;
 
 double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-double peak_rss_mb() {
-  rusage usage{};
-  ::getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;
 }
 
 // Runs body(k) for k in [0, count) on `threads` threads (plain std::threads: thread start and join
