@@ -1308,7 +1308,6 @@ nlohmann::json PipelineRun::evaluate_loops() {
 }
 
 nlohmann::json PipelineRun::make_summary(const RunResult& result) {
-  PipelineConfig echo = config_;
   nlohmann::json issues = nlohmann::json::array();
   for (const auto& issue : dataset_.issues()) {
     if (issues.size() >= kMaxListedProblems) break;
@@ -1335,7 +1334,7 @@ nlohmann::json PipelineRun::make_summary(const RunResult& result) {
          {"kdtree_frames", pose_gate_->frames_in_tree()}});
   }
   return {
-      {"config", config_to_json(echo)},
+      {"config", config_to_json(config_)},
       {"dataset",
        {{"root", dataset_.root().string()},
         {"layout", dataset_.layout()},
