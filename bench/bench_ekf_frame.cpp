@@ -46,7 +46,7 @@ EkfConfig config_from_env() {
     if (eq != std::string::npos) {
       const std::string key = item.substr(0, eq);
       const std::string value = item.substr(eq + 1);
-      config.visit([&](const char* name, auto& field) {
+      EkfConfig::fields(config, [&](const char* name, auto& field) {
         using T = std::decay_t<decltype(field)>;
         if (key != name) return;
         if constexpr (std::is_same_v<T, bool>) {

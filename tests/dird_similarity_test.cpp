@@ -189,7 +189,7 @@ TEST(DirdConfig, ValidateNamesKeys) {
   // The visitor sees every key once.
   std::vector<std::string> keys;
   const DirdConfig& const_config = config;
-  const_config.visit([&](const char* key, const auto&) { keys.emplace_back(key); });
+  DirdConfig::fields(const_config, [&](const char* key, const auto&) { keys.emplace_back(key); });
   EXPECT_EQ(keys,
             (std::vector<std::string>{"normalization", "flip_vertical", "metric", "mu", "sigma", "tau1"}));
 }

@@ -23,7 +23,7 @@ TEST(EkfConfig, VisitorSeesEveryKeyOnce) {
   EkfConfig config;
   std::set<std::string> keys;
   int count = 0;
-  config.visit([&](const char* key, auto&) {
+  EkfConfig::fields(config, [&](const char* key, auto&) {
     keys.insert(key);
     ++count;
   });

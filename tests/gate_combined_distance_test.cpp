@@ -87,7 +87,7 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   GateConfig config;
   EXPECT_NO_THROW(config.validate());
   int keys = 0;
-  config.visit([&](const char*, auto&) { ++keys; });
+  GateConfig::fields(config, [&](const char*, auto&) { ++keys; });
   EXPECT_EQ(keys, 12);
   EXPECT_EQ(config.gap_frames, 30);
   EXPECT_EQ(config.sigma_norm, "max_eigen");

@@ -17,13 +17,14 @@ struct AlphaSection {
   double gain = 1.5;
   std::string mode = "fast";
 
-  template <class V>
-  void visit(V&& v) {
-    v("enabled", enabled);
-    v("count", count);
-    v("seed", seed);
-    v("gain", gain);
-    v("mode", mode);
+  // The keys, in order, for loading, printing and the JSON echo (Self is AlphaSection or const AlphaSection).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("enabled", self.enabled);
+    v("count", self.count);
+    v("seed", self.seed);
+    v("gain", self.gain);
+    v("mode", self.mode);
   }
   void validate() const {
     require_one_of("alpha.mode", mode, {"fast", "slow"});
@@ -33,9 +34,10 @@ struct AlphaSection {
 
 struct BetaSection {
   double sigma_m = 0.25;
-  template <class V>
-  void visit(V&& v) {
-    v("sigma_m", sigma_m);
+  // The keys, in order, for loading, printing and the JSON echo (Self is BetaSection or const BetaSection).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("sigma_m", self.sigma_m);
   }
   void validate() const {}
 };
@@ -43,10 +45,11 @@ struct BetaSection {
 struct TestConfig {
   AlphaSection alpha;
   BetaSection beta;
-  template <class V>
-  void visit_sections(V&& v) {
-    v("alpha", alpha);
-    v("beta", beta);
+  // The sections, in order, for loading, printing and the JSON echo (Self is TestConfig or const TestConfig).
+  template <class Self, class V>
+  static void sections(Self& self, V&& v) {
+    v("alpha", self.alpha);
+    v("beta", self.beta);
   }
 };
 

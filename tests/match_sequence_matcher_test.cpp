@@ -347,7 +347,7 @@ TEST(MatchConfig, ValidateNamesKeys) {
   config.max_step = -1;
   EXPECT_THROW(config.validate(), ConfigError);
   std::vector<std::string> keys;
-  config.visit([&](const char* key, auto&) { keys.emplace_back(key); });
+  MatchConfig::fields(config, [&](const char* key, auto&) { keys.emplace_back(key); });
   EXPECT_EQ(keys,
             (std::vector<std::string>{"margin", "sequence_length", "tau3", "max_step", "nms_half_window"}));
 }

@@ -16,12 +16,14 @@ struct GroundTruthConfig {
   std::string plane = "xz";      // distances in: "xz" (KITTI camera frame), "xy", or "xyz" (3-D, EuRoC)
   double accept_radius_m = 0.0;  // r_accept for scoring a detection; <= 0 means r_true
 
-  template <class V>
-  void visit(V&& v) {
-    v("radius_m", radius_m);
-    v("gap_frames", gap_frames);
-    v("plane", plane);
-    v("accept_radius_m", accept_radius_m);
+  // The keys, in order, for loading, printing and the JSON echo (Self is GroundTruthConfig or const
+  // GroundTruthConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("radius_m", self.radius_m);
+    v("gap_frames", self.gap_frames);
+    v("plane", self.plane);
+    v("accept_radius_m", self.accept_radius_m);
   }
   void validate() const;  // throws ConfigError naming the key
   double effective_accept_radius_m() const { return accept_radius_m > 0.0 ? accept_radius_m : radius_m; }

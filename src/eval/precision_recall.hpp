@@ -21,9 +21,10 @@ struct PrConfig {
   // "lower_is_better" (SeqSLAM ratio, descriptor distance) or "higher_is_better" (similarity).
   std::string score_order = "lower_is_better";
 
-  template <class V>
-  void visit(V&& v) {
-    v("score_order", score_order);
+  // The keys, in order, for loading, printing and the JSON echo (Self is PrConfig or const PrConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("score_order", self.score_order);
   }
   void validate() const;  // throws ConfigError naming the key and the allowed values
   bool lower_is_better() const { return score_order == "lower_is_better"; }

@@ -21,11 +21,12 @@ struct AteConfig {
   std::string up_axis = "z";  // gravity axis for "posyaw": "x", "y" (KITTI camera frame) or "z" (EuRoC)
   std::int64_t max_dt_ns = 10'000'000;  // timestamp association tolerance (associate_by_time)
 
-  template <class V>
-  void visit(V&& v) {
-    v("alignment", alignment);
-    v("up_axis", up_axis);
-    v("max_dt_ns", max_dt_ns);
+  // The keys, in order, for loading, printing and the JSON echo (Self is AteConfig or const AteConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("alignment", self.alignment);
+    v("up_axis", self.up_axis);
+    v("max_dt_ns", self.max_dt_ns);
   }
   void validate() const;  // throws ConfigError naming the key and allowed values
   Eigen::Vector3d up() const;

@@ -2,11 +2,16 @@
 // line (`--set section.key=value`), printed at start and echoed as JSON into the run summary.
 //
 // A section is any struct with
-//   template <class V> void visit(V&& v) { v("key", field); ... }   // bool, int, int64_t, double, string
-//   void validate() const;                                          // throws ConfigError naming the key
+//   template <class Self, class V>
+//   static void fields(Self& self, V&& v) {  // fields are bool, int, int64_t, double or std::string
+//     v("key", self.field); ...
+//   }
+//   void validate() const;                   // throws ConfigError naming the key
 // and a top-level configuration is any struct with
-//   template <class V> void visit_sections(V&& v) { v("run", run); v("sync", sync); ... }
-// Adding a section (e.g. DirdConfig "dird") is one member and one line in visit_sections().
+//   template <class Self, class V>
+//   static void sections(Self& self, V&& v) { v("run", self.run); v("sync", self.sync); ... }
+// Self is the struct or the const struct: one list of keys serves loading (non-const), printing and the JSON
+// echo (const). Adding a section (e.g. DirdConfig "dird") is one member and one line in sections().
 //
 // YAML layout: a mapping of section name -> mapping of key -> scalar. Unknown sections or keys, values of
 // the wrong type and non-scalar values throw ConfigError naming "section.key" (and file:line for YAML).
@@ -86,14 +91,14 @@ std::string format_value(const std::string& value);
 
 }  // namespace config_detail
 
-// Applies the raw values of one section to `section` (keys must exist in its visit()).
+// Applies the raw values of one section to `section` (keys must exist in its fields()).
 template <class Section>
 void apply_section(const std::string& section_name, const std::map<std::string, RawConfigValue>& values,
                    Section& section) {
   for (const auto& [key, value] : values) {
     bool found = false;
     std::vector<std::string> keys;
-    section.visit([&](std::string_view field_key, auto& field) {
+    std::remove_cvref_t<Section>::fields(section, [&](std::string_view field_key, auto& field) {
       keys.emplace_back(field_key);
       if (field_key == key) {
         config_detail::assign(section_name + "." + key, value, field);
@@ -104,13 +109,13 @@ void apply_section(const std::string& section_name, const std::map<std::string, 
   }
 }
 
-// Applies every raw value to `config` (a struct with visit_sections), then validates every section.
+// Applies every raw value to `config` (a struct with sections()), then validates every section.
 template <class Config>
 void apply_config(const RawConfig& raw, Config& config) {
   for (const auto& [section_name, values] : raw.sections()) {
     bool found = false;
     std::vector<std::string> names;
-    config.visit_sections([&](std::string_view name, auto& section) {
+    Config::sections(config, [&](std::string_view name, auto& section) {
       names.emplace_back(name);
       if (name == section_name) {
         apply_section(section_name, values, section);
@@ -122,7 +127,7 @@ void apply_config(const RawConfig& raw, Config& config) {
       config_detail::throw_unknown("section", section_name, origin, names);
     }
   }
-  config.visit_sections([](std::string_view, auto& section) { section.validate(); });
+  Config::sections(config, [](std::string_view, const auto& section) { section.validate(); });
 }
 
 // Loads `file` (when not empty), applies the overrides in order, validates.
@@ -137,22 +142,23 @@ Config load_config(const std::filesystem::path& file, const std::vector<std::str
 
 // {"section": {"key": value, ...}, ...} with JSON types matching the fields.
 template <class Config>
-nlohmann::json config_to_json(Config& config) {
+nlohmann::json config_to_json(const Config& config) {
   nlohmann::json json = nlohmann::json::object();
-  config.visit_sections([&](std::string_view name, auto& section) {
+  Config::sections(config, [&](std::string_view name, const auto& section) {
     nlohmann::json& out = json[std::string(name)];
     out = nlohmann::json::object();
-    section.visit([&](std::string_view key, auto& field) { out[std::string(key)] = field; });
+    std::remove_cvref_t<decltype(section)>::fields(
+        section, [&](std::string_view key, const auto& field) { out[std::string(key)] = field; });
   });
   return json;
 }
 
-// "section.key = value" lines, one per parameter, in visit order.
+// "section.key = value" lines, one per parameter, in the order of sections() and fields().
 template <class Config>
-std::vector<std::string> config_to_lines(Config& config) {
+std::vector<std::string> config_to_lines(const Config& config) {
   std::vector<std::string> lines;
-  config.visit_sections([&](std::string_view name, auto& section) {
-    section.visit([&](std::string_view key, auto& field) {
+  Config::sections(config, [&](std::string_view name, const auto& section) {
+    std::remove_cvref_t<decltype(section)>::fields(section, [&](std::string_view key, const auto& field) {
       lines.push_back(std::string(name) + "." + std::string(key) + " = " +
                       config_detail::format_value(field));
     });

@@ -1,6 +1,6 @@
-// The top-level configuration of `loopgate run`: one struct per section, each with visit()/validate()
+// The top-level configuration of `loopgate run`: one struct per section, each with fields()/validate()
 // (see io/config.hpp). To add a section (e.g. DirdConfig "dird", MatchConfig "match"): add a member and
-// one line in visit_sections(); YAML loading, --set overrides, printing and the JSON echo follow.
+// one line in sections(); YAML loading, --set overrides, printing and the JSON echo follow.
 #pragma once
 
 #include <cstddef>
@@ -42,20 +42,21 @@ struct RunConfig {
   // dataset. 0 = no cache. Memory: this many images.
   int image_cache_frames = 64;
 
-  template <class V>
-  void visit(V&& v) {
-    v("dataset", dataset);
-    v("mode", mode);
-    v("method", method);
-    v("rate", rate);
-    v("threads", threads);
-    v("max_in_flight", max_in_flight);
-    v("frames", frames);
-    v("decode", decode);
-    v("strict", strict);
-    v("camera_index", camera_index);
-    v("deadline_ms", deadline_ms);
-    v("image_cache_frames", image_cache_frames);
+  // The keys, in order, for loading, printing and the JSON echo (Self is RunConfig or const RunConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("dataset", self.dataset);
+    v("mode", self.mode);
+    v("method", self.method);
+    v("rate", self.rate);
+    v("threads", self.threads);
+    v("max_in_flight", self.max_in_flight);
+    v("frames", self.frames);
+    v("decode", self.decode);
+    v("strict", self.strict);
+    v("camera_index", self.camera_index);
+    v("deadline_ms", self.deadline_ms);
+    v("image_cache_frames", self.image_cache_frames);
   }
   void validate() const;
 
@@ -72,11 +73,12 @@ struct OutputConfig {
   std::string progress = "auto";  // auto (when stderr is a terminal) | on | off
   int flush_every = 100;          // frames between flushes of the streamed CSV/TUM files
 
-  template <class V>
-  void visit(V&& v) {
-    v("trace", trace);
-    v("progress", progress);
-    v("flush_every", flush_every);
+  // The keys, in order, for loading, printing and the JSON echo (Self is OutputConfig or const OutputConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("trace", self.trace);
+    v("progress", self.progress);
+    v("flush_every", self.flush_every);
   }
   void validate() const;
 };
@@ -96,13 +98,14 @@ struct EvalConfig {
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
 
-  template <class V>
-  void visit(V&& v) {
-    v("truth_radius_m", truth_radius_m);
-    v("truth_gap_frames", truth_gap_frames);
-    v("plane", plane);
-    v("accept_radius_m", accept_radius_m);
-    v("aligned_tolerance_frames", aligned_tolerance_frames);
+  // The keys, in order, for loading, printing and the JSON echo (Self is EvalConfig or const EvalConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("truth_radius_m", self.truth_radius_m);
+    v("truth_gap_frames", self.truth_gap_frames);
+    v("plane", self.plane);
+    v("accept_radius_m", self.accept_radius_m);
+    v("aligned_tolerance_frames", self.aligned_tolerance_frames);
   }
   void validate() const;
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
@@ -129,18 +132,20 @@ struct PipelineConfig {
   EvalConfig eval;
   OutputConfig output;
 
-  template <class V>
-  void visit_sections(V&& v) {
-    v("run", run);
-    v("sync", sync);
-    v("odometry", odometry);
-    v("ekf", ekf);
-    v("gate", gate);
-    v("dird", dird);
-    v("match", match);
-    v("seqslam", seqslam);
-    v("eval", eval);
-    v("output", output);
+  // The sections, in order, for loading, printing and the JSON echo (Self is PipelineConfig or const
+  // PipelineConfig).
+  template <class Self, class V>
+  static void sections(Self& self, V&& v) {
+    v("run", self.run);
+    v("sync", self.sync);
+    v("odometry", self.odometry);
+    v("ekf", self.ekf);
+    v("gate", self.gate);
+    v("dird", self.dird);
+    v("match", self.match);
+    v("seqslam", self.seqslam);
+    v("eval", self.eval);
+    v("output", self.output);
   }
   void validate() const {
     run.validate();

@@ -13,11 +13,6 @@
 
 namespace loopgate {
 
-namespace {
-nlohmann::json config_echo(PipelineConfig config) {
-  return config_to_json(config);
-}
-}  // namespace
 
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
   const Dataset& dataset = parts.dataset;
@@ -80,7 +75,7 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
   }
   const std::size_t reads = parts.images.reads_for_description();
   nlohmann::json summary = {
-      {"config", config_echo(parts.config)},
+      {"config", config_to_json(parts.config)},
       {"dataset",
        {{"root", dataset.root().string()},
         {"layout", dataset.layout()},

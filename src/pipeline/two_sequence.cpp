@@ -265,14 +265,13 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   result.query_frames = query_count;
   result.loops = output.loops.size();
   const std::string score_order = "higher_is_better";
-  PipelineConfig echo = config;  // config_to_json visits (non-const)
   nlohmann::json evaluation = run_evaluation(setup, detections, detections, score_order, out_dir);
   result.wall_s = seconds_since(start);
   result.summary = {
       {"mode", "two-sequence"},
       {"method", "dird"},
       {"score_order", score_order},
-      {"config", config_to_json(echo)},
+      {"config", config_to_json(config)},
       {"images_decoded", ref.described + qry.described},
       {"descriptors_computed", ref.described + qry.described},
       {"similarities_computed", similarities},

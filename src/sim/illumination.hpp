@@ -49,28 +49,30 @@ struct IlluminationSchedule {
   // jump: day before jump_phase, night from jump_phase on.
   double jump_phase = 0.5;
 
-  template <class V>
-  void visit(V&& v) {
-    v("kind", kind);
-    v("day_exposure", day_exposure);
-    v("night_exposure", night_exposure);
-    v("day_ambient", day_ambient);
-    v("night_ambient", night_ambient);
-    v("day_sun_intensity", day_sun_intensity);
-    v("night_sun_intensity", night_sun_intensity);
-    v("day_sky_brightness", day_sky_brightness);
-    v("night_sky_brightness", night_sky_brightness);
-    v("day_vignetting", day_vignetting);
-    v("night_vignetting", night_vignetting);
-    v("day_noise_sigma", day_noise_sigma);
-    v("night_noise_sigma", night_noise_sigma);
-    v("gamma", gamma);
-    v("sun_dir_x", sun_dir_x);
-    v("sun_dir_y", sun_dir_y);
-    v("sun_dir_z", sun_dir_z);
-    v("transition_start", transition_start);
-    v("transition_end", transition_end);
-    v("jump_phase", jump_phase);
+  // The keys, in order, for loading, printing and the JSON echo (Self is IlluminationSchedule or const
+  // IlluminationSchedule).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("kind", self.kind);
+    v("day_exposure", self.day_exposure);
+    v("night_exposure", self.night_exposure);
+    v("day_ambient", self.day_ambient);
+    v("night_ambient", self.night_ambient);
+    v("day_sun_intensity", self.day_sun_intensity);
+    v("night_sun_intensity", self.night_sun_intensity);
+    v("day_sky_brightness", self.day_sky_brightness);
+    v("night_sky_brightness", self.night_sky_brightness);
+    v("day_vignetting", self.day_vignetting);
+    v("night_vignetting", self.night_vignetting);
+    v("day_noise_sigma", self.day_noise_sigma);
+    v("night_noise_sigma", self.night_noise_sigma);
+    v("gamma", self.gamma);
+    v("sun_dir_x", self.sun_dir_x);
+    v("sun_dir_y", self.sun_dir_y);
+    v("sun_dir_z", self.sun_dir_z);
+    v("transition_start", self.transition_start);
+    v("transition_end", self.transition_end);
+    v("jump_phase", self.jump_phase);
   }
   // Throws loopgate::ConfigError naming the key (kind values, ranges, sun direction not zero).
   void validate() const;

@@ -19,13 +19,15 @@ struct ImuSynthConfig {
   double initial_gyro_bias_sigma_radps = 0.0;
   double initial_accel_bias_sigma_mps2 = 0.0;
 
-  template <class V>
-  void visit(V&& v) {
-    v("rate_hz", rate_hz);
-    v("gravity_mps2", gravity_mps2);
-    v("add_noise", add_noise);
-    v("initial_gyro_bias_sigma_radps", initial_gyro_bias_sigma_radps);
-    v("initial_accel_bias_sigma_mps2", initial_accel_bias_sigma_mps2);
+  // The keys, in order, for loading, printing and the JSON echo (Self is ImuSynthConfig or const
+  // ImuSynthConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("rate_hz", self.rate_hz);
+    v("gravity_mps2", self.gravity_mps2);
+    v("add_noise", self.add_noise);
+    v("initial_gyro_bias_sigma_radps", self.initial_gyro_bias_sigma_radps);
+    v("initial_accel_bias_sigma_mps2", self.initial_accel_bias_sigma_mps2);
   }
   void validate() const;  // throws ConfigError
 };

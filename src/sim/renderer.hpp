@@ -21,13 +21,15 @@ struct RendererConfig {
   double min_incidence_cos = 0.03;  // clamps the texture footprint at grazing angles
   double sky_zenith_gain = 0.35;    // the sky gets brighter by this fraction towards the zenith
 
-  template <class V>
-  void visit(V&& v) {
-    v("near_m", near_m);
-    v("far_m", far_m);
-    v("haze_distance_m", haze_distance_m);
-    v("min_incidence_cos", min_incidence_cos);
-    v("sky_zenith_gain", sky_zenith_gain);
+  // The keys, in order, for loading, printing and the JSON echo (Self is RendererConfig or const
+  // RendererConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("near_m", self.near_m);
+    v("far_m", self.far_m);
+    v("haze_distance_m", self.haze_distance_m);
+    v("min_incidence_cos", self.min_incidence_cos);
+    v("sky_zenith_gain", self.sky_zenith_gain);
   }
   void validate() const;  // throws loopgate::ConfigError naming the key
 };

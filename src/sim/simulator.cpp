@@ -171,8 +171,7 @@ void LoopTruthSettings::validate() const {
 }
 
 void SimulationConfig::validate() const {
-  SimulationConfig copy = *this;
-  copy.visit_sections([](std::string_view, auto& section) { section.validate(); });
+  sections(*this, [](std::string_view, const auto& section) { section.validate(); });
 }
 
 // ---------------------------------------------------------------------------------------------------------

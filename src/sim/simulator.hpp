@@ -46,26 +46,28 @@ struct SimulationSettings {
   int png_compression = 3;       // zlib level 0..9, fixed so the output is byte-identical per seed
   int render_batch_frames = 32;  // frames rendered in parallel before being written in order
 
-  template <class V>
-  void visit(V&& v) {
-    v("preset", preset);
-    v("seed", seed);
-    v("max_frames", max_frames);
-    v("trajectory_format", trajectory_format);
-    v("trajectory_file", trajectory_file);
-    v("times_file", times_file);
-    v("frame_times_file", frame_times_file);
-    v("camera_yaml", camera_yaml);
-    v("imu_source", imu_source);
-    v("imu_file", imu_file);
-    v("imu_yaml", imu_yaml);
-    v("imu_padding_s", imu_padding_s);
-    v("frame_rate_hz", frame_rate_hz);
-    v("up_x", up_x);
-    v("up_y", up_y);
-    v("up_z", up_z);
-    v("png_compression", png_compression);
-    v("render_batch_frames", render_batch_frames);
+  // The keys, in order, for loading, printing and the JSON echo (Self is SimulationSettings or const
+  // SimulationSettings).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("preset", self.preset);
+    v("seed", self.seed);
+    v("max_frames", self.max_frames);
+    v("trajectory_format", self.trajectory_format);
+    v("trajectory_file", self.trajectory_file);
+    v("times_file", self.times_file);
+    v("frame_times_file", self.frame_times_file);
+    v("camera_yaml", self.camera_yaml);
+    v("imu_source", self.imu_source);
+    v("imu_file", self.imu_file);
+    v("imu_yaml", self.imu_yaml);
+    v("imu_padding_s", self.imu_padding_s);
+    v("frame_rate_hz", self.frame_rate_hz);
+    v("up_x", self.up_x);
+    v("up_y", self.up_y);
+    v("up_z", self.up_z);
+    v("png_compression", self.png_compression);
+    v("render_batch_frames", self.render_batch_frames);
   }
   void validate() const;
 };
@@ -91,26 +93,28 @@ struct CameraSettings {
   double q_b_c_y = 0.0;
   double q_b_c_z = 0.0;
 
-  template <class V>
-  void visit(V&& v) {
-    v("width_px", width_px);
-    v("height_px", height_px);
-    v("fx", fx);
-    v("fy", fy);
-    v("cx", cx);
-    v("cy", cy);
-    v("distortion_model", distortion_model);
-    v("k1", k1);
-    v("k2", k2);
-    v("p1", p1);
-    v("p2", p2);
-    v("t_b_c_x_m", t_b_c_x_m);
-    v("t_b_c_y_m", t_b_c_y_m);
-    v("t_b_c_z_m", t_b_c_z_m);
-    v("q_b_c_w", q_b_c_w);
-    v("q_b_c_x", q_b_c_x);
-    v("q_b_c_y", q_b_c_y);
-    v("q_b_c_z", q_b_c_z);
+  // The keys, in order, for loading, printing and the JSON echo (Self is CameraSettings or const
+  // CameraSettings).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("width_px", self.width_px);
+    v("height_px", self.height_px);
+    v("fx", self.fx);
+    v("fy", self.fy);
+    v("cx", self.cx);
+    v("cy", self.cy);
+    v("distortion_model", self.distortion_model);
+    v("k1", self.k1);
+    v("k2", self.k2);
+    v("p1", self.p1);
+    v("p2", self.p2);
+    v("t_b_c_x_m", self.t_b_c_x_m);
+    v("t_b_c_y_m", self.t_b_c_y_m);
+    v("t_b_c_z_m", self.t_b_c_z_m);
+    v("q_b_c_w", self.q_b_c_w);
+    v("q_b_c_x", self.q_b_c_x);
+    v("q_b_c_y", self.q_b_c_y);
+    v("q_b_c_z", self.q_b_c_z);
   }
   void validate() const;
   Eigen::Isometry3d T_b_c() const;
@@ -125,12 +129,14 @@ struct ImuNoiseSettings {
   double accel_noise_density = 2.0000e-03;  // m / s^2 / sqrt(Hz)
   double accel_random_walk = 3.0000e-03;    // m / s^3 / sqrt(Hz)
 
-  template <class V>
-  void visit(V&& v) {
-    v("gyro_noise_density", gyro_noise_density);
-    v("gyro_random_walk", gyro_random_walk);
-    v("accel_noise_density", accel_noise_density);
-    v("accel_random_walk", accel_random_walk);
+  // The keys, in order, for loading, printing and the JSON echo (Self is ImuNoiseSettings or const
+  // ImuNoiseSettings).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("gyro_noise_density", self.gyro_noise_density);
+    v("gyro_random_walk", self.gyro_random_walk);
+    v("accel_noise_density", self.accel_noise_density);
+    v("accel_random_walk", self.accel_random_walk);
   }
   void validate() const;
   ImuCalibration calibration(double rate_hz) const;
@@ -147,18 +153,20 @@ struct LoopTruthSettings {
   bool horizontal_only = true;
   double max_view_angle_deg = 180.0;
 
-  template <class V>
-  void visit(V&& v) {
-    v("radius_m", radius_m);
-    v("min_gap_frames", min_gap_frames);
-    v("min_travel_m", min_travel_m);
-    v("horizontal_only", horizontal_only);
-    v("max_view_angle_deg", max_view_angle_deg);
+  // The keys, in order, for loading, printing and the JSON echo (Self is LoopTruthSettings or const
+  // LoopTruthSettings).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("radius_m", self.radius_m);
+    v("min_gap_frames", self.min_gap_frames);
+    v("min_travel_m", self.min_travel_m);
+    v("horizontal_only", self.horizontal_only);
+    v("max_view_angle_deg", self.max_view_angle_deg);
   }
   void validate() const;
 };
 
-// Everything a simulation run needs. A top-level configuration for the config system (visit_sections).
+// Everything a simulation run needs. A top-level configuration for the config system (sections()).
 struct SimulationConfig {
   SimulationSettings simulation;
   CameraSettings camera;
@@ -170,17 +178,19 @@ struct SimulationConfig {
   IlluminationSchedule illumination;
   LoopTruthSettings loops;
 
-  template <class V>
-  void visit_sections(V&& v) {
-    v("simulation", simulation);
-    v("camera", camera);
-    v("route", route);
-    v("fit", fit);
-    v("imu", imu);
-    v("imu_noise", imu_noise);
-    v("world", world);
-    v("illumination", illumination);
-    v("loops", loops);
+  // The sections, in order, for loading, printing and the JSON echo (Self is SimulationConfig or const
+  // SimulationConfig).
+  template <class Self, class V>
+  static void sections(Self& self, V&& v) {
+    v("simulation", self.simulation);
+    v("camera", self.camera);
+    v("route", self.route);
+    v("fit", self.fit);
+    v("imu", self.imu);
+    v("imu_noise", self.imu_noise);
+    v("world", self.world);
+    v("illumination", self.illumination);
+    v("loops", self.loops);
   }
   void validate() const;
 };

@@ -28,12 +28,14 @@ struct TrajectoryFitConfig {
   int rotation_iterations = 20;
   double rotation_tolerance_rad = 1e-10;
 
-  template <class V>
-  void visit(V&& v) {
-    v("knot_spacing_s", knot_spacing_s);
-    v("smoothing_weight", smoothing_weight);
-    v("rotation_iterations", rotation_iterations);
-    v("rotation_tolerance_rad", rotation_tolerance_rad);
+  // The keys, in order, for loading, printing and the JSON echo (Self is TrajectoryFitConfig or const
+  // TrajectoryFitConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("knot_spacing_s", self.knot_spacing_s);
+    v("smoothing_weight", self.smoothing_weight);
+    v("rotation_iterations", self.rotation_iterations);
+    v("rotation_tolerance_rad", self.rotation_tolerance_rad);
   }
   void validate() const;  // throws ConfigError
 };
@@ -119,23 +121,25 @@ struct ProceduralRouteConfig {
   double heading_wobble_period_s = 7.0;
   std::int64_t start_t_ns = 0;
 
-  template <class V>
-  void visit(V&& v) {
-    v("shape", shape);
-    v("waypoints", waypoints);
-    v("length_x_m", length_x_m);
-    v("length_y_m", length_y_m);
-    v("corner_radius_m", corner_radius_m);
-    v("laps", laps);
-    v("frames", frames);
-    v("rate_hz", rate_hz);
-    v("camera_height_m", camera_height_m);
-    v("lap_lateral_offset_m", lap_lateral_offset_m);
-    v("speed_variation", speed_variation);
-    v("speed_cycles_per_lap", speed_cycles_per_lap);
-    v("heading_wobble_rad", heading_wobble_rad);
-    v("heading_wobble_period_s", heading_wobble_period_s);
-    v("start_t_ns", start_t_ns);
+  // The keys, in order, for loading, printing and the JSON echo (Self is ProceduralRouteConfig or const
+  // ProceduralRouteConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("shape", self.shape);
+    v("waypoints", self.waypoints);
+    v("length_x_m", self.length_x_m);
+    v("length_y_m", self.length_y_m);
+    v("corner_radius_m", self.corner_radius_m);
+    v("laps", self.laps);
+    v("frames", self.frames);
+    v("rate_hz", self.rate_hz);
+    v("camera_height_m", self.camera_height_m);
+    v("lap_lateral_offset_m", self.lap_lateral_offset_m);
+    v("speed_variation", self.speed_variation);
+    v("speed_cycles_per_lap", self.speed_cycles_per_lap);
+    v("heading_wobble_rad", self.heading_wobble_rad);
+    v("heading_wobble_period_s", self.heading_wobble_period_s);
+    v("start_t_ns", self.start_t_ns);
   }
   void validate() const;  // throws ConfigError
 };

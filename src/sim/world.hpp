@@ -63,42 +63,43 @@ struct WorldConfig {
   double hall_clearance_m = 1.2;  // pillars and crates keep this distance from every path point
   double hall_texels_per_m = 64.0;
 
-  template <class V>
-  void visit(V&& v) {
-    v("kind", kind);
-    v("seed", seed);
-    v("aliasing_fraction", aliasing_fraction);
-    v("alias_copy_radius_m", alias_copy_radius_m);
-    v("alias_copy_source_x_m", alias_copy_source_x_m);
-    v("alias_copy_source_y_m", alias_copy_source_y_m);
-    v("alias_copy_target_x_m", alias_copy_target_x_m);
-    v("alias_copy_target_y_m", alias_copy_target_y_m);
-    v("alias_copy_rotation_deg", alias_copy_rotation_deg);
-    v("alias_copy_tolerance_m", alias_copy_tolerance_m);
-    v("street_facade_offset_m", street_facade_offset_m);
-    v("street_facade_offset_jitter_m", street_facade_offset_jitter_m);
-    v("street_clearance_m", street_clearance_m);
-    v("street_facade_length_m", street_facade_length_m);
-    v("street_facade_gap_m", street_facade_gap_m);
-    v("street_facade_min_height_m", street_facade_min_height_m);
-    v("street_facade_max_height_m", street_facade_max_height_m);
-    v("street_camera_height_m", street_camera_height_m);
-    v("street_edge_line_offset_m", street_edge_line_offset_m);
-    v("street_ground_tile_m", street_ground_tile_m);
-    v("street_facade_texels_per_m", street_facade_texels_per_m);
-    v("street_road_texels_per_m", street_road_texels_per_m);
-    v("street_pole_spacing_m", street_pole_spacing_m);
-    v("street_pole_offset_m", street_pole_offset_m);
-    v("street_pole_height_m", street_pole_height_m);
-    v("street_pole_width_m", street_pole_width_m);
-    v("hall_margin_m", hall_margin_m);
-    v("hall_floor_below_m", hall_floor_below_m);
-    v("hall_ceiling_above_m", hall_ceiling_above_m);
-    v("hall_wall_panel_m", hall_wall_panel_m);
-    v("hall_pillar_count", hall_pillar_count);
-    v("hall_crate_count", hall_crate_count);
-    v("hall_clearance_m", hall_clearance_m);
-    v("hall_texels_per_m", hall_texels_per_m);
+  // The keys, in order, for loading, printing and the JSON echo (Self is WorldConfig or const WorldConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("kind", self.kind);
+    v("seed", self.seed);
+    v("aliasing_fraction", self.aliasing_fraction);
+    v("alias_copy_radius_m", self.alias_copy_radius_m);
+    v("alias_copy_source_x_m", self.alias_copy_source_x_m);
+    v("alias_copy_source_y_m", self.alias_copy_source_y_m);
+    v("alias_copy_target_x_m", self.alias_copy_target_x_m);
+    v("alias_copy_target_y_m", self.alias_copy_target_y_m);
+    v("alias_copy_rotation_deg", self.alias_copy_rotation_deg);
+    v("alias_copy_tolerance_m", self.alias_copy_tolerance_m);
+    v("street_facade_offset_m", self.street_facade_offset_m);
+    v("street_facade_offset_jitter_m", self.street_facade_offset_jitter_m);
+    v("street_clearance_m", self.street_clearance_m);
+    v("street_facade_length_m", self.street_facade_length_m);
+    v("street_facade_gap_m", self.street_facade_gap_m);
+    v("street_facade_min_height_m", self.street_facade_min_height_m);
+    v("street_facade_max_height_m", self.street_facade_max_height_m);
+    v("street_camera_height_m", self.street_camera_height_m);
+    v("street_edge_line_offset_m", self.street_edge_line_offset_m);
+    v("street_ground_tile_m", self.street_ground_tile_m);
+    v("street_facade_texels_per_m", self.street_facade_texels_per_m);
+    v("street_road_texels_per_m", self.street_road_texels_per_m);
+    v("street_pole_spacing_m", self.street_pole_spacing_m);
+    v("street_pole_offset_m", self.street_pole_offset_m);
+    v("street_pole_height_m", self.street_pole_height_m);
+    v("street_pole_width_m", self.street_pole_width_m);
+    v("hall_margin_m", self.hall_margin_m);
+    v("hall_floor_below_m", self.hall_floor_below_m);
+    v("hall_ceiling_above_m", self.hall_ceiling_above_m);
+    v("hall_wall_panel_m", self.hall_wall_panel_m);
+    v("hall_pillar_count", self.hall_pillar_count);
+    v("hall_crate_count", self.hall_crate_count);
+    v("hall_clearance_m", self.hall_clearance_m);
+    v("hall_texels_per_m", self.hall_texels_per_m);
   }
   // Throws loopgate::ConfigError naming the key and the allowed values / range.
   void validate() const;

@@ -29,19 +29,9 @@ struct DirdConfig {
   // Sparse similarity: only entries with sim > tau1 are kept.
   double tau1 = 0.05;
 
-  template <class V>
-  void visit(V&& v) {
-    visit_fields(*this, v);
-  }
-  template <class V>
-  void visit(V&& v) const {
-    visit_fields(*this, v);
-  }
-
- private:
-  // One list of keys for both visits (Self is DirdConfig or const DirdConfig).
+  // The keys, in order, for loading, printing and the JSON echo (Self is DirdConfig or const DirdConfig).
   template <class Self, class V>
-  static void visit_fields(Self& self, V& v) {
+  static void fields(Self& self, V&& v) {
     v("normalization", self.normalization);
     v("flip_vertical", self.flip_vertical);
     v("metric", self.metric);
@@ -49,8 +39,6 @@ struct DirdConfig {
     v("sigma", self.sigma);
     v("tau1", self.tau1);
   }
-
- public:
   // Throws ConfigError naming the key: normalization in {libdird, l2}, metric in {l1, l2}, sigma > 0,
   // finite mu, 0 < tau1 < 1, and with metric l2 mu/sigma must not be the L1 reference values.
   void validate() const;

@@ -39,19 +39,9 @@ struct GateConfig {
   // widens long after the row) are not computed; the rectangle is then the bounding box of what was.
   int row_horizon_frames = 40;
 
-  template <class V>
-  void visit(V&& v) {
-    visit_fields(*this, v);
-  }
-  template <class V>
-  void visit(V&& v) const {
-    visit_fields(*this, v);
-  }
-
- private:
-  // One list of keys for both visits (Self is GateConfig or const GateConfig).
+  // The keys, in order, for loading, printing and the JSON echo (Self is GateConfig or const GateConfig).
   template <class Self, class V>
-  static void visit_fields(Self& self, V& v) {
+  static void fields(Self& self, V&& v) {
     v("gap_frames", self.gap_frames);
     v("beta_m", self.beta_m);
     v("sigma_norm", self.sigma_norm);
@@ -65,8 +55,6 @@ struct GateConfig {
     v("area_margin_reference_frames", self.area_margin_reference_frames);
     v("row_horizon_frames", self.row_horizon_frames);
   }
-
- public:
   // Throws ConfigError naming the key: gap_frames >= 1, beta_m >= 0 (finite), sigma_norm in {max_eigen,
   // trace}, confidence_scale >= 0 (finite),
   // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size >= 1, kdtree_seed_neighbours >= 1, area_* >= 0.

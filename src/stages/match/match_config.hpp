@@ -16,27 +16,15 @@ struct MatchConfig {
   // NMS window: values M(j - k, i + k), k = -nms_half_window..nms_half_window, along the anti-diagonal.
   int nms_half_window = 59;
 
-  template <class V>
-  void visit(V&& v) {
-    visit_fields(*this, v);
-  }
-  template <class V>
-  void visit(V&& v) const {
-    visit_fields(*this, v);
-  }
-
- private:
-  // One list of keys for both visits (Self is MatchConfig or const MatchConfig).
+  // The keys, in order, for loading, printing and the JSON echo (Self is MatchConfig or const MatchConfig).
   template <class Self, class V>
-  static void visit_fields(Self& self, V& v) {
+  static void fields(Self& self, V&& v) {
     v("margin", self.margin);
     v("sequence_length", self.sequence_length);
     v("tau3", self.tau3);
     v("max_step", self.max_step);
     v("nms_half_window", self.nms_half_window);
   }
-
- public:
   // Throws ConfigError naming the key: margin >= 0, sequence_length >= 1, tau3 >= 0 (finite),
   // max_step >= 0, nms_half_window >= 0.
   void validate() const;

@@ -50,23 +50,25 @@ struct OdometryConfig {
   // truth (z for EuRoC, -y for KITTI camera-frame worlds); z without ground truth.
   std::string ekf_up_axis = "auto";
 
-  template <class V>
-  void visit(V&& v) {
-    v("source", source);
-    v("seed", seed);
-    v("drift_position_sigma_m_per_sqrt_m", drift_position_sigma_m_per_sqrt_m);
-    v("drift_heading_sigma_rad_per_sqrt_m", drift_heading_sigma_rad_per_sqrt_m);
-    v("drift_scale_sigma_per_sqrt_m", drift_scale_sigma_per_sqrt_m);
-    v("heading_axis", heading_axis);
-    v("initial_sigma_m", initial_sigma_m);
-    v("initial_sigma_rad", initial_sigma_rad);
-    v("file", file);
-    v("file_sigma2_a_m2", file_sigma2_a_m2);
-    v("file_sigma2_b_m2_per_m", file_sigma2_b_m2_per_m);
-    v("file_rot_sigma2_a_rad2", file_rot_sigma2_a_rad2);
-    v("file_rot_sigma2_b_rad2_per_m", file_rot_sigma2_b_rad2_per_m);
-    v("file_max_gap_s", file_max_gap_s);
-    v("ekf_up_axis", ekf_up_axis);
+  // The keys, in order, for loading, printing and the JSON echo (Self is OdometryConfig or const
+  // OdometryConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("source", self.source);
+    v("seed", self.seed);
+    v("drift_position_sigma_m_per_sqrt_m", self.drift_position_sigma_m_per_sqrt_m);
+    v("drift_heading_sigma_rad_per_sqrt_m", self.drift_heading_sigma_rad_per_sqrt_m);
+    v("drift_scale_sigma_per_sqrt_m", self.drift_scale_sigma_per_sqrt_m);
+    v("heading_axis", self.heading_axis);
+    v("initial_sigma_m", self.initial_sigma_m);
+    v("initial_sigma_rad", self.initial_sigma_rad);
+    v("file", self.file);
+    v("file_sigma2_a_m2", self.file_sigma2_a_m2);
+    v("file_sigma2_b_m2_per_m", self.file_sigma2_b_m2_per_m);
+    v("file_rot_sigma2_a_rad2", self.file_rot_sigma2_a_rad2);
+    v("file_rot_sigma2_b_rad2_per_m", self.file_rot_sigma2_b_rad2_per_m);
+    v("file_max_gap_s", self.file_max_gap_s);
+    v("ekf_up_axis", self.ekf_up_axis);
   }
   void validate() const;
 };

@@ -35,22 +35,24 @@ struct SeqSlamConfig {
   std::string exclusion = "none";
   int exclusion_margin_frames = 100;
 
-  template <class V>
-  void visit(V&& v) {
-    v("input_preprocessed", input_preprocessed);
-    v("image_width_px", image_width_px);
-    v("image_height_px", image_height_px);
-    v("resize_method", resize_method);
-    v("patch_size_px", patch_size_px);
-    v("patch_mean_grey", patch_mean_grey);
-    v("contrast_window_rows", contrast_window_rows);
-    v("sequence_length_frames", sequence_length_frames);
-    v("velocity_min", velocity_min);
-    v("velocity_max", velocity_max);
-    v("second_best_window_rows", second_best_window_rows);
-    v("ratio_threshold", ratio_threshold);
-    v("exclusion", exclusion);
-    v("exclusion_margin_frames", exclusion_margin_frames);
+  // The keys, in order, for loading, printing and the JSON echo (Self is SeqSlamConfig or const
+  // SeqSlamConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("input_preprocessed", self.input_preprocessed);
+    v("image_width_px", self.image_width_px);
+    v("image_height_px", self.image_height_px);
+    v("resize_method", self.resize_method);
+    v("patch_size_px", self.patch_size_px);
+    v("patch_mean_grey", self.patch_mean_grey);
+    v("contrast_window_rows", self.contrast_window_rows);
+    v("sequence_length_frames", self.sequence_length_frames);
+    v("velocity_min", self.velocity_min);
+    v("velocity_max", self.velocity_max);
+    v("second_best_window_rows", self.second_best_window_rows);
+    v("ratio_threshold", self.ratio_threshold);
+    v("exclusion", self.exclusion);
+    v("exclusion_margin_frames", self.exclusion_margin_frames);
   }
 
   // Throws ConfigError naming the key (and the allowed values for choices).

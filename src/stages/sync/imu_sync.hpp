@@ -21,9 +21,10 @@ namespace loopgate {
 struct SyncConfig {
   double max_gap_ms = 20.0;  // consecutive IMU samples further apart than this form a gap
 
-  template <class V>
-  void visit(V&& v) {
-    v("max_gap_ms", max_gap_ms);
+  // The keys, in order, for loading, printing and the JSON echo (Self is SyncConfig or const SyncConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("max_gap_ms", self.max_gap_ms);
   }
   void validate() const;
 };
