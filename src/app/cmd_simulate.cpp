@@ -131,7 +131,9 @@ void add_simulate_command(CLI::App& app, int& exit_code) {
       "Render a synthetic dataset (EuRoC ASL layout: images, IMU, ground truth, simulation.json)");
   std::string presets;
   for (const std::string& name : sim::preset_names()) presets += (presets.empty() ? "" : "|") + name;
-  cmd->add_option("--preset", opt->preset, "Preset: " + presets)->capture_default_str();
+  const std::string preset_help =
+      "Preset: " + presets + " (" + sim::preset_dir().string() + "/NAME.yaml), or a preset FILE.yaml";
+  cmd->add_option("--preset", opt->preset, preset_help)->capture_default_str();
   cmd->add_option("--out", opt->out_dir, "Output directory (must be empty or absent unless --force)")
       ->required();
   cmd->add_option("--seed", opt->seed, "Seed (same seed and inputs: byte-identical output)")

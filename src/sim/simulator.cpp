@@ -175,10 +175,33 @@ void SimulationConfig::validate() const {
 }
 
 // ---------------------------------------------------------------------------------------------------------
-// Presets
+// Presets: configs/sim/<name>.yaml
+
+std::filesystem::path preset_dir() {
+  return LOOPGATE_PRESET_DIR;
+}
 
 std::vector<std::string> preset_names() {
-  return {"demo", "kitti00", "euroc-mh05", "aliasing"};
+  std::vector<std::string> names;
+  std::error_code ec;
+  for (std::filesystem::directory_iterator it(preset_dir(), ec), end; !ec && it != end; it.increment(ec)) {
+    if (it->path().extension() == ".yaml") names.push_back(it->path().stem().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+std::filesystem::path preset_file(const std::string& name_or_file) {
+  const std::filesystem::path file = name_or_file;
+  if (file.extension() == ".yaml" || file.extension() == ".yml") return file;
+  const std::vector<std::string> names = preset_names();
+  if (std::find(names.begin(), names.end(), name_or_file) == names.end()) {
+    std::string known;
+    for (const std::string& name : names) known += (known.empty() ? "" : "|") + name;
+    throw ConfigError("preset '" + name_or_file + "': not one of " + (known.empty() ? "(none)" : known) +
+                      " (the *.yaml files of " + preset_dir().string() + ") nor a preset file (.yaml)");
+  }
+  return preset_dir() / (name_or_file + ".yaml");
 }
 
 std::filesystem::path default_shared_data_dir() {
@@ -186,216 +209,16 @@ std::filesystem::path default_shared_data_dir() {
   return std::filesystem::path("..") / "shared" / "data";
 }
 
-SimulationConfig make_preset(const std::string& name, const std::filesystem::path& shared_data_dir) {
-  require_one_of("simulation.preset", name, preset_names());
+SimulationConfig make_preset(const std::string& name_or_file, const std::filesystem::path& shared_data_dir) {
+  const std::filesystem::path file = preset_file(name_or_file);
   SimulationConfig c;
-  c.simulation.preset = name;
-  if (name == "demo") {
-    // What loopgate is for, in one minute of driving (600 frames at 10 Hz, 625 m, 640 x 200;
-    // configs/demo.yaml): a street map driven once along waypoints (x east, y north, metres; corners rounded
-    // with a 20 m radius, so that cornering at 9-12 m/s stays car-like: |a| p99 7.1 m/s^2):
-    //  - frames 0-175, day: loop A, counter-clockwise round block A (x in [-40, 40], y in [-25, 25]) from
-    //    (-25, -25): east along its south street, north, west along its north street;
-    //  - frames 175-485, new streets driven once: south down x = -40 (15 m west of the start: no revisit) to
-    //    street B (y = -140.6), east along B and its corner (frames 335-400), north up x = 40 back to loop A;
-    //    the light turns to dusk on the way (illumination phase 0.70-0.79, frames 420-474);
-    //  - frames 485-565, dusk: x = 40 rejoins loop A at its south-east corner and drives its east street and
-    //    part of its north street again, the only genuine revisit (67 ground-truth query frames, 492-558, of
-    //    frames 57-118);
-    //  - frames 565-599, dusk: a right turn onto a new street north (the revisit does not end the drive).
-    // Perceptual aliasing: street B and its corner are laid out like loop A's south street and its corner,
-    // 115.6 m further south, and the place copy gives B's facades those of A (same textures, styles,
-    // heights): B by day looks like the start of the drive (frames 0-60), driven the same way under the same
-    // light. B's y = -140.6 puts its facades at the same phase of the facade pitch (12.6 m of path) as A's,
-    // so that each copy stands 0.3-0.7 m from where its source stands relative to the road.
-    c.simulation.trajectory_format = "procedural";
-    c.simulation.imu_source = "synthesised";
-    c.simulation.up_x = 0.0;
-    c.simulation.up_y = 0.0;
-    c.simulation.up_z = 1.0;
-    c.route.shape = "waypoints";
-    c.route.waypoints = "-25,-25; 40,-25; 40,25; -40,25; -40,-140.6; 40,-140.6; 40,25; -5,25; -5,60";
-    c.route.corner_radius_m = 20.0;
-    c.route.laps = 1;
-    c.route.frames = 600;
-    c.simulation.frame_rate_hz = c.route.rate_hz;
-    // KITTI-like field of view at 640 x 200; the vehicle body is x forward, y left, z up.
-    c.camera = CameraSettings{};
-    Eigen::Matrix3d R_b_c;
-    R_b_c << 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0;
-    const Eigen::Quaterniond q_b_c(R_b_c);
-    c.camera.q_b_c_w = q_b_c.w();
-    c.camera.q_b_c_x = q_b_c.x();
-    c.camera.q_b_c_y = q_b_c.y();
-    c.camera.q_b_c_z = q_b_c.z();
-    // The straight-to-arc joints are curvature steps: smoothing rounds them off like a driver would.
-    c.fit.smoothing_weight = 3.0;
-    c.imu.initial_gyro_bias_sigma_radps = 0.002;
-    c.imu.initial_accel_bias_sigma_mps2 = 0.02;
-    c.world.kind = "street";
-    c.world.street_camera_height_m = c.route.camera_height_m;
-    // Only the deterministic place copy aliases; facades without random setback so that the copies stand
-    // where their sources stand relative to the road. The copied area: street B from x = -20 to its corner
-    // and the first 20 m north of it, from the same part of loop A (9 facades; the others around B have no
-    // counterpart in A, e.g. A's outer corner facade is missing where the street north to the revisit
-    // leaves).
-    c.world.aliasing_fraction = 0.0;
-    c.world.street_facade_offset_jitter_m = 0.0;
-    c.world.alias_copy_source_x_m = 15.0;
-    c.world.alias_copy_source_y_m = -25.0;
-    c.world.alias_copy_target_x_m = 15.0;
-    c.world.alias_copy_target_y_m = -140.6;
-    c.world.alias_copy_rotation_deg = 0.0;
-    c.world.alias_copy_radius_m = 35.0;
-    c.world.alias_copy_tolerance_m = 6.0;
-    // Dusk, not full night, for the revisit: with the full-night sensor noise (sigma 9) DIRD at 640 x 200
-    // does not separate revisits from unrelated places (README "Known limitations"); at dusk (noise 3) it
-    // does. Day until frame 420 (after street B), dusk from frame 474 (before the revisit).
-    c.illumination.kind = "day-to-night";
-    c.illumination.transition_start = 0.70;
-    c.illumination.transition_end = 0.79;
-    c.illumination.night_noise_sigma = 3.0;
-    c.illumination.night_ambient = 0.15;
-    c.illumination.night_sky_brightness = 0.2;
-    c.loops.radius_m = 2.0;
-    c.loops.min_gap_frames = 20;
-    c.loops.min_travel_m = 10.0;
-    c.loops.horizontal_only = true;
-  } else if (name == "kitti00") {
-    const std::filesystem::path dir = shared_data_dir / "kitti" / "00";
-    c.simulation.trajectory_format = "kitti";
-    c.simulation.trajectory_file = (dir / "poses.txt").string();
-    c.simulation.times_file = (dir / "times.txt").string();
-    c.simulation.imu_source = "synthesised";
-    c.simulation.frame_rate_hz = 10.0;
-    c.simulation.up_x = 0.0;
-    c.simulation.up_y = -1.0;
-    c.simulation.up_z = 0.0;
-    // KITTI P0 (rectified, no distortion); body = camera 0.
-    c.camera = CameraSettings{};
-    c.camera.width_px = 1241;
-    c.camera.height_px = 376;
-    c.camera.fx = 718.856;
-    c.camera.fy = 718.856;
-    c.camera.cx = 607.1928;
-    c.camera.cy = 185.2157;
-    // KITTI ground truth at ~10 Hz has timing/position jitter: a stronger smoothing keeps the synthesised
-    // accelerations car-like (p99 |a_w| 3.8 m/s^2 instead of 13.7) for a fit within 0.14 m of every pose.
-    c.fit.smoothing_weight = 3.0;
-    c.imu.initial_gyro_bias_sigma_radps = 0.002;
-    c.imu.initial_accel_bias_sigma_mps2 = 0.02;
-    c.world.kind = "street";
-    c.world.aliasing_fraction = 0.05;
-    c.illumination.kind = "day-to-night";
-    c.loops.radius_m = 2.0;  // as the paper's KITTI 00 truth: 2 m horizontally, >= 20 frames apart
-    c.loops.min_gap_frames = 20;
-    c.loops.min_travel_m = 10.0;  // a stop at a light is not a revisit
-    c.loops.horizontal_only = true;
-  } else if (name == "aliasing") {
-    // Perceptual aliasing (issue 5): 1.2 laps of a 200 x 60 m circuit (counter-clockwise, starting mid-way
-    // along the bottom straight) at 10 Hz, ~1.2 m per frame, 320 x 100 images under constant overcast
-    // light. Place B (top straight, facades between x = 26 and 77, driven westwards at frames ~136-185) is a
-    // copy of place A (bottom straight, x = -71 to -20, driven eastwards at frames ~341-388): the same
-    // facade texture seeds, styles and heights at the positions rotated by 180 degrees, so the camera sees
-    // the same street at both. A and B are 80-170 m apart and each is driven once; the genuine loop is
-    // the end of the run, which drives the first ~95 m again (frames ~412-489 revisit frames 0-78).
-    c.simulation.trajectory_format = "procedural";
-    c.simulation.imu_source = "synthesised";
-    c.simulation.up_x = 0.0;
-    c.simulation.up_y = 0.0;
-    c.simulation.up_z = 1.0;
-    c.route.length_x_m = 200.0;
-    c.route.length_y_m = 60.0;
-    c.route.corner_radius_m = 15.0;
-    // A two-lap route (988 m in 824 frames) of which the first 490 frames (1.2 laps) are rendered.
-    c.route.laps = 2;
-    c.route.frames = 824;
-    c.simulation.max_frames = 490;
-    // No steering wobble: both places are driven along the same straight line relative to their facades.
-    c.route.heading_wobble_rad = 0.0;
-    c.simulation.frame_rate_hz = c.route.rate_hz;
-    // The demo's field of view at half its resolution (fast to render); body x forward, y left, z up.
-    c.camera = CameraSettings{};
-    c.camera.width_px = 320;
-    c.camera.height_px = 100;
-    c.camera.fx = 185.0;
-    c.camera.fy = 185.0;
-    c.camera.cx = 159.5;
-    c.camera.cy = 49.5;
-    Eigen::Matrix3d R_b_c;
-    R_b_c << 0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0;
-    const Eigen::Quaterniond q_b_c(R_b_c);
-    c.camera.q_b_c_w = q_b_c.w();
-    c.camera.q_b_c_x = q_b_c.x();
-    c.camera.q_b_c_y = q_b_c.y();
-    c.camera.q_b_c_z = q_b_c.z();
-    c.fit.smoothing_weight = 3.0;  // as the demo: rounds off the straight-to-arc curvature steps
-    c.imu.initial_gyro_bias_sigma_radps = 0.002;
-    c.imu.initial_accel_bias_sigma_mps2 = 0.02;
-    c.world.kind = "street";
-    c.world.street_camera_height_m = c.route.camera_height_m;
-    // Only the deterministic copy aliases (no random knob); facades without random setback and no posts,
-    // so that the copied facades stand where their sources stand relative to the road.
-    c.world.aliasing_fraction = 0.0;
-    c.world.street_facade_offset_jitter_m = 0.0;
-    c.world.street_pole_spacing_m = 0.0;
-    // The circuit is point-symmetric about the origin; the target centre is moved 6.3 m (half a facade
-    // pitch) from the mirror image of the source centre so that the two places' facades line up (copied
-    // facades are 0.3 m from their mapped sources' positions instead of 6 m).
-    c.world.alias_copy_source_x_m = -45.0;
-    c.world.alias_copy_source_y_m = -30.0;
-    c.world.alias_copy_target_x_m = 51.3;
-    c.world.alias_copy_target_y_m = 30.0;
-    c.world.alias_copy_rotation_deg = 180.0;
-    // 38 m: the mapped source area stays on the part of the bottom straight west of the start that is
-    // driven once (x in [-83, -7]); the 10 facades around B (both sides) are copies.
-    c.world.alias_copy_radius_m = 38.0;
-    c.world.alias_copy_tolerance_m = 6.0;
-    // Overcast, constant light: the sun straight overhead lights every facade alike whatever way it faces
-    // (a sun from the side would shade the rotated copy differently), and both places look the same.
-    c.illumination.kind = "constant";
-    c.illumination.sun_dir_x = 0.0;
-    c.illumination.sun_dir_y = 0.0;
-    c.illumination.sun_dir_z = 1.0;
-    c.loops.radius_m = 2.0;
-    c.loops.min_gap_frames = 20;
-    c.loops.min_travel_m = 10.0;
-    c.loops.horizontal_only = true;
-  } else {  // euroc-mh05
-    const std::filesystem::path mav0 = shared_data_dir / "euroc" / "MH_05_difficult" / "mav0";
-    c.simulation.trajectory_format = "euroc";
-    c.simulation.trajectory_file = (mav0 / "state_groundtruth_estimate0" / "data.csv").string();
-    c.simulation.frame_times_file = (mav0 / "cam0" / "data.csv").string();
-    c.simulation.camera_yaml = (mav0 / "cam0" / "sensor.yaml").string();
-    c.simulation.imu_source = "file";
-    c.simulation.imu_file = (mav0 / "imu0" / "data.csv").string();
-    c.simulation.imu_yaml = (mav0 / "imu0" / "sensor.yaml").string();
-    c.simulation.frame_rate_hz = 20.0;
-    c.simulation.up_x = 0.0;
-    c.simulation.up_y = 0.0;
-    c.simulation.up_z = 1.0;
-    // EuRoC cam0 (overwritten from camera_yaml when it is read).
-    c.camera = CameraSettings{};
-    c.camera.width_px = 752;
-    c.camera.height_px = 480;
-    c.camera.fx = 458.654;
-    c.camera.fy = 457.296;
-    c.camera.cx = 367.215;
-    c.camera.cy = 248.375;
-    c.camera.distortion_model = "radtan";
-    c.camera.k1 = -0.28340811;
-    c.camera.k2 = 0.07395907;
-    c.camera.p1 = 0.00019359;
-    c.camera.p2 = 1.76187114e-05;
-    c.fit.knot_spacing_s = 0.025;
-    c.fit.smoothing_weight = 1.0;  // damps jitter of the 200 Hz ground truth (fit still within 0.03 m)
-    c.world.kind = "hall";
-    c.world.aliasing_fraction = 0.05;
-    c.illumination.kind = "day-to-night";
-    c.loops.radius_m = 0.2;  // as the paper's MH_05 truth: 0.2 m, >= 20 frames apart
-    c.loops.min_gap_frames = 20;
-    c.loops.min_travel_m = 2.0;  // hovering in place is not a revisit
-    c.loops.horizontal_only = false;
+  c.simulation.preset = file.stem().string();
+  apply_config(RawConfig::from_yaml_file(file), c);
+  // Input files of a preset are relative to the shared-data folder (absolute ones stay as they are).
+  SimulationSettings& s = c.simulation;
+  for (std::string* input :
+       {&s.trajectory_file, &s.times_file, &s.frame_times_file, &s.camera_yaml, &s.imu_file, &s.imu_yaml}) {
+    if (!input->empty()) *input = (shared_data_dir / *input).string();
   }
   return c;
 }

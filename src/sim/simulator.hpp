@@ -195,12 +195,26 @@ struct SimulationConfig {
   void validate() const;
 };
 
-// Names of the built-in presets: "demo", "kitti00", "euroc-mh05", "aliasing" (a perceptual-aliasing street:
-// two far places with copied facade textures, each driven once, and one genuine revisit).
+// Presets are YAML files of this configuration, loaded by the config system (io/config.hpp) over the
+// defaults: configs/sim/<name>.yaml of the source tree ("demo", "kitti00", "euroc-mh05", and "aliasing", a
+// perceptual-aliasing street: two far places with copied facade textures, each driven once, and one
+// genuine revisit), or any such file. In a preset file, the input files of section simulation
+// (trajectory_file, times_file, frame_times_file, camera_yaml, imu_file, imu_yaml) are relative to the
+// shared-data folder.
+
+// The folder of the shipped presets (configs/sim of the source tree this library was built from).
+std::filesystem::path preset_dir();
+// Names of the shipped presets: the *.yaml files of preset_dir() without the extension, sorted.
 std::vector<std::string> preset_names();
-// The configuration of a preset. Shared-data paths are resolved under `shared_data_dir` (see
-// default_shared_data_dir()). Throws ConfigError naming the allowed presets for an unknown name.
-SimulationConfig make_preset(const std::string& name, const std::filesystem::path& shared_data_dir);
+// The file of a preset: `name_or_file` itself when it ends in .yaml or .yml, else preset_dir()/NAME.yaml.
+// Throws ConfigError naming the shipped presets for an unknown name.
+std::filesystem::path preset_file(const std::string& name_or_file);
+// The configuration of a preset (a name or a file, see preset_file()), validated. simulation.preset is
+// the file's name without extension unless the file sets it. Relative input files are resolved under
+// `shared_data_dir` (see default_shared_data_dir()). Throws ConfigError for an unknown name, an unreadable
+// file, and unknown keys, values of the wrong type or invalid values (naming the key, and file:line for
+// the first two).
+SimulationConfig make_preset(const std::string& name_or_file, const std::filesystem::path& shared_data_dir);
 // $LOOPGATE_SHARED_DATA when set, else "../shared/data" relative to the current directory.
 std::filesystem::path default_shared_data_dir();
 
