@@ -3,7 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
-#include "io/config.hpp"
+#include "core/validate.hpp"
 #include "io/dataset.hpp"
 #include "io/trajectory_io.hpp"
 #include "stages/ekf/vio_ekf.hpp"
