@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "core/validate.hpp"
 #include "io/dataset.hpp"
 #include "io/trajectory_io.hpp"
@@ -47,11 +48,7 @@ std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset) {
     if (gt && s.accel_mps2.allFinite()) sum_w += gt->T_w_b.rotation() * (R_b_i * s.accel_mps2);
   }
   if (sum_w.isZero(0.0)) return std::nullopt;
-  Eigen::Index axis = 2;
-  sum_w.cwiseAbs().maxCoeff(&axis);
-  Eigen::Vector3d up_w = Eigen::Vector3d::Zero();
-  up_w[axis] = sum_w[axis] > 0.0 ? 1.0 : -1.0;
-  return up_w;
+  return nearest_signed_axis(sum_w);
 }
 
 std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
@@ -64,14 +61,6 @@ std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfi
 }
 
 namespace {
-Eigen::Vector3d axis_from_name(const std::string& name) {
-  const double sign = name.front() == '-' ? -1.0 : 1.0;
-  const char axis = name.back();
-  return sign * (axis == 'x'   ? Eigen::Vector3d::UnitX()
-                 : axis == 'y' ? Eigen::Vector3d::UnitY()
-                               : Eigen::Vector3d::UnitZ());
-}
-
 std::unique_ptr<OdometrySource> make_ekf_source(const OdometryConfig& config, const EkfConfig& ekf,
                                                 const Dataset& dataset) {
   ekf.validate();
@@ -98,7 +87,7 @@ std::unique_ptr<OdometrySource> make_ekf_source(const OdometryConfig& config, co
   }
   Eigen::Vector3d up_w = Eigen::Vector3d::UnitZ();
   if (config.ekf_up_axis != "auto") {
-    up_w = axis_from_name(config.ekf_up_axis);
+    up_w = axis_vector(config.ekf_up_axis);
   } else if (dataset.has_ground_truth()) {
     up_w = world_up_axis_from_imu(dataset).value_or(Eigen::Vector3d::UnitZ());
   }
@@ -131,8 +120,7 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
                       " has none (use source: file)");
   }
   Eigen::Vector3d axis_w = Eigen::Vector3d::UnitZ();
-  if (config.heading_axis == "x") axis_w = Eigen::Vector3d::UnitX();
-  if (config.heading_axis == "y") axis_w = Eigen::Vector3d::UnitY();
+  if (config.heading_axis != "auto") axis_w = axis_vector(config.heading_axis);
   if (config.heading_axis == "auto") {
     std::vector<Eigen::Vector3d> positions;
     for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
