@@ -31,6 +31,7 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/descriptor_store.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/parallel_handoff.hpp"
 #include "pipeline/run_metrics.hpp"
 #include "pipeline/seqslam_batch.hpp"

@@ -7,8 +7,8 @@
 #include "core/geometry.hpp"
 #include "eval/trajectory_metrics.hpp"
 #include "io/dataset.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "stages/ekf/vio_ekf.hpp"
-#include "stages/odometry/odometry_source.hpp"
 
 namespace loopgate {
 
