@@ -18,10 +18,10 @@
 #include <vector>
 
 #include "../tests/ekf_sim_support.hpp"
+#include "core/geometry.hpp"
 #include "io/dataset.hpp"
 #include "stages/ekf/feature_tracker.hpp"
 #include "stages/ekf/msckf.hpp"
-#include "stages/ekf/so3.hpp"
 #include "stages/ekf/vio_ekf.hpp"
 
 namespace {
@@ -91,8 +91,8 @@ void BM_EkfTracking(benchmark::State& state) {
     const Eigen::Vector3d bias = gt.has_value() ? gt->gyro_bias_radps : Eigen::Vector3d::Zero().eval();
     Eigen::Quaterniond q = Eigen::Quaterniond::Identity();
     for (std::size_t k = 0; k + 1 < imu.size(); ++k) {
-      q = q * so3::exp_quat((0.5 * (imu[k].gyro_radps + imu[k + 1].gyro_radps) - bias) *
-                            ns_to_s(imu[k + 1].t_ns - imu[k].t_ns));
+      q = q * so3_exp_quat((0.5 * (imu[k].gyro_radps + imu[k + 1].gyro_radps) - bias) *
+                           ns_to_s(imu[k + 1].t_ns - imu[k].t_ns));
     }
     R_cur_prev[i] = R_i_c.transpose() * q.toRotationMatrix().transpose() * R_i_c;
   }

@@ -8,10 +8,10 @@
 #include <random>
 #include <vector>
 
+#include "core/geometry.hpp"
 #include "ekf_sim_support.hpp"
 #include "stages/ekf/chi_square.hpp"
 #include "stages/ekf/msckf.hpp"
-#include "stages/ekf/so3.hpp"
 
 namespace loopgate {
 namespace {
@@ -156,7 +156,7 @@ RunResult run_filter(const RunSettings& settings) {
     const PoseEstimate est = filter.pose_estimate(Eigen::Isometry3d::Identity());
     const Eigen::Isometry3d T_true = motion.pose(t);
     const Eigen::Vector3d e_p = T_true.translation() - est.T_w_b.translation();
-    const Eigen::Vector3d e_r = so3::log(est.T_w_b.rotation().transpose() * T_true.rotation());
+    const Eigen::Vector3d e_r = so3_log(est.T_w_b.rotation().transpose() * T_true.rotation());
     const Eigen::Matrix3d P_p = est.cov.topLeftCorner<3, 3>();
     const Eigen::Matrix3d P_r = est.cov.bottomRightCorner<3, 3>();
     result.nees_position.push_back(e_p.dot(P_p.ldlt().solve(e_p)));

@@ -3,9 +3,9 @@
 #include <Eigen/Eigenvalues>
 #include <random>
 
+#include "core/geometry.hpp"
 #include "ekf_sim_support.hpp"
 #include "stages/ekf/imu_propagator.hpp"
-#include "stages/ekf/so3.hpp"
 
 namespace loopgate {
 namespace {
@@ -44,7 +44,7 @@ TEST(EkfPropagation, NoiseFreeImuFollowsTheTruth) {
   const double t = 10.0;
   const double pos_err = (state.p_w_m - motion.position(t)).norm();
   const double vel_err = (state.v_w_mps - motion.velocity(t)).norm();
-  const double rot_err = so3::log(state.q_w_i.toRotationMatrix().transpose() * motion.rotation(t)).norm();
+  const double rot_err = so3_log(state.q_w_i.toRotationMatrix().transpose() * motion.rotation(t)).norm();
   EXPECT_LT(pos_err, 0.01) << "position error after 10 s of noise-free IMU";
   EXPECT_LT(vel_err, 0.005);
   EXPECT_LT(rot_err, 1e-4);
@@ -106,7 +106,7 @@ TEST(EkfPropagation, TransitionMatchesNumericalJacobian) {
     ASSERT_TRUE(propagator.propagate(imu, t_end, &perturbed, &unused_phi, &unused_q));
     Eigen::Matrix<double, kImuErrorDim, 1> d_end;
     d_end.segment<3>(0) =
-        so3::log(nominal.q_w_i.toRotationMatrix().transpose() * perturbed.q_w_i.toRotationMatrix());
+        so3_log(nominal.q_w_i.toRotationMatrix().transpose() * perturbed.q_w_i.toRotationMatrix());
     d_end.segment<3>(3) = perturbed.p_w_m - nominal.p_w_m;
     d_end.segment<3>(6) = perturbed.v_w_mps - nominal.v_w_mps;
     d_end.segment<3>(9) = perturbed.gyro_bias_radps - nominal.gyro_bias_radps;

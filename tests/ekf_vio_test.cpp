@@ -7,8 +7,8 @@
 #include <opencv2/core/mat.hpp>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/dataset.hpp"
-#include "stages/ekf/so3.hpp"
 #include "stages/ekf/vio_ekf.hpp"
 #include "test_support.hpp"
 

@@ -408,15 +408,5 @@ TEST(IoTrajectory, GarbageInputOnlyGivesDataErrors) {
   EXPECT_GT(strict_errors, 200);  // the garbage is mostly rejected
 }
 
-TEST(IoTrajectory, InterpolatePose) {
-  const StampedPose a{1000, make_pose(0.0, 0.0, 0.0, Eigen::Vector3d(0, 0, 0))};
-  const StampedPose b{2000, make_pose(1.0, 0.0, 0.0, Eigen::Vector3d(2, 4, -6))};
-  const Eigen::Isometry3d mid = interpolate_pose(a, b, 1250);
-  EXPECT_LT((mid.translation() - Eigen::Vector3d(0.5, 1.0, -1.5)).norm(), 1e-12);
-  EXPECT_LT(pose_difference(mid, make_pose(0.25, 0, 0, mid.translation())), 1e-12);
-  EXPECT_LT(pose_difference(interpolate_pose(a, b, 1000), a.T_w_b), 1e-15);
-  EXPECT_LT(pose_difference(interpolate_pose(a, b, 2000), b.T_w_b), 1e-12);
-}
-
 }  // namespace
 }  // namespace loopgate

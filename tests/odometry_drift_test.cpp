@@ -111,16 +111,6 @@ TEST(OdometryDrift, LostWithoutTruthHoldsLastEstimate) {
   EXPECT_TRUE(lost.pose.T_w_b.isApprox(first.pose.T_w_b, 0.0));
 }
 
-TEST(OdometryDrift, PlaneNormal) {
-  std::vector<Eigen::Vector3d> positions;
-  for (int k = 0; k < 100; ++k) positions.push_back(circle_pose(k).translation());
-  const Eigen::Vector3d n = plane_normal(positions);
-  EXPECT_NEAR(n.z(), 1.0, 1e-9);
-  // KITTI camera frames: the ground plane is x-z, the normal is y.
-  for (auto& p : positions) p = Eigen::Vector3d(p.x(), 0.01 * std::sin(p.x()), p.y());
-  EXPECT_NEAR(std::abs(plane_normal(positions).y()), 1.0, 1e-3);
-}
-
 TEST(OdometryDrift, ConfigValidation) {
   OdometryConfig config;
   config.source = "ekf2";

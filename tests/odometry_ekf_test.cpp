@@ -1,7 +1,8 @@
 // The `ekf` odometry source (EkfOdometry behind OdometrySource) on the real EuRoC excerpt
 // V1_01_easy_micro (95 images, a standstill before take-off): ground-truth and standstill initialisation,
 // the status sequence, poses against the ground truth, and bad input (NaN IMU, bad or missing images)
-// reported as lost without an exception; the factory's choice for `auto` and its errors.
+// reported as lost without an exception. (How the factory builds it from a dataset, its choice for `auto`
+// and its errors: pipeline_odometry_factory_test.)
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,22 +10,19 @@
 #include <cstdio>
 #include <filesystem>
 #include <limits>
+#include <memory>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
 
-#include "core/error.hpp"
 #include "io/dataset.hpp"
 #include "stages/ekf/vio_ekf.hpp"
 #include "stages/odometry/ekf_odometry.hpp"
-#include "stages/odometry/odometry_source.hpp"
 #include "test_support.hpp"
 
 namespace loopgate {
 namespace {
 
-namespace fs = std::filesystem;
 constexpr const char* kMicro = "euroc/V1_01_easy_micro";
 
 struct FrameResult {
@@ -73,55 +71,18 @@ std::unique_ptr<Dataset> open_micro() {
   return open_dataset(testing::shared_data_dir() / kMicro);
 }
 
-OdometryConfig ekf_source() {
-  OdometryConfig config;
-  config.source = "ekf";
-  return config;
-}
-
-TEST(OdometryEkf, FactoryBuildsTheEkfSourceAndAutoPicksIt) {
-  LOOPGATE_REQUIRE_SHARED_DATA(kMicro);
-  const auto dataset = open_micro();
-  const auto source = make_odometry_source(ekf_source(), EkfConfig{}, *dataset);
-  EXPECT_STREQ(source->name(), "ekf");
-  EXPECT_TRUE(source->needs_images());
-  EXPECT_TRUE(source->needs_imu());
-  EXPECT_FALSE(source->needs_ground_truth());  // it keeps the dataset's full ground-truth states itself
-  OdometryConfig automatic;
-  EXPECT_EQ(automatic.source, "auto");  // the default
-  EXPECT_NO_THROW(automatic.validate());
-  EXPECT_EQ(resolve_odometry_source(automatic, EkfConfig{}, *dataset), "ekf");
-  EXPECT_STREQ(make_odometry_source(automatic, EkfConfig{}, *dataset)->name(), "ekf");
-  OdometryConfig bad;
-  bad.source = "vio";
-  EXPECT_THROW(bad.validate(), ConfigError);
-}
-
-// An image folder (no IMU, no calibration, no ground truth): auto falls back to drift, an explicit ekf
-// source is refused with an error saying what is missing.
-TEST(OdometryEkf, DatasetWithoutImuIsRefusedClearly) {
-  const fs::path dir = testing::make_temp_dir("odometry-ekf-folder");
-  for (int k = 0; k < 3; ++k) {
-    cv::Mat image(48, 64, CV_8UC1, cv::Scalar(40 * k));
-    cv::imwrite((dir / ("img_" + std::to_string(k) + ".png")).string(), image);
-  }
-  const auto dataset = open_dataset(dir);
-  ASSERT_FALSE(dataset->has_imu());
-  OdometryConfig automatic;
-  automatic.source = "auto";
-  EXPECT_EQ(resolve_odometry_source(automatic, EkfConfig{}, *dataset), "drift");
-  try {
-    make_odometry_source(ekf_source(), EkfConfig{}, *dataset);
-    FAIL() << "expected DataError";
-  } catch (const DataError& e) {
-    EXPECT_NE(std::string(e.what()).find("ekf needs IMU"), std::string::npos) << e.what();
-  }
+// The ekf source as the odometry factory builds it for this EuRoC dataset (world up is z): calibration
+// from the dataset, its ground truth for init_mode ground_truth.
+std::unique_ptr<EkfOdometry> ekf_source(const Dataset& dataset, const EkfConfig& config = {}) {
+  return std::make_unique<EkfOdometry>(
+      config, *dataset.camera(), *dataset.imu_calibration(),
+      config.init_mode == "ground_truth" ? dataset.ground_truth() : std::vector<GroundTruthState>{});
 }
 
 TEST(OdometryEkf, GroundTruthInitTracksCloseToTheTruth) {
   LOOPGATE_REQUIRE_SHARED_DATA(kMicro);
   const auto dataset = open_micro();
-  const auto source = make_odometry_source(ekf_source(), EkfConfig{}, *dataset);
+  const auto source = ekf_source(*dataset);
   const auto results = run_source(*source, *dataset);
   ASSERT_EQ(results.size(), dataset->frame_count());
   // Status sequence: initialising while there is no ground truth yet, then tracking to the end.
@@ -204,7 +165,7 @@ TEST(OdometryEkf, StandstillInitialisesAfterTheConfiguredDuration) {
   // per 1 s window, above the defaults (meant for a vehicle at rest).
   config.standstill_max_accel_std_mps2 = 1.0;
   config.standstill_max_gyro_std_radps = 0.06;
-  const auto source = make_odometry_source(ekf_source(), config, *dataset);
+  const auto source = ekf_source(*dataset, config);
   const auto results = run_source(*source, *dataset);
   std::size_t first_tracking = results.size();
   for (std::size_t i = 0; i < results.size(); ++i) {
@@ -236,7 +197,7 @@ TEST(OdometryEkf, StandstillInitialisesAfterTheConfiguredDuration) {
 TEST(OdometryEkf, BadInputIsReportedLostAndTheFilterRecovers) {
   LOOPGATE_REQUIRE_SHARED_DATA(kMicro);
   const auto dataset = open_micro();
-  const auto source = make_odometry_source(ekf_source(), EkfConfig{}, *dataset);
+  const auto source = ekf_source(*dataset);
   constexpr std::size_t kNanFrame = 50;
   constexpr std::size_t kSmallImageFrame = 60;
   constexpr std::size_t kNoImageFrame = 70;

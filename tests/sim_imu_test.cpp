@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "sim/imu_synth.hpp"
 #include "sim/simulator.hpp"
 #include "sim/trajectory.hpp"

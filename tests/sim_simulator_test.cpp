@@ -11,6 +11,7 @@
 #include <set>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/dataset.hpp"
 #include "io/trajectory_io.hpp"
 #include "sim/renderer.hpp"

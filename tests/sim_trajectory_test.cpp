@@ -8,6 +8,7 @@
 #include <stdexcept>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "sim/trajectory.hpp"
 #include "test_support.hpp"
 
@@ -37,14 +38,6 @@ std::vector<StampedPose> analytic_poses(double duration_s, double rate_hz) {
     poses.push_back(p);
   }
   return poses;
-}
-
-TEST(So3, ExpLogRoundTrip) {
-  const Eigen::Vector3d phi(0.3, -1.2, 0.7);
-  EXPECT_LT((so3_log(so3_exp(phi)) - phi).norm(), 1e-12);
-  EXPECT_LT(so3_log(so3_exp(Eigen::Vector3d(1e-12, 0, 0))).norm(), 1e-11);
-  const Eigen::Vector3d near_pi(0.0, 0.0, std::numbers::pi - 1e-6);
-  EXPECT_NEAR(so3_log(so3_exp(near_pi)).z(), near_pi.z(), 1e-9);
 }
 
 TEST(SplineTrajectory, PassesThroughInputPoses) {

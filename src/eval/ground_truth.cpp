@@ -9,16 +9,11 @@
 #include <unordered_map>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 
 namespace loopgate {
 
 namespace {
-
-Eigen::Vector3d project(const Eigen::Vector3d& p, const std::string& plane) {
-  if (plane == "xz") return {p.x(), 0.0, p.z()};
-  if (plane == "xy") return {p.x(), p.y(), 0.0};
-  return p;
-}
 
 struct CellKey {
   std::int64_t x, y, z;
@@ -56,7 +51,7 @@ LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3
   const std::size_t n = p_w.size();
   gt.references_.resize(n);
   gt.positions_.reserve(n);
-  for (const auto& p : p_w) gt.positions_.push_back(project(p, config.plane));
+  for (const auto& p : p_w) gt.positions_.push_back(project_to_plane(p, config.plane));
   gt.accept_radius_m_ = config.effective_accept_radius_m();
   const double r = config.radius_m;
   const double r2 = r * r;

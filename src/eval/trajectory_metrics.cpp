@@ -7,6 +7,7 @@
 #include <stdexcept>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 
 namespace loopgate {
 
@@ -36,9 +37,7 @@ void AteConfig::validate() const {
 }
 
 Eigen::Vector3d AteConfig::up() const {
-  if (up_axis == "x") return Eigen::Vector3d::UnitX();
-  if (up_axis == "y") return Eigen::Vector3d::UnitY();
-  return Eigen::Vector3d::UnitZ();
+  return axis_vector(up_axis);
 }
 
 Eigen::Isometry3d align_se3(const std::vector<Eigen::Vector3d>& p_est,

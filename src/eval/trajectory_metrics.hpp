@@ -29,6 +29,7 @@ struct AteConfig {
     v("max_dt_ns", self.max_dt_ns);
   }
   void validate() const;  // throws ConfigError naming the key and allowed values
+  // Unit vector of up_axis (std::invalid_argument unless x, y or z: validate() first).
   Eigen::Vector3d up() const;
 };
 

@@ -180,15 +180,4 @@ void log_config_lines(const std::vector<std::string>& lines) {
   for (const auto& line : lines) spdlog::info("  {}", line);
 }
 
-void require_one_of(const std::string& name, const std::string& value,
-                    const std::vector<std::string>& allowed) {
-  if (std::find(allowed.begin(), allowed.end(), value) == allowed.end()) {
-    throw ConfigError(name + ": '" + value + "' is not one of " + join(allowed, "|"));
-  }
-}
-
-void require(bool ok, const std::string& name, const std::string& message, const std::string& value) {
-  if (!ok) throw ConfigError(name + ": must be " + message + " (got " + value + ")");
-}
-
 }  // namespace loopgate

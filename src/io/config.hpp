@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/validate.hpp"  // require / require_one_of for validate(), re-exported here
 
 namespace loopgate {
 
@@ -168,11 +169,5 @@ std::vector<std::string> config_to_lines(const Config& config) {
 
 // Logs the configuration through spdlog (info), one line per parameter.
 void log_config_lines(const std::vector<std::string>& lines);
-
-// Helper for validate(): throws ConfigError "NAME: 'VALUE' is not one of a|b|c" unless value is allowed.
-void require_one_of(const std::string& name, const std::string& value,
-                    const std::vector<std::string>& allowed);
-// Helper for validate(): throws ConfigError "NAME: must be MESSAGE (got VALUE)" when !ok.
-void require(bool ok, const std::string& name, const std::string& message, const std::string& value);
 
 }  // namespace loopgate

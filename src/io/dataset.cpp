@@ -9,8 +9,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/loaded_dataset.hpp"
-#include "io/trajectory_io.hpp"
 
 namespace loopgate {
 

@@ -631,15 +631,4 @@ void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalib
   io_detail::write_text_file(yaml_file, out);
 }
 
-Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, Timestamp t_ns) {
-  if (b.t_ns == a.t_ns) return a.T_w_b;
-  const double alpha = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
-  const Eigen::Quaterniond qa(a.T_w_b.linear());
-  const Eigen::Quaterniond qb(b.T_w_b.linear());
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = qa.slerp(alpha, qb).normalized().toRotationMatrix();
-  T.translation() = (1.0 - alpha) * a.T_w_b.translation() + alpha * b.T_w_b.translation();
-  return T;
-}
-
 }  // namespace loopgate

@@ -57,7 +57,4 @@ std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& 
 void write_euroc_camera_csv(const std::filesystem::path& csv_file,
                             const std::vector<EurocImageEntry>& images);
 
-// Pose interpolation between two stamped poses (linear position, slerp rotation) at t_ns.
-Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, Timestamp t_ns);
-
 }  // namespace loopgate

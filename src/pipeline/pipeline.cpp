@@ -14,12 +14,12 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/loops_writer.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/parallel_handoff.hpp"
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_outputs.hpp"
 #include "pipeline/run_resources.hpp"
 #include "pipeline/run_summary.hpp"
-#include "stages/odometry/odometry_source.hpp"
 
 namespace loopgate {
 

@@ -4,11 +4,11 @@
 #include <exception>
 #include <string>
 
+#include "core/geometry.hpp"
 #include "eval/trajectory_metrics.hpp"
 #include "io/dataset.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "stages/ekf/vio_ekf.hpp"
-#include "stages/odometry/drift_odometry.hpp"
-#include "stages/odometry/odometry_source.hpp"
 
 namespace loopgate {
 
@@ -20,9 +20,7 @@ constexpr std::size_t kMinPairs = 3;  // alignment needs three non-collinear pai
 // ground-truth positions (real KITTI).
 std::string gravity_axis(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_gt) {
   const auto up_w = world_up_axis_from_imu(dataset);
-  Eigen::Vector3d::Index axis = 2;
-  (up_w ? *up_w : plane_normal(p_gt)).cwiseAbs().maxCoeff(&axis);
-  return axis == 0 ? "x" : axis == 1 ? "y" : "z";
+  return axis_name(dominant_axis(up_w ? *up_w : plane_normal(p_gt)));
 }
 }  // namespace
 

@@ -15,6 +15,7 @@
 #include <stdexcept>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/config.hpp"
 #include "io/trajectory_io.hpp"
 #include "io/writers.hpp"
@@ -52,7 +53,7 @@ Eigen::Vector3d up_vector(const SimulationSettings& s) {
 
 // Horizontal component of v (perpendicular to up) or v itself.
 Eigen::Vector3d loop_offset(const Eigen::Vector3d& v, const Eigen::Vector3d& up_w, bool horizontal_only) {
-  return horizontal_only ? Eigen::Vector3d(v - v.dot(up_w) * up_w) : v;
+  return horizontal_only ? horizontal_part(v, up_w) : v;
 }
 
 double estimate_rate_hz(const std::vector<Timestamp>& t_ns, double fallback_hz) {

@@ -9,19 +9,12 @@
 #include <stdexcept>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/trajectory_io.hpp"
 
 namespace loopgate::sim {
 
 namespace {
-
-constexpr double kSmallAngleRad = 1e-10;
-
-Eigen::Matrix3d skew(const Eigen::Vector3d& w) {
-  Eigen::Matrix3d S;
-  S << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
-  return S;
-}
 
 // Uniform cubic B-spline basis (value, first and second derivative in u) for the four controls.
 struct Basis {
@@ -63,23 +56,6 @@ Eigen::Matrix3d sample_rotation_at(const std::vector<StampedPose>& poses, Timest
 }
 
 }  // namespace
-
-Eigen::Matrix3d so3_exp(const Eigen::Vector3d& phi_rad) {
-  const double angle = phi_rad.norm();
-  if (angle < kSmallAngleRad) return Eigen::Matrix3d::Identity() + skew(phi_rad);
-  return Eigen::AngleAxisd(angle, phi_rad / angle).toRotationMatrix();
-}
-
-Eigen::Vector3d so3_log(const Eigen::Matrix3d& R) {
-  const Eigen::AngleAxisd aa(Eigen::Quaterniond(R).normalized());
-  double angle = aa.angle();
-  Eigen::Vector3d axis = aa.axis();
-  if (angle > std::numbers::pi) {  // keep the angle in [0, pi]
-    angle = 2.0 * std::numbers::pi - angle;
-    axis = -axis;
-  }
-  return angle * axis;
-}
 
 void TrajectoryFitConfig::validate() const {
   if (!(knot_spacing_s >= 0.0)) throw ConfigError("knot_spacing_s must be >= 0 (0 = automatic)");

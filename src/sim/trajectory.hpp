@@ -79,10 +79,6 @@ class SplineTrajectory {
   std::vector<Eigen::Vector3d> rotation_deltas_;  // Log(R_k^T R_{k+1}), precomputed
 };
 
-// SO(3) helpers (exposed for the tests and the IMU integration check).
-Eigen::Matrix3d so3_exp(const Eigen::Vector3d& phi_rad);
-Eigen::Vector3d so3_log(const Eigen::Matrix3d& R);
-
 // ---- Trajectory sources (all return body poses T_w_b with timestamps) ----
 
 // KITTI: poses.txt + times.txt (camera-0 poses; the body is the camera).

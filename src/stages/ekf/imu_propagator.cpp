@@ -1,13 +1,13 @@
 #include "stages/ekf/imu_propagator.hpp"
 
-#include "stages/ekf/so3.hpp"
+#include "core/geometry.hpp"
 
 namespace loopgate {
 
 using I = ImuErrorIndex;
 
 void ImuState::apply_correction(const Eigen::Matrix<double, kImuErrorDim, 1>& dx) {
-  q_w_i = (q_w_i * so3::exp_quat(dx.segment<3>(I::kTheta))).normalized();
+  q_w_i = (q_w_i * so3_exp_quat(dx.segment<3>(I::kTheta))).normalized();
   p_w_m += dx.segment<3>(I::kPos);
   v_w_mps += dx.segment<3>(I::kVel);
   gyro_bias_radps += dx.segment<3>(I::kGyroBias);
@@ -62,18 +62,18 @@ void ImuPropagator::step(const ImuSample& s0, const ImuSample& s1, double dt_s, 
 
   const Eigen::Matrix3d R0 = state->q_w_i.toRotationMatrix();
   const Eigen::Vector3d phi = w_mid * dt_s;
-  const Eigen::Quaterniond dq = so3::exp_quat(phi);
+  const Eigen::Quaterniond dq = so3_exp_quat(phi);
   const Eigen::Quaterniond q1 = (state->q_w_i * dq).normalized();
   const Eigen::Matrix3d R1 = q1.toRotationMatrix();
   const Eigen::Vector3d acc_w0 = R0 * a0 + gravity_w_;
   const Eigen::Vector3d acc_w1 = R1 * a1 + gravity_w_;
 
   // Error-state transition over the step (first order, rotation block exact).
-  const Eigen::Matrix3d R_mid = (state->q_w_i * so3::exp_quat(0.5 * phi)).toRotationMatrix();
-  const Eigen::Matrix3d Ra_skew = R_mid * so3::skew(a_mid);
+  const Eigen::Matrix3d R_mid = (state->q_w_i * so3_exp_quat(0.5 * phi)).toRotationMatrix();
+  const Eigen::Matrix3d Ra_skew = R_mid * skew(a_mid);
   ImuMatrix F = ImuMatrix::Identity();
   F.block<3, 3>(I::kTheta, I::kTheta) = dq.toRotationMatrix().transpose();
-  F.block<3, 3>(I::kTheta, I::kGyroBias) = -so3::right_jacobian(phi) * dt_s;
+  F.block<3, 3>(I::kTheta, I::kGyroBias) = -so3_right_jacobian(phi) * dt_s;
   F.block<3, 3>(I::kPos, I::kTheta) = -0.5 * Ra_skew * dt_s * dt_s;
   F.block<3, 3>(I::kPos, I::kVel) = Eigen::Matrix3d::Identity() * dt_s;
   F.block<3, 3>(I::kPos, I::kAccelBias) = -0.5 * R_mid * dt_s * dt_s;

@@ -8,7 +8,7 @@
 #include <limits>
 #include <unordered_set>
 
-#include "stages/ekf/so3.hpp"
+#include "core/geometry.hpp"
 
 namespace loopgate {
 namespace {
@@ -74,9 +74,9 @@ void Msckf::propagate(std::span<const ImuSample> imu, Timestamp t_ns) {
     const Eigen::Vector3d& g = propagator_.gravity_w();
     using I = ImuErrorIndex;
     Phi.block<3, 3>(I::kTheta, I::kTheta) = R1.transpose() * R0;
-    Phi.block<3, 3>(I::kVel, I::kTheta) = -so3::skew(state_.v_w_mps - fej_.v_w_mps - g * dt_s) * R0;
+    Phi.block<3, 3>(I::kVel, I::kTheta) = -skew(state_.v_w_mps - fej_.v_w_mps - g * dt_s) * R0;
     Phi.block<3, 3>(I::kPos, I::kTheta) =
-        -so3::skew(state_.p_w_m - fej_.p_w_m - fej_.v_w_mps * dt_s - 0.5 * g * dt_s * dt_s) * R0;
+        -skew(state_.p_w_m - fej_.p_w_m - fej_.v_w_mps * dt_s - 0.5 * g * dt_s * dt_s) * R0;
   }
   fej_ = state_;
   const Eigen::Index n = P_.rows();
@@ -296,7 +296,7 @@ bool Msckf::feature_jacobian(const FeatureTrack& track, const Eigen::Vector3d& p
     const Eigen::Matrix<double, 2, 3> Jp = projection_jacobian(p_c_lin) * R_c_i;
     const Eigen::Matrix<double, 2, 3> Jp_R = Jp * R_lin.transpose();
     const Eigen::Index col = kCloneDim * k;
-    H_x.block<2, 3>(2 * j, col) = Jp * so3::skew(p_i);
+    H_x.block<2, 3>(2 * j, col) = Jp * skew(p_i);
     H_x.block<2, 3>(2 * j, col + 3) = -Jp_R;
     H_f.block<2, 3>(2 * j, 0) = Jp_R;
   }
@@ -385,7 +385,7 @@ void Msckf::apply_update(Eigen::Index col0, const Eigen::MatrixXd& H, const Eige
   state_.apply_correction(dx.head<kImuErrorDim>());
   for (std::size_t k = 0; k < clones_.size(); ++k) {
     const Eigen::Index col = kImuErrorDim + kCloneDim * static_cast<Eigen::Index>(k);
-    clones_[k].q_w_i = (clones_[k].q_w_i * so3::exp_quat(dx.segment<3>(col))).normalized();
+    clones_[k].q_w_i = (clones_[k].q_w_i * so3_exp_quat(dx.segment<3>(col))).normalized();
     clones_[k].p_w_m += dx.segment<3>(col + 3);
   }
 }
@@ -432,7 +432,7 @@ PoseEstimate Msckf::pose_estimate(const Eigen::Isometry3d& T_b_i) const {
   if (P_.rows() >= kImuErrorDim) {
     // [dp_b; dtheta_b] = J [dtheta; dp]:  dp_b = dp - R_w_i [p_i_b]x dtheta,  dtheta_b = R_b_i dtheta.
     Eigen::Matrix<double, 6, 6> J = Eigen::Matrix<double, 6, 6>::Zero();
-    J.block<3, 3>(0, 0) = -R_w_i * so3::skew(p_i_b);
+    J.block<3, 3>(0, 0) = -R_w_i * skew(p_i_b);
     J.block<3, 3>(0, 3) = Eigen::Matrix3d::Identity();
     J.block<3, 3>(3, 0) = T_i_b.rotation().transpose();
     const Eigen::Matrix<double, 6, 6> P_sub = P_.topLeftCorner<6, 6>();

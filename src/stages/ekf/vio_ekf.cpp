@@ -9,7 +9,7 @@
 #include <opencv2/core/mat.hpp>
 
 #include "core/error.hpp"
-#include "stages/ekf/so3.hpp"
+#include "core/geometry.hpp"
 
 namespace loopgate {
 namespace {
@@ -50,10 +50,7 @@ std::optional<GroundTruthState> ground_truth_state_at(const std::vector<GroundTr
   const double f = span > 0.0 ? static_cast<double>(t_ns - a.t_ns) / span : 0.0;
   GroundTruthState out;
   out.t_ns = t_ns;
-  const Eigen::Quaterniond qa(a.T_w_b.rotation());
-  const Eigen::Quaterniond qb(b.T_w_b.rotation());
-  out.T_w_b.linear() = qa.slerp(f, qb).toRotationMatrix();
-  out.T_w_b.translation() = (1.0 - f) * a.T_w_b.translation() + f * b.T_w_b.translation();
+  out.T_w_b = interpolate_pose(StampedPose{a.t_ns, a.T_w_b}, StampedPose{b.t_ns, b.T_w_b}, t_ns);
   out.gyro_bias_radps = (1.0 - f) * a.gyro_bias_radps + f * b.gyro_bias_radps;
   out.accel_bias_mps2 = (1.0 - f) * a.accel_bias_mps2 + f * b.accel_bias_mps2;
   if (!a.v_w_mps.isZero(0.0) || !b.v_w_mps.isZero(0.0)) {
@@ -202,7 +199,7 @@ std::optional<Eigen::Matrix3d> VioEkf::camera_rotation_since_previous(const EkfF
     const Timestamp hi = std::min(b.t_ns, t1);
     if (hi <= lo) continue;
     const Eigen::Vector3d w = 0.5 * (a.gyro_radps + b.gyro_radps) - bias;
-    q_prev_cur = q_prev_cur * so3::exp_quat(w * ns_to_s(hi - lo));
+    q_prev_cur = q_prev_cur * so3_exp_quat(w * ns_to_s(hi - lo));
   }
   if (!q_prev_cur.coeffs().allFinite()) return std::nullopt;
   return (R_i_c_.transpose() * q_prev_cur.toRotationMatrix().transpose() * R_i_c_).eval();

@@ -50,7 +50,8 @@ struct EkfFrameOutput {
 // Throws ConfigError naming the key when a density ends up zero.
 ImuNoise effective_imu_noise(const EkfConfig& config, const ImuCalibration& imu);
 
-// Ground-truth state at t_ns, interpolated (linear / slerp) between the two nearest states; when those carry
+// Ground-truth state at t_ns, interpolated between the two nearest states (pose: interpolate_pose of
+// core/geometry.hpp; biases and velocity linear); when those carry
 // no velocity (all zero, e.g. a TUM ground truth) it is taken from the positions by central difference.
 // nullopt outside the time span or with fewer than two states.
 std::optional<GroundTruthState> ground_truth_state_at(const std::vector<GroundTruthState>& states,

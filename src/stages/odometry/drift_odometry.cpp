@@ -1,33 +1,10 @@
 #include "stages/odometry/drift_odometry.hpp"
 
-#include <Eigen/Eigenvalues>
 #include <cmath>
-#include <stdexcept>
+
+#include "core/geometry.hpp"
 
 namespace loopgate {
-
-namespace {
-Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
-}  // namespace
-
-Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions) {
-  if (positions.size() < 3) throw std::invalid_argument("plane_normal: fewer than 3 positions");
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& p : positions) mean += p;
-  mean /= static_cast<double>(positions.size());
-  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
-  for (const auto& p : positions) scatter += (p - mean) * (p - mean).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(scatter);
-  Eigen::Vector3d normal = solver.eigenvectors().col(0);  // smallest eigenvalue first
-  Eigen::Index largest = 0;
-  normal.cwiseAbs().maxCoeff(&largest);
-  if (normal[largest] < 0) normal = -normal;
-  return normal;
-}
 
 DriftOdometry::DriftOdometry(const OdometryConfig& config, const Eigen::Vector3d& axis_w)
     : config_(config), axis_w_(axis_w.normalized()), rng_(static_cast<std::uint64_t>(config.seed)) {}

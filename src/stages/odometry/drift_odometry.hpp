@@ -47,8 +47,4 @@ class DriftOdometry : public OdometrySource {
   Eigen::Matrix<double, 5, 5> cov_ = Eigen::Matrix<double, 5, 5>::Zero();
 };
 
-// Normal of the best-fit plane of `positions` (smallest principal axis), sign chosen so that its
-// largest component is positive. Throws std::invalid_argument with fewer than 3 positions.
-Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions);
-
 }  // namespace loopgate

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "core/geometry.hpp"
+
 namespace loopgate {
 
 FileOdometry::FileOdometry(const OdometryConfig& config, std::vector<StampedPose> poses)
@@ -44,12 +46,7 @@ OdometryOutput FileOdometry::process(const OdometryInput& input) {
   } else {
     const StampedPose& a = *(it - 1);
     const StampedPose& b = *it;
-    const double alpha = static_cast<double>(t_ns - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns);
-    out.pose.T_w_b.translation() = (1.0 - alpha) * a.T_w_b.translation() + alpha * b.T_w_b.translation();
-    out.pose.T_w_b.linear() = Eigen::Quaterniond(a.T_w_b.rotation())
-                                  .slerp(alpha, Eigen::Quaterniond(b.T_w_b.rotation()))
-                                  .normalized()
-                                  .toRotationMatrix();
+    out.pose.T_w_b = interpolate_pose(a, b, t_ns);
     out.pose.v_w_mps = (b.T_w_b.translation() - a.T_w_b.translation()) / ns_to_s(b.t_ns - a.t_ns);
     out.pose.has_velocity = true;
     if (std::min(t_ns - a.t_ns, b.t_ns - t_ns) > max_gap_ns) {

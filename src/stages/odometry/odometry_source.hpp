@@ -5,7 +5,8 @@
 //   ekf:   the MSCKF visual-inertial filter of src/stages/ekf on the images and IMU (ekf_odometry.hpp);
 //   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth unless
 //          ekf.init_mode is standstill), else drift. The default: EuRoC-layout data with IMU gets the ekf.
-// Every source emits one PoseEstimate per image.
+// Every source emits one PoseEstimate per image. The sources take plain data (a trajectory, ground-truth
+// states, calibrations, an axis); pipeline/odometry_factory.hpp builds the configured one from a Dataset.
 #pragma once
 
 #include <cstddef>
@@ -23,8 +24,6 @@ class Mat;
 }
 
 namespace loopgate {
-
-class Dataset;
 
 struct OdometryConfig {
   std::string source = "auto";  // drift | file | ekf | auto (see above)
@@ -98,21 +97,5 @@ class OdometrySource {
   // Called once per frame, in frame order (serially).
   virtual OdometryOutput process(const OdometryInput& input) = 0;
 };
-
-// Builds the configured source. `dataset` supplies ground truth (drift: required, and the heading axis
-// when "auto"; ekf: the initial state with ekf.init_mode ground_truth) and the camera and IMU calibration
-// (ekf); `ekf` configures the ekf source. Throws ConfigError / DataError naming what is missing.
-std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
-                                                     const Dataset& dataset);
-// Same with the default EkfConfig.
-std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const Dataset& dataset);
-
-// The world axis (+-x, +-y or +-z) nearest the up direction: the mean specific force of the IMU over the
-// sequence, rotated into the world by the ground truth. nullopt without IMU or ground truth.
-std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset);
-
-// The source `config.source` resolves to for `dataset`: "auto" becomes "ekf" or "drift" (see above).
-std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
-                                    const Dataset& dataset);
 
 }  // namespace loopgate

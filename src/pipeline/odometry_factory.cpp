@@ -1,0 +1,113 @@
+#include "pipeline/odometry_factory.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <vector>
+
+#include "core/error.hpp"
+#include "core/geometry.hpp"
+#include "io/dataset.hpp"
+#include "io/trajectory_io.hpp"
+#include "stages/ekf/vio_ekf.hpp"
+#include "stages/odometry/drift_odometry.hpp"
+#include "stages/odometry/ekf_odometry.hpp"
+#include "stages/odometry/file_odometry.hpp"
+
+namespace loopgate {
+
+std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset) {
+  if (!dataset.has_imu() || !dataset.has_ground_truth()) return std::nullopt;
+  const auto imu = dataset.imu_calibration();
+  const Eigen::Matrix3d R_b_i = imu ? Eigen::Matrix3d(imu->T_b_i.rotation()) : Eigen::Matrix3d::Identity();
+  Eigen::Vector3d sum_w = Eigen::Vector3d::Zero();
+  for (const ImuSample& s : dataset.imu_samples()) {
+    const auto gt = ground_truth_state_at(dataset.ground_truth(), s.t_ns);
+    if (gt && s.accel_mps2.allFinite()) sum_w += gt->T_w_b.rotation() * (R_b_i * s.accel_mps2);
+  }
+  if (sum_w.isZero(0.0)) return std::nullopt;
+  return nearest_signed_axis(sum_w);
+}
+
+std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                    const Dataset& dataset) {
+  if (config.source != "auto") return config.source;
+  const bool ekf_inputs = dataset.has_images() && dataset.has_imu() && dataset.camera().has_value() &&
+                          dataset.imu_calibration().has_value();
+  const bool ekf_init = ekf.init_mode == "standstill" || dataset.has_ground_truth();
+  return ekf_inputs && ekf_init ? "ekf" : "drift";
+}
+
+namespace {
+std::unique_ptr<OdometrySource> make_ekf_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                                const Dataset& dataset) {
+  ekf.validate();
+  const auto where = dataset.root();
+  if (!dataset.has_images())
+    throw DataError(where, "odometry.source ekf needs images, and this dataset has none");
+  if (!dataset.has_imu())
+    throw DataError(where, "odometry.source ekf needs IMU data, and this dataset has none");
+  const auto camera = dataset.camera();
+  if (!camera) {
+    throw DataError(where,
+                    "odometry.source ekf needs the camera calibration (cam sensor.yaml), and this "
+                    "dataset has none");
+  }
+  const auto imu = dataset.imu_calibration();
+  if (!imu) {
+    throw DataError(where,
+                    "odometry.source ekf needs the IMU calibration (imu0 sensor.yaml), and this "
+                    "dataset has none");
+  }
+  if (ekf.init_mode == "ground_truth" && !dataset.has_ground_truth()) {
+    throw ConfigError("ekf.init_mode: 'ground_truth' needs ground truth, and dataset " + where.string() +
+                      " has none (use ekf.init_mode=standstill)");
+  }
+  Eigen::Vector3d up_w = Eigen::Vector3d::UnitZ();
+  if (config.ekf_up_axis != "auto") {
+    up_w = axis_vector(config.ekf_up_axis);
+  } else if (dataset.has_ground_truth()) {
+    up_w = world_up_axis_from_imu(dataset).value_or(Eigen::Vector3d::UnitZ());
+  }
+  spdlog::info("odometry: ekf source (MSCKF, window {}, {} features), init from {}, world up [{} {} {}]",
+               ekf.window_size, ekf.max_features, ekf.init_mode, up_w.x(), up_w.y(), up_w.z());
+  return std::make_unique<EkfOdometry>(
+      ekf, *camera, *imu,
+      ekf.init_mode == "ground_truth" ? dataset.ground_truth() : std::vector<GroundTruthState>{}, up_w);
+}
+}  // namespace
+
+std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const Dataset& dataset) {
+  return make_odometry_source(config, EkfConfig{}, dataset);
+}
+
+std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                                     const Dataset& dataset) {
+  config.validate();
+  const std::string source = resolve_odometry_source(config, ekf, dataset);
+  if (config.source == "auto") spdlog::info("odometry: source auto -> {}", source);
+  if (source == "ekf") return make_ekf_source(config, ekf, dataset);
+  if (source == "file") {
+    auto poses = read_tum(config.file);
+    if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
+    spdlog::info("odometry: file source, {} poses from {}", poses.size(), config.file);
+    return std::make_unique<FileOdometry>(config, std::move(poses));
+  }
+  if (!dataset.has_ground_truth()) {
+    throw ConfigError("odometry.source: 'drift' needs ground truth, and dataset " + dataset.root().string() +
+                      " has none (use source: file)");
+  }
+  Eigen::Vector3d axis_w = Eigen::Vector3d::UnitZ();
+  if (config.heading_axis != "auto") axis_w = axis_vector(config.heading_axis);
+  if (config.heading_axis == "auto") {
+    std::vector<Eigen::Vector3d> positions;
+    for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
+      if (auto T_w_b = dataset.ground_truth_T_w_b(i)) positions.push_back(T_w_b->translation());
+    }
+    if (positions.size() >= 3) axis_w = plane_normal(positions);
+  }
+  spdlog::info("odometry: drift source, seed {}, heading axis [{:.3f} {:.3f} {:.3f}]", config.seed,
+               axis_w.x(), axis_w.y(), axis_w.z());
+  return std::make_unique<DriftOdometry>(config, axis_w);
+}
+
+}  // namespace loopgate

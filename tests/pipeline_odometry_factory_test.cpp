@@ -1,0 +1,158 @@
+// The odometry factory (pipeline/odometry_factory.hpp): which source `odometry.source` builds for a dataset,
+// what it reads out of the dataset for it, and the errors naming what is missing. The sources themselves
+// are tested with plain data in the odometry_* tests.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "io/trajectory_io.hpp"
+#include "pipeline/odometry_factory.hpp"
+#include "pipeline_fake_dataset.hpp"
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+constexpr const char* kMicro = "euroc/V1_01_easy_micro";
+
+OdometryConfig source(const std::string& name) {
+  OdometryConfig config;
+  config.source = name;
+  return config;
+}
+
+// Runs `odometry` over the frames of `dataset` with the ground truth as input, returns the estimates.
+std::vector<PoseEstimate> run(OdometrySource& odometry, const Dataset& dataset) {
+  std::vector<PoseEstimate> out;
+  for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
+    OdometryInput input;
+    input.frame = i;
+    input.t_ns = dataset.frame_t_ns(i);
+    input.T_w_b_true = dataset.ground_truth_T_w_b(i);
+    out.push_back(odometry.process(input).pose);
+  }
+  return out;
+}
+
+TEST(PipelineOdometryFactory, BuildsTheEkfSourceAndAutoPicksItOnEuroc) {
+  LOOPGATE_REQUIRE_SHARED_DATA(kMicro);
+  const auto dataset = open_dataset(testing::shared_data_dir() / kMicro);
+  const auto ekf = make_odometry_source(source("ekf"), EkfConfig{}, *dataset);
+  EXPECT_STREQ(ekf->name(), "ekf");
+  EXPECT_TRUE(ekf->needs_images());
+  EXPECT_TRUE(ekf->needs_imu());
+  EXPECT_FALSE(ekf->needs_ground_truth());  // it keeps the dataset's full ground-truth states itself
+  OdometryConfig automatic;
+  EXPECT_EQ(automatic.source, "auto");  // the default
+  EXPECT_NO_THROW(automatic.validate());
+  EXPECT_EQ(resolve_odometry_source(automatic, EkfConfig{}, *dataset), "ekf");
+  EXPECT_STREQ(make_odometry_source(automatic, EkfConfig{}, *dataset)->name(), "ekf");
+  // EuRoC's world is z up: the IMU's mean specific force rotated by the ground truth says so.
+  const auto up_w = world_up_axis_from_imu(*dataset);
+  ASSERT_TRUE(up_w.has_value());
+  EXPECT_EQ(*up_w, Eigen::Vector3d::UnitZ());
+  EXPECT_THROW(make_odometry_source(source("vio"), *dataset), ConfigError);
+}
+
+// An image folder (no IMU, no calibration, no ground truth): auto falls back to drift, an explicit ekf
+// source is refused with an error saying what is missing, and so is drift (it needs ground truth).
+TEST(PipelineOdometryFactory, DatasetWithoutImuIsRefusedClearly) {
+  const fs::path dir = testing::make_temp_dir("odometry-factory-folder");
+  for (int k = 0; k < 3; ++k) {
+    cv::Mat image(48, 64, CV_8UC1, cv::Scalar(40 * k));
+    cv::imwrite((dir / ("img_" + std::to_string(k) + ".png")).string(), image);
+  }
+  const auto dataset = open_dataset(dir);
+  ASSERT_FALSE(dataset->has_imu());
+  EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, *dataset), "drift");
+  EXPECT_FALSE(world_up_axis_from_imu(*dataset).has_value());
+  try {
+    make_odometry_source(source("ekf"), EkfConfig{}, *dataset);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("ekf needs IMU"), std::string::npos) << e.what();
+  }
+  try {
+    make_odometry_source(source("drift"), *dataset);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("'drift' needs ground truth"), std::string::npos) << e.what();
+  }
+}
+
+// IMU but no camera calibration: auto is drift, ekf names the missing calibration.
+TEST(PipelineOdometryFactory, EkfNeedsTheCalibration) {
+  const testing::FakeDataset dataset(20);
+  EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, dataset), "drift");
+  try {
+    make_odometry_source(source("ekf"), dataset);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("camera calibration"), std::string::npos) << e.what();
+  }
+}
+
+// The drift source's heading axis: "auto" is the normal of the ground truth's plane (the fake drive is
+// a circle in the x-y plane: z), so with no position noise the estimate stays in that plane; a
+// heading axis in the plane ("x") tilts it out.
+TEST(PipelineOdometryFactory, DriftHeadingAxisFromTheGroundTruthPlane) {
+  const testing::FakeDataset dataset(120);
+  OdometryConfig config = source("drift");
+  config.drift_position_sigma_m_per_sqrt_m = 0.0;
+  config.drift_heading_sigma_rad_per_sqrt_m = 0.01;
+  const auto automatic = make_odometry_source(config, dataset);
+  EXPECT_STREQ(automatic->name(), "drift");
+  double max_z_m = 0.0;
+  for (const PoseEstimate& p : run(*automatic, dataset))
+    max_z_m = std::max(max_z_m, std::abs(p.T_w_b.translation().z()));
+  EXPECT_LT(max_z_m, 1e-12);
+  config.heading_axis = "x";
+  const auto tilted = make_odometry_source(config, dataset);
+  max_z_m = 0.0;
+  for (const PoseEstimate& p : run(*tilted, dataset))
+    max_z_m = std::max(max_z_m, std::abs(p.T_w_b.translation().z()));
+  EXPECT_GT(max_z_m, 1e-3);
+}
+
+// The file source reads the TUM trajectory named in the config; a missing or empty file is an error
+// naming it.
+TEST(PipelineOdometryFactory, FileSourceReadsTheTrajectory) {
+  const testing::FakeDataset dataset(10);
+  const fs::path dir = testing::make_temp_dir("odometry-factory-file");
+  std::vector<StampedPose> poses;
+  for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
+    poses.push_back(StampedPose{dataset.frame_t_ns(i), *dataset.ground_truth_T_w_b(i)});
+    poses.back().T_w_b.translation().z() = 7.0;
+  }
+  write_tum(dir / "trajectory.tum", poses);
+  OdometryConfig config = source("file");
+  config.file = (dir / "trajectory.tum").string();
+  const auto file = make_odometry_source(config, dataset);
+  EXPECT_STREQ(file->name(), "file");
+  const std::vector<PoseEstimate> estimates = run(*file, dataset);
+  ASSERT_EQ(estimates.size(), dataset.frame_count());
+  EXPECT_EQ(estimates[4].status, OdometryStatus::kTracking);
+  EXPECT_NEAR(estimates[4].T_w_b.translation().z(), 7.0, 1e-9);
+
+  config.file = (dir / "absent.tum").string();
+  EXPECT_THROW(make_odometry_source(config, dataset), DataError);
+  write_tum(dir / "empty.tum", {});
+  config.file = (dir / "empty.tum").string();
+  try {
+    make_odometry_source(config, dataset);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_NE(std::string(e.what()).find("no poses"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace loopgate
