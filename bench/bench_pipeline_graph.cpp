@@ -82,7 +82,7 @@ void BM_GraphDecodeAll(benchmark::State& state) {
   static const PngMemoryDataset dataset;
   PipelineConfig config;
   config.run.threads = static_cast<int>(state.range(0));
-  config.run.decode = "all";
+  config.run.decode = DecodePolicy::kAll;
   config.output.progress = "off";
   config.odometry.heading_axis = "z";
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline";
@@ -116,7 +116,7 @@ void BM_GraphKittiThumbs(benchmark::State& state) {
   const auto dataset = open_dataset(dir, options);
   PipelineConfig config;
   config.run.threads = static_cast<int>(state.range(0));
-  config.run.decode = "all";
+  config.run.decode = DecodePolicy::kAll;
   config.output.progress = "off";
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline-thumbs";
   double wall_s = 0, cpu_s = 0, data_s = 0, frames = 0;

@@ -33,7 +33,7 @@ constexpr std::size_t kPeriod = 120;
 
 PipelineConfig full_config(int threads = 2, int margin = 30) {
   PipelineConfig config;
-  config.run.mode = "full";
+  config.run.mode = RunMode::kFull;
   config.run.threads = threads;
   config.output.progress = "off";
   config.match.margin = margin;
@@ -178,7 +178,7 @@ TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
     EXPECT_NE(what.find("gated|full|odometry"), std::string::npos) << what;
   }
   PipelineConfig odometry_only;
-  odometry_only.run.mode = "odometry";
+  odometry_only.run.mode = RunMode::kOdometry;
   odometry_only.output.progress = "off";
   const RevisitDataset dataset(kPeriod, 1);
   const auto out = testing::make_temp_dir("pipeline-odometry-mode");

@@ -34,7 +34,7 @@ constexpr std::size_t kDetourBegin = 250, kDetourEnd = 300;  // third lap, 500 m
 
 PipelineConfig gated_config(int threads = 2) {
   PipelineConfig config;
-  config.run.mode = "gated";
+  config.run.mode = RunMode::kGated;
   config.run.threads = threads;
   config.output.progress = "off";
   config.odometry.source = "drift";  // ground truth + a random-walk drift, sigma growing with distance
@@ -211,7 +211,7 @@ TEST(PipelineGatedMode, LoopsAreTheBatchResultOnTheCoveredCellsAndDpEqualsFullIn
 TEST(PipelineGatedMode, AliasingDetourGivesFullFalseLoopsAndGatedNone) {
   const RevisitDataset dataset = detour_dataset();
   PipelineConfig full = gated_config();
-  full.run.mode = "full";
+  full.run.mode = RunMode::kFull;
   const auto out_full = testing::make_temp_dir("pipeline-gated-alias-full");
   const auto out_gated = testing::make_temp_dir("pipeline-gated-alias-gated");
   ASSERT_FALSE(run_pipeline(full, dataset, out_full).failed);
@@ -255,7 +255,7 @@ TEST(PipelineGatedMode, OneAndTwoThreadsGiveIdenticalOutputs) {
 TEST(PipelineGatedMode, ImageCacheServesRecentFramesWithIdenticalResults) {
   const RevisitDataset dataset = detour_dataset();
   PipelineConfig cached = gated_config();
-  cached.run.decode = "all";
+  cached.run.decode = DecodePolicy::kAll;
   PipelineConfig uncached = cached;
   uncached.run.image_cache_frames = 0;
   const auto out_cached = testing::make_temp_dir("pipeline-gated-cache");

@@ -20,8 +20,8 @@ using testing::read_file;
 PipelineConfig base_config(int threads = 2) {
   PipelineConfig config;
   config.run.threads = threads;
-  config.run.mode = "odometry";  // the graph itself; detection modes have their own tests
-  config.run.decode = "all";
+  config.run.mode = RunMode::kOdometry;  // the graph itself; detection modes have their own tests
+  config.run.decode = DecodePolicy::kAll;
   config.output.progress = "off";
   return config;
 }
@@ -120,7 +120,7 @@ TEST(PipelineGraph, FrameRangeAndLazyDecode) {
   FakeDataset dataset(50);
   dataset.corrupt_frames = {12};  // never decoded: nothing needs pixels with the drift source
   PipelineConfig config = base_config();
-  config.run.decode = "lazy";
+  config.run.decode = DecodePolicy::kLazy;
   config.run.frames = "10:20";
   const auto out = testing::make_temp_dir("pipeline-range");
   const RunResult result = run_pipeline(config, dataset, out);

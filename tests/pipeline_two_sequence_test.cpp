@@ -40,7 +40,7 @@ PipelineConfig dird_config() {
 
 PipelineConfig seqslam_config(int threads = 2) {
   PipelineConfig config;
-  config.run.method = "seqslam";
+  config.run.method = Detector::kSeqSlam;
   config.run.threads = threads;
   config.output.progress = "off";
   config.eval.aligned_tolerance_frames = 1;
@@ -273,23 +273,16 @@ TEST(PipelineTwoSequence, NoToleranceNoEvaluation) {
 }
 
 TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
-  const RevisitDataset reference(20, 1, 0);
-  const RevisitDataset query(20, 1, 1);
-  PipelineConfig config = dird_config();
-  config.run.method = "netvlad";
-  const auto out = testing::make_temp_dir("pipeline-two-seq-bad-method");
+  // run.method is parsed into an enum by the config system: an unknown word never reaches the run.
+  RawConfig raw;
+  raw.apply_override("run.method=netvlad");
+  PipelineConfig loaded;
   try {
-    run_two_sequences(config, reference, query, out);
+    apply_config(raw, loaded);
     FAIL() << "run.method=netvlad accepted";
   } catch (const ConfigError& e) {
-    const std::string what = e.what();
-    EXPECT_NE(what.find("run.method"), std::string::npos) << what;
-    EXPECT_NE(what.find("seqslam"), std::string::npos) << what;
+    EXPECT_STREQ(e.what(), "run.method: 'netvlad' is not one of dird|seqslam (--set run.method=netvlad)");
   }
-  RawConfig raw;
-  raw.apply_override("run.method=bogus");
-  PipelineConfig loaded;
-  EXPECT_THROW(apply_config(raw, loaded), ConfigError);
 }
 
 // Issue 7: Nordland summer (reference) vs winter (query), configs/nordland.yaml, both methods, the whole

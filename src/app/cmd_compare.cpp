@@ -70,11 +70,13 @@ std::vector<std::string> split_methods(const std::string& text) {
   return out;
 }
 
-// Overrides that make a method out of the shared configuration.
-std::vector<std::string> method_overrides(const std::string& method) {
-  if (method == "full") return {"run.mode=full", "run.method=dird"};
-  if (method == "gated") return {"run.mode=gated", "run.method=dird"};
-  return {"run.mode=full", "run.method=seqslam"};
+// The shared configuration made into one method's (validated again: the mode changes what must hold).
+PipelineConfig method_config(const PipelineConfig& base, const std::string& method) {
+  PipelineConfig config = base;
+  config.run.mode = method == "gated" ? RunMode::kGated : RunMode::kFull;
+  config.run.method = method == "seqslam" ? Detector::kSeqSlam : Detector::kDird;
+  config.validate();
+  return config;
 }
 
 double stage_total_ms(const json& summary, const char* stage) {
@@ -181,11 +183,11 @@ std::string shell_quote(const std::string& text) {
 
 int compare_command(const CompareOptions& options) {
   const std::vector<std::string> methods = split_methods(options.methods);
-  std::vector<std::string> shared = options.overrides;
-  if (!options.dataset.empty()) shared.push_back("run.dataset=" + options.dataset);
-  if (options.threads > 0) shared.push_back("run.threads=" + std::to_string(options.threads));
-  if (!options.frames.empty()) shared.push_back("run.frames=" + options.frames);
-  PipelineConfig base = load_config<PipelineConfig>(options.config_file, shared);
+  std::vector<FlagValue> flags;
+  if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
+  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
+  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(base));
   OpenOptions open_options;
@@ -201,9 +203,7 @@ int compare_command(const CompareOptions& options) {
   auto* previous = std::signal(SIGINT, on_compare_sigint);
   bool failed = false;
   for (const std::string& method : methods) {
-    std::vector<std::string> overrides = shared;
-    for (auto& o : method_overrides(method)) overrides.push_back(std::move(o));
-    const PipelineConfig config = load_config<PipelineConfig>(options.config_file, overrides);
+    const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
     RunResult result;
     try {

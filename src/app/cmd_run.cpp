@@ -67,16 +67,16 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
 }
 
 int run_command(const RunOptions& options) {
-  // YAML, then --set in order, then the dedicated flags.
-  std::vector<std::string> overrides = options.overrides;
-  if (!options.dataset.empty()) overrides.push_back("run.dataset=" + options.dataset);
-  if (!options.mode.empty()) overrides.push_back("run.mode=" + options.mode);
-  if (!options.method.empty()) overrides.push_back("run.method=" + options.method);
-  if (!options.rate.empty()) overrides.push_back("run.rate=" + options.rate);
-  if (options.threads > 0) overrides.push_back("run.threads=" + std::to_string(options.threads));
-  if (options.trace) overrides.push_back("output.trace=true");
-  if (!options.frames.empty()) overrides.push_back("run.frames=" + options.frames);
-  PipelineConfig config = load_config<PipelineConfig>(options.config_file, overrides);
+  // YAML, then --set in order, then the dedicated flags (each names the key it sets).
+  std::vector<FlagValue> flags;
+  if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
+  if (!options.mode.empty()) flags.push_back({"run.mode", options.mode, "--mode"});
+  if (!options.method.empty()) flags.push_back({"run.method", options.method, "--method"});
+  if (!options.rate.empty()) flags.push_back({"run.rate", options.rate, "--rate"});
+  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
+  if (options.trace) flags.push_back({"output.trace", "true", "--trace"});
+  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  PipelineConfig config = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
   if (config.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(config));

@@ -155,6 +155,10 @@ void throw_unknown(const std::string& what, const std::string& name, const std::
                     "; known: " + join(allowed, ", "));
 }
 
+void throw_bad_word(const std::string& name, const RawConfigValue& value, const std::string& choices) {
+  throw ConfigError(name + ": '" + value.text + "' is not one of " + choices + where(value.origin));
+}
+
 std::string format_value(bool value) {
   return value ? "true" : "false";
 }

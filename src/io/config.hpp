@@ -26,6 +26,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "core/error.hpp"
 #include "core/validate.hpp"  // require / require_one_of for validate(), re-exported here
 
@@ -65,6 +66,9 @@ std::int64_t parse_int64(const std::string& name, const RawConfigValue& value);
 double parse_double(const std::string& name, const RawConfigValue& value);
 [[noreturn]] void throw_unknown(const std::string& what, const std::string& name, const std::string& origin,
                                 const std::vector<std::string>& allowed);
+// "NAME: 'TEXT' is not one of a|b|c (ORIGIN)".
+[[noreturn]] void throw_bad_word(const std::string& name, const RawConfigValue& value,
+                                 const std::string& choices);
 
 template <class T>
 void assign(const std::string& name, const RawConfigValue& value, T& field) {
@@ -78,8 +82,16 @@ void assign(const std::string& name, const RawConfigValue& value, T& field) {
     field = parse_double(name, value);
   } else if constexpr (std::is_same_v<T, std::string>) {
     field = value.text;
+  } else if constexpr (std::is_enum_v<T>) {
+    for (const EnumName<T>& n : enum_names(field)) {
+      if (n.name == value.text) {
+        field = n.value;
+        return;
+      }
+    }
+    throw_bad_word(name, value, enum_choices(field));
   } else {
-    static_assert(sizeof(T) == 0, "config fields are bool, int, int64_t, double or std::string");
+    static_assert(sizeof(T) == 0, "config fields are bool, int, int64_t, double, std::string or an enum");
   }
 }
 
@@ -89,6 +101,19 @@ std::string format_value(int value);
 std::string format_value(std::int64_t value);
 std::string format_value(double value);
 std::string format_value(const std::string& value);
+template <class E>
+requires std::is_enum_v<E> std::string format_value(E value) {
+  return std::string(enum_name(value));
+}
+// The JSON echo of a field (an enum as its name).
+template <class T>
+nlohmann::json json_value(const T& value) {
+  if constexpr (std::is_enum_v<T>) {
+    return std::string(enum_name(value));
+  } else {
+    return value;
+  }
+}
 
 }  // namespace config_detail
 
@@ -110,7 +135,9 @@ void apply_section(const std::string& section_name, const std::map<std::string, 
   }
 }
 
-// Applies every raw value to `config` (a struct with sections()), then validates every section.
+// Applies every raw value to `config` (a struct with sections()), then validates it once: config.validate()
+// when the configuration has one (every section and the rules between sections), else every section's
+// validate().
 template <class Config>
 void apply_config(const RawConfig& raw, Config& config) {
   for (const auto& [section_name, values] : raw.sections()) {
@@ -128,14 +155,31 @@ void apply_config(const RawConfig& raw, Config& config) {
       config_detail::throw_unknown("section", section_name, origin, names);
     }
   }
-  Config::sections(config, [](std::string_view, const auto& section) { section.validate(); });
+  if constexpr (requires { config.validate(); }) {
+    config.validate();
+  } else {
+    Config::sections(config, [](std::string_view, const auto& section) { section.validate(); });
+  }
 }
 
-// Loads `file` (when not empty), applies the overrides in order, validates.
+// A command-line flag that sets one config key ("run.mode" from --mode): parsed by the same typed parser as
+// YAML and --set, and named in errors ("run.mode: 'x' is not one of gated|full|odometry (--mode)").
+struct FlagValue {
+  std::string key;  // "section.key"
+  std::string value;
+  std::string flag;  // "--mode"
+};
+
+// Loads `file` (when not empty), applies the --set overrides in order, then the flags, validates (once).
 template <class Config>
-Config load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides = {}) {
+Config load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides = {},
+                   const std::vector<FlagValue>& flags = {}) {
   RawConfig raw = file.empty() ? RawConfig{} : RawConfig::from_yaml_file(file);
   for (const auto& assignment : overrides) raw.apply_override(assignment);
+  for (const FlagValue& f : flags) {
+    const std::size_t dot = f.key.find('.');
+    raw.set(f.key.substr(0, dot), f.key.substr(dot + 1), f.value, f.flag);
+  }
   Config config;
   apply_config(raw, config);
   return config;
@@ -148,8 +192,9 @@ nlohmann::json config_to_json(const Config& config) {
   Config::sections(config, [&](std::string_view name, const auto& section) {
     nlohmann::json& out = json[std::string(name)];
     out = nlohmann::json::object();
-    std::remove_cvref_t<decltype(section)>::fields(
-        section, [&](std::string_view key, const auto& field) { out[std::string(key)] = field; });
+    std::remove_cvref_t<decltype(section)>::fields(section, [&](std::string_view key, const auto& field) {
+      out[std::string(key)] = config_detail::json_value(field);
+    });
   });
   return json;
 }

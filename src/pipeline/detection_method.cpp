@@ -11,7 +11,7 @@ namespace {
 // run.mode odometry: sync, decode, odometry only.
 class NoDetection final : public DetectionMethod {
  public:
-  explicit NoDetection(const PipelineConfig& config) : mode_(config.run.mode) {}
+  explicit NoDetection(const PipelineConfig& config) : mode_(enum_name(config.run.mode)) {}
   std::string name() const override { return "dird"; }
   std::string mode() const override { return mode_; }
   bool detects() const override { return false; }
@@ -34,15 +34,15 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
       throw DataError(dataset_root, "run.method seqslam needs images, and this dataset has none");
     spdlog::info(
         "run: SeqSLAM on every frame (run.mode {} does not apply to it); matches at the end of the stream",
-        run.mode);
+        enum_name(run.mode));
     return make_seqslam(context);
   }
   if (!run.detects_loops()) return make_no_detection(context);
   if (!dataset_has_images) {
-    throw DataError(dataset_root, "run.mode " + run.mode +
+    throw DataError(dataset_root, "run.mode " + std::string(enum_name(run.mode)) +
                                       " needs images, and this dataset has none (use --mode odometry)");
   }
-  return run.mode == "full" ? make_dird_full(context) : make_dird_gated(context);
+  return run.mode == RunMode::kFull ? make_dird_full(context) : make_dird_gated(context);
 }
 
 }  // namespace loopgate

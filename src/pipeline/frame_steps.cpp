@@ -43,7 +43,7 @@ FrameSteps::FrameSteps(const PipelineConfig& config, const Dataset& dataset,
                        std::unique_ptr<OdometrySource> odometry, ImageSource& images,
                        bool decode_pixels_for_describe)
     : dataset_(dataset), images_(images), odometry_(std::move(odometry)) {
-  bool decode_all = config.run.decode == "all";
+  bool decode_all = config.run.decode == DecodePolicy::kAll;
   if (decode_all && !dataset.has_images()) {
     spdlog::warn("run.decode is 'all' but dataset {} has no images: nothing to decode",
                  dataset.root().string());

@@ -276,7 +276,6 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
 
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
-  config.validate();
   if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
   PipelineRun run(config, dataset, out_dir, stop);
   return run.run();

@@ -72,9 +72,9 @@ struct RunResult {
 // descriptors.csv in gated mode; ground_truth.tum and truth_loops.csv with ground truth) into `out_dir`.
 // summary.json has mode, method, images_decoded, descriptors_computed, similarities_computed, loops,
 // detection (frames per outcome), gate counts, and with ground truth an "evaluation" block (loops true /
-// false, PR curve, AP, recall at 100/99/95% precision, gate coverage). `config` must be validated. `stop`
-// (may be null) is polled by the producer. Throws ConfigError/DataError for problems found before the graph
-// starts.
+// false, PR curve, AP, recall at 100/99/95% precision, gate coverage). `config` must be valid (load_config /
+// apply_config validate it, once). `stop` (may be null) is polled by the producer. Throws
+// ConfigError/DataError for problems found before the graph starts.
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop = nullptr);
 

@@ -54,15 +54,12 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 }
 
 void RunConfig::validate() const {
-  require_one_of("run.mode", mode, {"gated", "full", "odometry"});
-  require_one_of("run.method", method, {"dird", "seqslam"});
-  if (method == "seqslam" && mode == "odometry") {
+  if (method == Detector::kSeqSlam && mode == RunMode::kOdometry) {
     throw ConfigError("run.method: seqslam detects loops; it needs run.mode gated or full, not odometry");
   }
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
   require(max_in_flight >= 1, "run.max_in_flight", ">= 1", std::to_string(max_in_flight));
-  require_one_of("run.decode", decode, {"lazy", "all"});
   require(camera_index == 0 || camera_index == 1, "run.camera_index", "0 or 1", std::to_string(camera_index));
   require(deadline_ms >= 0, "run.deadline_ms", ">= 0", std::to_string(deadline_ms));
   require(image_cache_frames >= 0, "run.image_cache_frames", ">= 0", std::to_string(image_cache_frames));

@@ -5,9 +5,11 @@
 
 #include <cstddef>
 #include <optional>
+#include <span>
 #include <string>
 #include <utility>
 
+#include "core/enum_names.hpp"
 #include "stages/dird/dird_config.hpp"
 #include "stages/gate/gate_config.hpp"
 #include "stages/match/match_config.hpp"
@@ -17,26 +19,47 @@
 
 namespace loopgate {
 
+// run.mode: "gated" (the paper's method): the pose gate finds candidate areas and DIRD descriptors and
+// similarities are computed only inside them (past frames re-read on demand), then sequence match and NMS;
+// "full": DIRD on every frame and its similarity against every earlier frame beyond match.margin, same
+// sequence match and NMS (the paper's pure-DIRD baseline); "odometry": sync, decode, odometry only.
+enum class RunMode { kGated, kFull, kOdometry };
+inline constexpr EnumName<RunMode> kRunModeNames[] = {
+    {RunMode::kGated, "gated"}, {RunMode::kFull, "full"}, {RunMode::kOdometry, "odometry"}};
+constexpr std::span<const EnumName<RunMode>> enum_names(RunMode) {
+  return kRunModeNames;
+}
+
+// run.method: "dird" (the paper's detector, in the chosen mode) or "seqslam" (the SeqSLAM baseline with the
+// OpenSeqSLAM defaults of section seqslam, on every frame; its score is the ratio best/second, lower is
+// better).
+enum class Detector { kDird, kSeqSlam };
+inline constexpr EnumName<Detector> kDetectorNames[] = {{Detector::kDird, "dird"},
+                                                        {Detector::kSeqSlam, "seqslam"}};
+constexpr std::span<const EnumName<Detector>> enum_names(Detector) {
+  return kDetectorNames;
+}
+
+// run.decode: "lazy" (only frames a later stage needs pixels of now) or "all".
+enum class DecodePolicy { kLazy, kAll };
+inline constexpr EnumName<DecodePolicy> kDecodePolicyNames[] = {{DecodePolicy::kLazy, "lazy"},
+                                                                {DecodePolicy::kAll, "all"}};
+constexpr std::span<const EnumName<DecodePolicy>> enum_names(DecodePolicy) {
+  return kDecodePolicyNames;
+}
+
 struct RunConfig {
-  std::string dataset;  // dataset folder (the --dataset flag overrides it)
-  // "gated" (the paper's method): the pose gate finds candidate areas and DIRD descriptors and
-  // similarities are computed only inside them (past frames re-read on demand), then sequence match and
-  // NMS; "full": DIRD on every frame and its similarity against every earlier frame beyond match.margin,
-  // same sequence match and NMS (the paper's pure-DIRD baseline); "odometry": sync, decode, odometry only
-  // (no loop detection).
-  std::string mode = "gated";
-  // "dird" (the paper's detector, in the chosen mode) or "seqslam" (the SeqSLAM baseline with the
-  // OpenSeqSLAM defaults of section seqslam, on every frame: it has no gated variant, so mode gated or
-  // full both run it on all frames; its score is the ratio best/second, lower is better).
-  std::string method = "dird";
-  std::string rate = "max";     // "max" (as fast as the graph drains) or R > 0 (R x real time)
-  int threads = 2;              // worker threads of the graph
-  int max_in_flight = 8;        // limiter: frames inside the graph at once
-  std::string frames;           // "A:B" frame indices [A, B), "A:" or ":B"; empty = all
-  std::string decode = "lazy";  // lazy (only frames a later stage needs pixels of) | all
-  bool strict = false;          // open the dataset strictly (first bad row fails) instead of leniently
-  int camera_index = 0;         // 0 or 1 (stereo layouts)
-  double deadline_ms = 0;       // rate mode: time a frame may take from release to sink; 0 = frame period
+  std::string dataset;                        // dataset folder (the --dataset flag overrides it)
+  RunMode mode = RunMode::kGated;             // gated | full | odometry (see RunMode)
+  Detector method = Detector::kDird;          // dird | seqslam (see Detector); SeqSLAM runs on every frame
+  std::string rate = "max";                   // "max" (as fast as the graph drains) or R > 0 (R x real time)
+  int threads = 2;                            // worker threads of the graph
+  int max_in_flight = 8;                      // limiter: frames inside the graph at once
+  std::string frames;                         // "A:B" frame indices [A, B), "A:" or ":B"; empty = all
+  DecodePolicy decode = DecodePolicy::kLazy;  // lazy | all
+  bool strict = false;     // open the dataset strictly (first bad row fails) instead of leniently
+  int camera_index = 0;    // 0 or 1 (stereo layouts)
+  double deadline_ms = 0;  // rate mode: time a frame may take from release to sink; 0 = frame period
   // gated mode: decoded images of the most recent frames kept for describe (a new candidate area asks for
   // the descriptors of the rows just behind the current frame); older frames are read again from the
   // dataset. 0 = no cache. Memory: this many images.
@@ -60,8 +83,8 @@ struct RunConfig {
   }
   void validate() const;
 
-  bool detects_loops() const { return mode == "full" || mode == "gated"; }
-  bool seqslam() const { return method == "seqslam"; }
+  bool detects_loops() const { return mode != RunMode::kOdometry; }
+  bool seqslam() const { return method == Detector::kSeqSlam; }
   // nullopt for "max", else the rate factor R.
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
@@ -156,7 +179,7 @@ struct PipelineConfig {
     dird.validate();
     match.validate();
     seqslam.validate();
-    if (run.mode == "gated") gate.validate_for_sequence_length(match.sequence_length);
+    if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
     output.validate();
   }

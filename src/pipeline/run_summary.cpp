@@ -13,7 +13,6 @@
 
 namespace loopgate {
 
-
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
   const Dataset& dataset = parts.dataset;
   if (!parts.method.detects() || !dataset.has_ground_truth()) return {{"available", false}};

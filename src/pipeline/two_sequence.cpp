@@ -428,7 +428,6 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
 
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
                                     const Dataset& query, const std::filesystem::path& out_dir) {
-  config.validate();
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");
     if (!dataset->has_images()) throw DataError(dataset->root(), "two-sequence mode needs images");
@@ -439,7 +438,7 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
                                 config.eval.aligned_tolerance_frames};
   const TwoSequenceSetup setup{config, reference, query, ranges};
   spdlog::info("two-sequence run ({}): reference {} ({} frames) vs query {} ({} frames), {} threads",
-               config.run.method, reference.root().string(), setup.ranges.reference_count,
+               enum_name(config.run.method), reference.root().string(), setup.ranges.reference_count,
                query.root().string(), setup.ranges.query_count, config.run.threads);
   const auto start = Clock::now();
   std::filesystem::create_directories(out_dir);

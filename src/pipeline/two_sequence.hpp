@@ -45,8 +45,8 @@ struct TwoSequenceResult {
   nlohmann::json summary;
 };
 
-// `config` must be valid (run.mode is not used). Throws ConfigError/DataError for bad input found before
-// the run (no frames, no images, an empty frame range).
+// `config` must be valid (load_config / apply_config validate it; run.mode is not used). Throws
+// ConfigError/DataError for bad input found before the run (no frames, no images, an empty frame range).
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
                                     const Dataset& query, const std::filesystem::path& out_dir);
 
