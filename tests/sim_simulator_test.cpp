@@ -75,8 +75,8 @@ TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
 }
 
 TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
-  ASSERT_EQ(preset_names(),
-            (std::vector<std::string>{"aliasing", "demo", "euroc-mh05", "kitti00", "night-loop"}));
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-night", "euroc-mh05",
+                                                      "kitti00", "night-loop"}));
   for (const std::string& name : preset_names()) {
     SimulationConfig c = make_preset(name, "/nonexistent");
     EXPECT_EQ(c.simulation.preset, name);
@@ -332,6 +332,46 @@ TEST(SimulatorPresets, NightLoopClosesTheLoopAtFullNightUnderLamps) {
   std::printf("night-loop preset: %zu night query frames (%lld-%lld), %zu lamps (%zu out)\n", queries.size(),
               static_cast<long long>(*queries.begin()), static_cast<long long>(*queries.rbegin()),
               lighting.lamps().lights.size(), lighting.lamps().out_count());
+}
+
+TEST(SimulatorPresets, DemoNightIsTheDemoWithItsRevisitAtFullNight) {
+  SimulationConfig demo = make_preset("demo", "");
+  SimulationConfig night = make_preset("demo-night", "");
+  // The same drive, world and loops: every section but the illumination is the demo's (the lamps model
+  // keys the ground cells exactly: the demo's ground has holes where the legacy keys collide).
+  nlohmann::json a = config_to_json(demo), b = config_to_json(night);
+  for (nlohmann::json* j : {&a, &b}) {
+    j->erase("illumination");
+    (*j)["simulation"].erase("preset");
+  }
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(night.illumination.night_model, "lamps");
+  SimulationPlan plan;
+  const std::vector<LoopInterval> loops = preset_loops(night, &plan);
+  SimulationPlan demo_plan;
+  const std::vector<LoopInterval> demo_loops = preset_loops(demo, &demo_plan);
+  ASSERT_EQ(loops.size(), demo_loops.size());
+  for (std::size_t k = 0; k < loops.size(); ++k) {
+    EXPECT_EQ(loops[k].query, demo_loops[k].query);
+    EXPECT_EQ(loops[k].first, demo_loops[k].first);
+    EXPECT_EQ(loops[k].last, demo_loops[k].last);
+    EXPECT_EQ(
+        night.illumination.night_factor(plan.illumination_phase[static_cast<std::size_t>(loops[k].query)]),
+        1.0);
+  }
+  // Street B (the aliased place, frames 335-400) by day, the lamps on before the revisit (frame 492).
+  std::vector<Eigen::Vector3d> path;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path.push_back(T.translation());
+  night.world.street_ground_exact_cells = true;
+  const World world = build_world(night.world, path, plan.up_w);
+  const SceneLighting lighting(night.illumination, night.lights, night.sensor, world, path, 1);
+  for (std::size_t f = 335; f <= 400; ++f)
+    EXPECT_EQ(night.illumination.night_factor(plan.illumination_phase[f]), 0.0);
+  std::size_t first_lamps = 0, first_headlight = 0;
+  while (!lighting.lamps_on(plan.illumination_phase[first_lamps])) ++first_lamps;
+  while (!lighting.headlight_on(plan.illumination_phase[first_headlight])) ++first_headlight;
+  EXPECT_EQ(first_lamps, 447u);  // as configs/sim/demo-night.yaml says
+  EXPECT_EQ(first_headlight, 439u);
 }
 
 TEST(LoopTruth, OutAndBackAlongALine) {
