@@ -51,7 +51,8 @@ struct LightsConfig {
   double lamp_glare = 0.003;
   double lamps_on_night_factor = 0.5;
   // Headlight (street): a spot on the vehicle, below and ahead of the camera, pointing forward and pitched
-  // down, wide and flat (low beam); on from headlight_on_night_factor. Hall: a round spot at the camera.
+  // down, wide and flat (low beam); on from headlight_on_night_factor. Hall: a round spot at the camera
+  // (hall_headlight_*, with headlight_inner_fraction and headlight_on_night_factor).
   double headlight_intensity = 100.0;
   double headlight_below_camera_m = 0.9;
   double headlight_ahead_m = 1.0;
