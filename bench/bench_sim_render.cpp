@@ -1,15 +1,21 @@
 // Rendering speed of the simulator: frames per second, single thread, along real trajectories when
 // the shared data is present (KITTI 00 poses, EuRoC MH_05 ground truth), else along procedural ones.
+// The *Night* cases render every frame at full night: the ambient-noise night (ambient light, additive
+// noise) and the lamps night (lamps, headlight, photon sensor with auto-exposure), on the same worlds.
 #include <benchmark/benchmark.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <string>
+#include <vector>
 
 #include "sim/illumination.hpp"
+#include "sim/lights.hpp"
 #include "sim/renderer.hpp"
 #include "sim/world.hpp"
 
@@ -158,6 +164,51 @@ void render_along(benchmark::State& state, const Scene& scene, const CameraCalib
       benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
 }
 
+// Every frame at full night under `night_model`, along the scene's poses.
+void render_night(benchmark::State& state, const Scene& scene, const CameraCalibration& camera,
+                  const std::string& night_model) {
+  const sim::Renderer renderer(scene.world, camera);
+  sim::IlluminationSchedule schedule;
+  schedule.night_model = night_model;
+  std::vector<Eigen::Vector3d> path;
+  for (const auto& T : scene.poses) path.push_back(T.translation());
+  const sim::SceneLighting lighting(schedule, sim::LightsConfig{}, sim::SensorConfig{}, scene.world, path, 1);
+  const sim::Illumination light = lighting.illumination(1.0);
+  const std::size_t stride = std::max<std::size_t>(1, scene.poses.size() / 97);
+  std::size_t k = 0;
+  double lights = 0.0;
+  for (auto _ : state) {
+    const std::size_t frame = (k * stride) % scene.poses.size();
+    const std::vector<sim::SpotLight> frame_lights = lighting.lights(1.0, scene.poses[frame]);
+    cv::Mat image = renderer.render(scene.poses[frame], light, frame, frame_lights);
+    benchmark::DoNotOptimize(image.data);
+    lights += static_cast<double>(frame_lights.size());
+    ++k;
+  }
+  state.counters["frames_per_s"] =
+      benchmark::Counter(static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  state.counters["lights_per_frame"] = lights / static_cast<double>(std::max<std::size_t>(1, k));
+}
+
+void BM_RenderStreet640x200NightAmbientNoise(benchmark::State& state) {
+  render_night(state, street_scene(), kitti_camera(640, 200), "ambient_noise");
+}
+void BM_RenderStreet640x200NightLamps(benchmark::State& state) {
+  render_night(state, street_scene(), kitti_camera(640, 200), "lamps");
+}
+void BM_RenderStreet1241x376NightAmbientNoise(benchmark::State& state) {
+  render_night(state, street_scene(), kitti_camera(1241, 376), "ambient_noise");
+}
+void BM_RenderStreet1241x376NightLamps(benchmark::State& state) {
+  render_night(state, street_scene(), kitti_camera(1241, 376), "lamps");
+}
+void BM_RenderHall752x480NightAmbientNoise(benchmark::State& state) {
+  render_night(state, hall_scene(), euroc_camera(), "ambient_noise");
+}
+void BM_RenderHall752x480NightLamps(benchmark::State& state) {
+  render_night(state, hall_scene(), euroc_camera(), "lamps");
+}
+
 void BM_RenderStreet1241x376(benchmark::State& state) {
   render_along(state, street_scene(), kitti_camera(1241, 376));
 }
@@ -181,6 +232,30 @@ void BM_BuildStreetWorld(benchmark::State& state) {
 BENCHMARK(BM_RenderStreet1241x376)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->MinTime(3.0);
 BENCHMARK(BM_RenderHall752x480Radtan)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->MinTime(3.0);
 BENCHMARK(BM_RenderStreet640x200)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->MinTime(3.0);
+BENCHMARK(BM_RenderStreet640x200NightAmbientNoise)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
+BENCHMARK(BM_RenderStreet640x200NightLamps)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
+BENCHMARK(BM_RenderStreet1241x376NightAmbientNoise)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
+BENCHMARK(BM_RenderStreet1241x376NightLamps)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
+BENCHMARK(BM_RenderHall752x480NightAmbientNoise)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
+BENCHMARK(BM_RenderHall752x480NightLamps)
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->MinTime(3.0);
 BENCHMARK(BM_BuildStreetWorld)->Unit(benchmark::kMillisecond)->MeasureProcessCPUTime()->Iterations(2);
 
 }  // namespace

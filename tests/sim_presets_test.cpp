@@ -34,7 +34,8 @@ std::string error_of(const std::string& name_or_file) {
 
 TEST(SimPresets, EveryShippedPresetFileLoadsAndValidates) {
   EXPECT_EQ(preset_dir(), fs::path(LOOPGATE_SOURCE_DIR) / "configs" / "sim");
-  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "euroc-mh05", "kitti00"}));
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-night", "euroc-mh05",
+                                                      "kitti00", "night-loop"}));
   for (const std::string& name : preset_names()) {
     const fs::path file = preset_dir() / (name + ".yaml");
     EXPECT_EQ(preset_file(name), file);
@@ -139,7 +140,7 @@ TEST(SimPresets, BadKeysAndValuesNameTheFileAndLine) {
   EXPECT_NE(error_of((dir / "absent.yaml").string()).find("absent.yaml"), std::string::npos);
   error = error_of("kitti01");
   EXPECT_NE(error.find("kitti01"), std::string::npos) << error;
-  EXPECT_NE(error.find("aliasing|demo|euroc-mh05|kitti00"), std::string::npos) << error;
+  EXPECT_NE(error.find("aliasing|demo|demo-night|euroc-mh05|kitti00|night-loop"), std::string::npos) << error;
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 
 #include "core/error.hpp"
 #include "core/geometry.hpp"
+#include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/trajectory_io.hpp"
 #include "sim/renderer.hpp"
@@ -75,7 +76,8 @@ TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
 }
 
 TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
-  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "euroc-mh05", "kitti00"}));
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-night", "euroc-mh05",
+                                                      "kitti00", "night-loop"}));
   for (const std::string& name : preset_names()) {
     SimulationConfig c = make_preset(name, "/nonexistent");
     EXPECT_EQ(c.simulation.preset, name);
@@ -288,6 +290,89 @@ TEST(SimulatorPresets, DemoPresetShowsARevisitAtDuskNewStreetsAndAnAliasedPlace)
     }
   }
   EXPECT_GE(facades, 8);
+}
+
+// Ground-truth loops of the frames a preset renders.
+std::vector<LoopInterval> preset_loops(SimulationConfig& config, SimulationPlan* plan) {
+  *plan = plan_simulation(config);
+  return find_loop_truth(
+      std::vector<Eigen::Isometry3d>(plan->T_w_c.begin(),
+                                     plan->T_w_c.begin() + static_cast<std::ptrdiff_t>(plan->frames_used)),
+      plan->up_w, config.loops);
+}
+
+TEST(SimulatorPresets, NightLoopClosesTheLoopAtFullNightUnderLamps) {
+  SimulationConfig config = make_preset("night-loop", "");
+  EXPECT_EQ(config.illumination.night_model, "lamps");
+  SimulationPlan plan;
+  const std::vector<LoopInterval> loops = preset_loops(config, &plan);
+  ASSERT_EQ(plan.frames_used, 470u);
+  EXPECT_EQ(plan.camera.width_px, 640);
+  EXPECT_EQ(plan.camera.height_px, 200);
+  EXPECT_TRUE(config.world.street_ground_exact_cells);  // set by the lamps model
+  // Every revisit: a night query (lamps and headlight on) of a day reference; the second lap revisits the
+  // first almost all along (200+ query frames).
+  std::vector<Eigen::Vector3d> path;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path.push_back(T.translation());
+  const World world = build_world(config.world, path, plan.up_w);
+  const SceneLighting lighting(config.illumination, config.lights, config.sensor, world, path, 1);
+  ASSERT_FALSE(loops.empty());
+  std::set<std::int64_t> queries;
+  for (const LoopInterval& loop : loops) {
+    queries.insert(loop.query);
+    const double query_phase = plan.illumination_phase[static_cast<std::size_t>(loop.query)];
+    EXPECT_EQ(config.illumination.night_factor(query_phase), 1.0) << loop.query;
+    EXPECT_TRUE(lighting.lamps_on(query_phase) && lighting.headlight_on(query_phase)) << loop.query;
+    for (const std::int64_t f : {loop.first, loop.last}) {
+      EXPECT_EQ(config.illumination.night_factor(plan.illumination_phase[static_cast<std::size_t>(f)]), 0.0)
+          << loop.query << " revisits " << f;
+    }
+  }
+  EXPECT_GE(queries.size(), 200u);
+  EXPECT_GE(lighting.lamps().lights.size(), 8u);
+  std::printf("night-loop preset: %zu night query frames (%lld-%lld), %zu lamps (%zu out)\n", queries.size(),
+              static_cast<long long>(*queries.begin()), static_cast<long long>(*queries.rbegin()),
+              lighting.lamps().lights.size(), lighting.lamps().out_count());
+}
+
+TEST(SimulatorPresets, DemoNightIsTheDemoWithItsRevisitAtFullNight) {
+  SimulationConfig demo = make_preset("demo", "");
+  SimulationConfig night = make_preset("demo-night", "");
+  // The same drive, world and loops: every section but the illumination is the demo's (the lamps model
+  // keys the ground cells exactly: the demo's ground has holes where the legacy keys collide).
+  nlohmann::json a = config_to_json(demo), b = config_to_json(night);
+  for (nlohmann::json* j : {&a, &b}) {
+    j->erase("illumination");
+    (*j)["simulation"].erase("preset");
+  }
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(night.illumination.night_model, "lamps");
+  SimulationPlan plan;
+  const std::vector<LoopInterval> loops = preset_loops(night, &plan);
+  SimulationPlan demo_plan;
+  const std::vector<LoopInterval> demo_loops = preset_loops(demo, &demo_plan);
+  ASSERT_EQ(loops.size(), demo_loops.size());
+  for (std::size_t k = 0; k < loops.size(); ++k) {
+    EXPECT_EQ(loops[k].query, demo_loops[k].query);
+    EXPECT_EQ(loops[k].first, demo_loops[k].first);
+    EXPECT_EQ(loops[k].last, demo_loops[k].last);
+    EXPECT_EQ(
+        night.illumination.night_factor(plan.illumination_phase[static_cast<std::size_t>(loops[k].query)]),
+        1.0);
+  }
+  // Street B (the aliased place, frames 335-400) by day, the lamps on before the revisit (frame 492).
+  std::vector<Eigen::Vector3d> path;
+  for (const Eigen::Isometry3d& T : plan.T_w_c) path.push_back(T.translation());
+  night.world.street_ground_exact_cells = true;
+  const World world = build_world(night.world, path, plan.up_w);
+  const SceneLighting lighting(night.illumination, night.lights, night.sensor, world, path, 1);
+  for (std::size_t f = 335; f <= 400; ++f)
+    EXPECT_EQ(night.illumination.night_factor(plan.illumination_phase[f]), 0.0);
+  std::size_t first_lamps = 0, first_headlight = 0;
+  while (!lighting.lamps_on(plan.illumination_phase[first_lamps])) ++first_lamps;
+  while (!lighting.headlight_on(plan.illumination_phase[first_headlight])) ++first_headlight;
+  EXPECT_EQ(first_lamps, 447u);  // as configs/sim/demo-night.yaml says
+  EXPECT_EQ(first_headlight, 439u);
 }
 
 TEST(LoopTruth, OutAndBackAlongALine) {

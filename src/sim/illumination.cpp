@@ -28,6 +28,8 @@ void require(bool ok, const std::string& key, const std::string& what) {
 void IlluminationSchedule::validate() const {
   require(kind == "constant" || kind == "day-to-night" || kind == "jump", "kind",
           "'" + kind + "' is not one of constant, day-to-night, jump");
+  require(night_model == "ambient_noise" || night_model == "lamps", "night_model",
+          "'" + night_model + "' is not one of ambient_noise, lamps");
   require(day_exposure > 0.0, "day_exposure", "must be > 0");
   require(night_exposure > 0.0, "night_exposure", "must be > 0");
   require(day_ambient >= 0.0, "day_ambient", "must be >= 0");

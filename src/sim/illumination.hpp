@@ -5,10 +5,13 @@
 #include <Eigen/Core>
 #include <string>
 
+#include "sim/sensor.hpp"
+
 namespace loopgate::sim {
 
-// Radiance of a surface = albedo * (ambient + sun_intensity * max(0, n . sun_dir_w)); pixel value =
-// 255 * clamp(exposure * radiance * vignette)^(1/gamma) + noise. Defaults = a plain day.
+// Radiance of a surface = albedo * (ambient + sun_intensity * max(0, n . sun_dir_w) + lights); pixel value =
+// 255 * clamp(exposure * radiance * vignette)^(1/gamma) + noise (the additive sensor), or the photon sensor
+// of sim/sensor.hpp (auto-exposure, shot + read noise, then gamma). Defaults = a plain day, additive sensor.
 struct Illumination {
   double exposure = 0.9;       // gain applied to radiance before gamma
   double gamma = 2.2;          // display gamma (output = linear^(1/gamma))
@@ -20,10 +23,19 @@ struct Illumination {
   double sky_brightness = 0.9;  // linear radiance of the sky (rays that hit nothing)
   double vignetting = 0.25;     // relative darkening at the image corners (0 = none)
   double noise_sigma = 1.5;     // sensor noise std-dev in grey levels (0..255 scale)
+  // The photon sensor (night_model lamps) instead of exposure + additive noise_sigma.
+  bool photon_sensor = false;
+  SensorConfig sensor;
 };
 
 struct IlluminationSchedule {
   std::string kind = "day-to-night";  // "constant" | "day-to-night" | "jump"
+  // What the night is: "ambient_noise" = ambient light only and additive Gaussian noise (night_noise_sigma):
+  // the harsh night of the first presets; "lamps" = street / hall lamps and a headlight (section "lights",
+  // sim/lights.hpp) seen through the photon sensor with auto-exposure (section "sensor", sim/sensor.hpp);
+  // the day_* / night_* end points below still apply except night_ambient and night_sky_brightness (the
+  // lights section's), the exposures and the noise sigmas (the sensor's).
+  std::string night_model = "ambient_noise";
   // Day (phase 0) and night (phase 1) end points.
   double day_exposure = 0.9;
   double night_exposure = 1.8;
@@ -54,6 +66,7 @@ struct IlluminationSchedule {
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
     v("kind", self.kind);
+    v("night_model", self.night_model);
     v("day_exposure", self.day_exposure);
     v("night_exposure", self.night_exposure);
     v("day_ambient", self.day_ambient);

@@ -275,6 +275,8 @@ std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& 
 SimulationPlan plan_simulation(SimulationConfig& config) {
   SimulationSettings& s = config.simulation;
   config.world.seed = s.seed;  // one seed drives the whole dataset
+  // The lamps light the ground around the camera, where the legacy ground cell keys leave holes.
+  if (config.illumination.night_model == "lamps") config.world.street_ground_exact_cells = true;
   config.validate();
 
   // Calibration files first: they may complete the config.
@@ -463,6 +465,12 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   const Renderer renderer(world, plan.camera);
   spdlog::info("simulate: world '{}' with {} quads, {} structures ({} aliased)", config.world.kind,
                world.quads.size(), world.structures.size(), world.aliased_structure_count());
+  const SceneLighting lighting(config.illumination, config.lights, config.sensor, world, path_w,
+                               static_cast<std::uint64_t>(s.seed));
+  if (lighting.lamps_model()) {
+    spdlog::info("simulate: night model 'lamps': {} lamps ({} out for the night), headlight",
+                 lighting.lamps().lights.size(), lighting.lamps().out_count());
+  }
 
   const std::filesystem::path mav0 = out_dir / "mav0";
   const std::filesystem::path cam_dir = mav0 / "cam0";
@@ -478,6 +486,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   std::vector<std::vector<unsigned char>> encoded(batch);
   std::vector<EurocImageEntry> entries;
   entries.reserve(n);
+  std::vector<RenderStats> frame_stats(n);
   double render_s = 0.0;
   for (std::size_t begin = 0; begin < n; begin += batch) {
     const std::size_t end = std::min(n, begin + batch);
@@ -485,9 +494,11 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
     tbb::parallel_for(
         tbb::blocked_range<std::size_t>(begin, end), [&](const tbb::blocked_range<std::size_t>& range) {
           for (std::size_t f = range.begin(); f != range.end(); ++f) {
-            const Illumination light = config.illumination.at(plan.illumination_phase[f]);
+            const double phase = plan.illumination_phase[f];
+            const std::vector<SpotLight> lights = lighting.lights(phase, plan.T_w_c[f]);
             const cv::Mat image = renderer.render(
-                plan.T_w_c[f], light, mix_seed(static_cast<std::uint64_t>(s.seed), kFrameNoiseStream, f));
+                plan.T_w_c[f], lighting.illumination(phase),
+                mix_seed(static_cast<std::uint64_t>(s.seed), kFrameNoiseStream, f), lights, &frame_stats[f]);
             if (!cv::imencode(".png", image, encoded[f - begin], png_params)) {
               throw std::runtime_error("PNG encoding failed for frame " + std::to_string(f));
             }
@@ -547,6 +558,15 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   meta["preset"] = s.preset;
   meta["seed"] = s.seed;
   meta["parameters"] = config_to_json(config);
+  if (!lighting.lamps_model()) {
+    // The keys added with the lamps model do nothing under the ambient-noise night (or at their defaults):
+    // they are echoed only when used, so that datasets of the ambient-noise night keep the bytes they had
+    // before the lamps model existed.
+    meta["parameters"].erase("lights");
+    meta["parameters"].erase("sensor");
+    meta["parameters"]["illumination"].erase("night_model");
+  }
+  if (!config.world.street_ground_exact_cells) meta["parameters"]["world"].erase("street_ground_exact_cells");
   meta["world"] = {{"kind", config.world.kind},
                    {"quads", world.quads.size()},
                    {"structures", world.structures.size()},
@@ -584,6 +604,24 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
                     {"duration_s", summary.duration_s},
                     {"distance_m", summary.distance_m}};
   meta["illumination"] = {{"schedule", config.illumination.kind}, {"phase", phases}, {"night_factor", night}};
+  if (lighting.lamps_model()) {
+    // Per frame: the auto-exposure's exposure time and analogue gain, and whether lamps and headlight shone.
+    nlohmann::json exposure = nlohmann::json::array(), gain = nlohmann::json::array();
+    nlohmann::json lamps_on = nlohmann::json::array(), headlight_on = nlohmann::json::array();
+    for (std::size_t f = 0; f < n; ++f) {
+      exposure.push_back(frame_stats[f].exposure_time);
+      gain.push_back(frame_stats[f].gain);
+      lamps_on.push_back(lighting.lamps_on(plan.illumination_phase[f]));
+      headlight_on.push_back(lighting.headlight_on(plan.illumination_phase[f]));
+    }
+    meta["illumination"]["night_model"] = config.illumination.night_model;
+    meta["illumination"]["lamps"] = {{"count", lighting.lamps().lights.size()},
+                                     {"out_for_the_night", lighting.lamps().out_count()}};
+    meta["illumination"]["exposure_time"] = exposure;
+    meta["illumination"]["gain"] = gain;
+    meta["illumination"]["lamps_on"] = lamps_on;
+    meta["illumination"]["headlight_on"] = headlight_on;
+  }
   meta["imu"] = {{"source", s.imu_source}, {"samples", plan.imu.size()}, {"rate_hz", config.imu.rate_hz}};
   nlohmann::json intervals = nlohmann::json::array();
   for (const LoopInterval& loop : loops) intervals.push_back({loop.query, loop.first, loop.last});

@@ -16,6 +16,8 @@
 #include "core/types.hpp"
 #include "sim/illumination.hpp"
 #include "sim/imu_synth.hpp"
+#include "sim/lights.hpp"
+#include "sim/sensor.hpp"
 #include "sim/trajectory.hpp"
 #include "sim/world.hpp"
 
@@ -176,6 +178,8 @@ struct SimulationConfig {
   ImuNoiseSettings imu_noise;
   WorldConfig world;
   IlluminationSchedule illumination;
+  LightsConfig lights;  // illumination.night_model lamps only
+  SensorConfig sensor;  // illumination.night_model lamps only
   LoopTruthSettings loops;
 
   // The sections, in order, for loading, printing and the JSON echo (Self is SimulationConfig or const
@@ -190,6 +194,8 @@ struct SimulationConfig {
     v("imu_noise", self.imu_noise);
     v("world", self.world);
     v("illumination", self.illumination);
+    v("lights", self.lights);
+    v("sensor", self.sensor);
     v("loops", self.loops);
   }
   void validate() const;
@@ -247,7 +253,8 @@ struct SimulationPlan {
 
 // Loads the inputs named by the config, fits the trajectory, makes / reads the IMU and the ground truth.
 // Throws DataError for missing or malformed input files, ConfigError for a bad configuration.
-// May update `config` (camera / imu_noise sections read from sensor.yaml files).
+// May update `config` (camera / imu_noise sections read from sensor.yaml files; world.seed = simulation.seed;
+// world.street_ground_exact_cells under illumination.night_model lamps).
 SimulationPlan plan_simulation(SimulationConfig& config);
 
 struct SimulationSummary {

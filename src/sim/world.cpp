@@ -232,8 +232,18 @@ void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
   // path (so neighbouring cells share their edges exactly: no cracks).
   const double ground_reach_m =
       cfg.street_facade_offset_m + cfg.street_facade_offset_jitter_m + kGroundBeyondFacadesM;
-  const auto cell_key = [](long long ix, long long iy) {
+  // The historical key of a cell (its texture seed): different cells can share it, e.g. (1, -24) and
+  // (-1, 22). As the key of the cell set and the vertex heights it drops such cells from the ground (holes
+  // through which the distant ground shows) and gives their vertices one height; street_ground_exact_cells
+  // keys those by the cell itself (the legacy keys stay the default: they are what the first presets render).
+  const auto seed_key = [](long long ix, long long iy) -> std::uint64_t {
     return (static_cast<std::uint64_t>(ix) * 0x9E3779B97F4A7C15ull) ^ static_cast<std::uint64_t>(iy);
+  };
+  const bool exact_cells = cfg.street_ground_exact_cells;
+  const auto cell_key = [&](long long ix, long long iy) -> std::uint64_t {
+    if (!exact_cells) return seed_key(ix, iy);
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(ix)) << 32) |
+           static_cast<std::uint64_t>(static_cast<std::uint32_t>(iy));
   };
   std::unordered_map<std::uint64_t, char> cell_set;
   std::vector<std::pair<long long, long long>> cells;
@@ -288,7 +298,7 @@ void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     const Eigen::Vector3d p10 = f.to_world(x1, y0, vertex_height(ix + 1, iy));
     const Eigen::Vector3d p01 = f.to_world(x0, y1, vertex_height(ix, iy + 1));
     const Eigen::Vector3d p11 = f.to_world(x1, y1, vertex_height(ix + 1, iy + 1));
-    const std::uint64_t tile_seed = hash_combine(seed, cell_key(ix, iy));
+    const std::uint64_t tile_seed = hash_combine(seed, seed_key(ix, iy));
     const int s = bld.add_structure("ground", TextureStyle::kRoad, tile_seed, cfg.street_ground_tile_m,
                                     cfg.street_ground_tile_m, 0.25 * (p00 + p10 + p01 + p11), false);
     bld.pending[static_cast<std::size_t>(s)].info.texture =

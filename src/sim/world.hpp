@@ -48,6 +48,10 @@ struct WorldConfig {
   double street_ground_tile_m = 8.0;       // ground cells (two triangles each) of this size
   double street_facade_texels_per_m = 24.0;
   double street_road_texels_per_m = 48.0;
+  // Key the ground cells exactly. false: the historical keys, under which some cells of a large map collide
+  // and are missing from the ground (the distant ground shows through: nearly invisible by day, black holes
+  // under the lamps night model, for which plan_simulation() therefore always sets this).
+  bool street_ground_exact_cells = false;
   double street_pole_spacing_m = 25.0;  // lamp/sign posts along the kerb, alternating sides (0 = none)
   double street_pole_offset_m = 6.5;    // lateral distance of posts from the path (>= street_clearance_m)
   double street_pole_height_m = 6.0;
@@ -88,6 +92,7 @@ struct WorldConfig {
     v("street_ground_tile_m", self.street_ground_tile_m);
     v("street_facade_texels_per_m", self.street_facade_texels_per_m);
     v("street_road_texels_per_m", self.street_road_texels_per_m);
+    v("street_ground_exact_cells", self.street_ground_exact_cells);
     v("street_pole_spacing_m", self.street_pole_spacing_m);
     v("street_pole_offset_m", self.street_pole_offset_m);
     v("street_pole_height_m", self.street_pole_height_m);
