@@ -170,16 +170,19 @@ void Standardization::apply_float(const Descriptor& raw, StandardizedFloat& z) c
   const float* mean = table_->mean.data();
   const float* scale = table_->code_scale.data();
   const float to_z = static_cast<float>(table_->clamp_sigma / kStandardCodeMax);
-  for (std::size_t k = 0; k < kDirdBytes; ++k) z[k] = (static_cast<float>(raw[k]) - mean[k]) * scale[k] * to_z;
+  for (std::size_t k = 0; k < kDirdBytes; ++k)
+    z[k] = (static_cast<float>(raw[k]) - mean[k]) * scale[k] * to_z;
 }
 
 std::int64_t Standardization::count() const {
   return table_ ? table_->count : 0;
 }
 float Standardization::mean(std::size_t dim) const {
+  if (!table_) throw std::logic_error("Standardization::mean: no statistics");
   return table_->mean.at(dim);
 }
 double Standardization::stddev(std::size_t dim) const {
+  if (!table_) throw std::logic_error("Standardization::stddev: no statistics");
   return kStandardCodeMax / (table_->clamp_sigma * static_cast<double>(table_->code_scale.at(dim)));
 }
 double Standardization::clamp_sigma() const {

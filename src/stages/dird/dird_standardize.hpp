@@ -119,7 +119,7 @@ class DescriptorMoments {
 // Cheap to share (copies share the tables).
 class Standardization {
  public:
-  Standardization() = default;  // empty(): apply() throws
+  Standardization() = default;  // empty(): apply(), mean(), stddev() throw std::logic_error
   // The statistics of `moments` (count >= 1) with the floor and clamp of `config`.
   Standardization(const DescriptorMoments& moments, const StandardizeConfig& config);
 
