@@ -8,23 +8,13 @@
 #include <vector>
 
 #include "core/geometry.hpp"
+#include "pose_test_support.hpp"
 
 namespace loopgate {
 namespace {
 
-Eigen::Isometry3d make_pose(double yaw, double pitch, double roll, const Eigen::Vector3d& p) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() =
-      (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-       Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-          .toRotationMatrix();
-  T.translation() = p;
-  return T;
-}
-
-double pose_difference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff();
-}
+using testing::make_pose;
+using testing::pose_difference;
 
 TEST(CoreGeometry, SkewIsTheCrossProduct) {
   const Eigen::Vector3d w(0.3, -1.2, 0.7);

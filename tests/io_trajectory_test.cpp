@@ -10,6 +10,7 @@
 #include "io/csv_formats.hpp"
 #include "io/csv_text.hpp"
 #include "io/trajectory_io.hpp"
+#include "pose_test_support.hpp"
 #include "test_support.hpp"
 
 namespace loopgate {
@@ -38,19 +39,8 @@ void expect_data_error(Fn&& fn, const std::string& file_name, std::size_t line, 
   }
 }
 
-Eigen::Isometry3d make_pose(double yaw, double pitch, double roll, const Eigen::Vector3d& p) {
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() =
-      (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
-       Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
-          .toRotationMatrix();
-  T.translation() = p;
-  return T;
-}
-
-double pose_difference(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
-  return (a.matrix() - b.matrix()).cwiseAbs().maxCoeff();
-}
+using testing::make_pose;
+using testing::pose_difference;
 
 TEST(IoTrajectory, SecondsParseExactly) {
   Timestamp t = 0;
