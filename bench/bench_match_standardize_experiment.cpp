@@ -494,8 +494,8 @@ Result evaluate(const Variant& v, const Matrix& m, const Truth& truth, bool two_
 void print_header(bool loose) {
   std::printf(
       "| variant | R@1 | AP single | all q0.0005 | all q0.01 | all median | diff q0.01 | diff median | same "
-      "median | hist err mu/cut | DP AP offline | DP AP fixed | DP AP online |%s\n",
-      loose ? " DP AP 10 m offline / fixed / online |" : "");
+      "median | hist err mu/cut | DP AP (R@P100) offline | DP fixed | DP online |%s\n",
+      loose ? " DP 10 m offline / fixed / online |" : "");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n", loose ? "---|" : "");
 }
 
@@ -508,7 +508,7 @@ void print_row(const std::string& name, const Result& r) {
     for (const auto& [k, pr] : list) {
       if (k == key || (key == "fixed" && k != "offline" && k != "online")) {
         char text[64];
-        std::snprintf(text, sizeof text, "%.3f", pr.ap);
+        std::snprintf(text, sizeof text, "%.3f (%.2f)", pr.ap, pr.r100);
         return text;
       }
     }

@@ -13,20 +13,22 @@
 // distances give the same counts and the same estimate on every build, in any order of addition (counts
 // only; merge() adds histograms of parallel workers). A quantile is read at the same rank as the offline
 // rule (position q * (n - 1) among the sorted distances), interpolated linearly inside its bucket; it lies
-// within 2^-9 (relative) of the exact linear-interpolation quantile. Memory: 45 058 counts (352 KB).
+// within 2^-10 (relative) of the exact linear-interpolation quantile. Memory: 45 058 counts (352 KB).
 //
 // Ready: at least min_distances distances (default 20 000: 10 of them below the mu quantile, 200 below the
 // cut-off) and the estimate spread (d_tau1 - mu more than one bucket, 2^-10 d_tau1; the offline rule fails
-// there too). Before that, scale() returns the prior (the configured
-// mu / sigma, e.g. standard_default_scale() for standardised descriptors) with estimated = false.
+// there too). Before that, scale() returns the prior (the configured mu / sigma, e.g.
+// standard_default_scale() for standardised descriptors) with estimated = false.
 //
 // Use in a stream: the similarities of frame i use the scale frozen before frame i's distances are added
 // (no frame's similarity depends on its own or later distances). The distances must be exact: kernels with
 // an early exit (DirdSimilarity::sparse_columns' AVX2 path) return only lower bounds above their limit, which
 // still count correctly as long as the limit lies above the cut-off quantile (use a limit well above it).
 //
-// Fixed default for standardised descriptors (measured on Nordland 64x32 summer/winter and KITTI 00 thumbs,
-// bench/bench_match_standardize_experiment.cpp, see docs/standardize.md): standard_default_scale().
+// Measured (docs/standardize.md): with the default quantiles this reproduces the offline rule, whose 1 %
+// cut-off keeps too few entries for cross-season matching (Nordland DP AP 0.30 with standardised cosine);
+// the fixed standard_default_scale() does better there (0.52) and as well elsewhere (KITTI 0.85), so it is
+// the recommended scale for standardised descriptors and OnlineScale the option for raw ones.
 #pragma once
 
 #include <cstddef>

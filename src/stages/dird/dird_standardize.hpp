@@ -56,15 +56,18 @@
 
 namespace loopgate {
 
-// Configuration section `standardize` (read by the integrator's config system through fields()).
+// Configuration section `standardize` (read by the integrator's config system through fields()). Defaults
+// other than `mode` are the measured recommendation (docs/standardize.md): causal statistics over the last
+// 100 observed frames, cosine on int8 codes; L1 on causally standardised codes is fragile (frames
+// standardised with different statistics become hubs or outliers) and is kept for measurements.
 struct StandardizeConfig {
-  std::string mode = "off";     // "off" (raw bytes), "batch" (whole sequence), "causal" (CausalStandardizer)
-  std::string distance = "l1";  // on the codes: "l1" (SAD, psadbw) or "cosine" (1 - cos of the codes)
-  double clamp_sigma = 4.0;     // z-scores clamped to +-clamp_sigma, mapped to codes +-127
-  double min_stddev = 1.0;      // floor of every dimension's standard deviation, in descriptor bytes
-  std::int64_t warm_up = 50;    // causal: observations before the statistics are used (>= 2)
-  std::int64_t window = 0;      // causal: statistics of the last `window` observations; 0 = all of them
-  std::int64_t refresh_every = 1;  // causal: a snapshot every N observations (memory: 27.6 KB each)
+  std::string mode = "off";         // "off" (raw bytes), "batch" (one sequence), "causal" (streaming)
+  std::string distance = "cosine";  // on the codes: "cosine" (1 - cos of the codes) or "l1" (SAD, psadbw)
+  double clamp_sigma = 4.0;         // z-scores clamped to +-clamp_sigma, mapped to codes +-127
+  double min_stddev = 1.0;          // floor of every dimension's standard deviation, in descriptor bytes
+  std::int64_t warm_up = 50;        // causal: observations before the statistics are used (>= 2)
+  std::int64_t window = 100;        // causal: statistics of the last `window` observations; 0 = all of them
+  std::int64_t refresh_every = 10;  // causal: a snapshot every N observations (27.6 KB each, all kept)
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
