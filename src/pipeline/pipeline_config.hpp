@@ -11,6 +11,7 @@
 
 #include "core/enum_names.hpp"
 #include "stages/dird/dird_config.hpp"
+#include "stages/dird/dird_online_scale.hpp"
 #include "stages/gate/gate_config.hpp"
 #include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
@@ -149,6 +150,12 @@ struct PipelineConfig {
   GateConfig gate;
   DirdConfig dird;
   MatchConfig match;
+  // Descriptor standardisation (docs/standardize.md): off = raw DIRD bytes; causal (single sequence) or
+  // batch (two sequences: each its own statistics) = z-scored codes compared by cosine or L1.
+  StandardizeConfig standardize;
+  // The logistic's scale: off = dird.mu / dird.sigma (raw) or standard_default_scale() (standardised);
+  // online = OnlineScale, from the distances seen so far.
+  OnlineScaleConfig scale;
   // SeqSLAM (run.method seqslam). A single run is matched against itself: reference rows closer than
   // exclusion_margin_frames before the query are excluded ("past"); set the margin like match.margin.
   SeqSlamConfig seqslam = single_sequence_seqslam();
@@ -166,6 +173,8 @@ struct PipelineConfig {
     v("gate", self.gate);
     v("dird", self.dird);
     v("match", self.match);
+    v("standardize", self.standardize);
+    v("scale", self.scale);
     v("seqslam", self.seqslam);
     v("eval", self.eval);
     v("output", self.output);
@@ -178,6 +187,8 @@ struct PipelineConfig {
     gate.validate();
     dird.validate();
     match.validate();
+    standardize.validate();
+    scale.validate();
     seqslam.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
