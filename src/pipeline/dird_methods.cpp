@@ -11,17 +11,13 @@
 #include <mutex>
 #include <stdexcept>
 
-#include "core/error.hpp"
 #include "io/dataset.hpp"
-#include "io/writers.hpp"
 #include "pipeline/descriptor_store.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
+#include "pipeline/gated_cells.hpp"
 #include "pipeline/loops_writer.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "stages/dird/dird_similarity.hpp"
-#include "stages/gate/candidate_areas.hpp"
-#include "stages/gate/pose_gate.hpp"
 #include "stages/match/match_outcome.hpp"
 #include "stages/match/row_assembler.hpp"
 #include "stages/match/sequence_matcher.hpp"
@@ -215,98 +211,37 @@ class DirdFull final : public DetectionMethod {
   std::vector<std::uint8_t> described_;
 };
 
-// run.mode gated. gate runs the pose gate (eq. 8-10) and the candidate-area tracker: the cells newly covered
-// and the frames newly needing a descriptor; describe computes exactly those descriptors (past frames read
-// again, several in parallel, each at most once); match computes the new cells' similarities into rows kept
-// open for gate.row_horizon_frames (RowAssembler), then final rows go to the matcher.
+// run.mode gated. gate runs the pose gate and the candidate-area tracker (PoseGatedCells): the cells newly
+// covered and the frames newly needing a descriptor; describe computes exactly those descriptors (past
+// frames read again, several in parallel, each at most once); match computes the new cells' similarities
+// into rows kept open for gate.row_horizon_frames (RowAssembler), then final rows go to the matcher.
 class DirdGated final : public DetectionMethod {
  public:
   explicit DirdGated(const MethodContext& context)
-      : context_(context),
-        dird_(context),
-        pose_gate_(context.config.gate, "odometry (gate)"),
-        tracker_(context.config.gate, context.config.match.sequence_length, context.config.match.margin),
-        rows_(context.config.gate.row_horizon_frames),
-        frames_(context.capacity),
-        row_cells_(context.capacity, 0) {
-    context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
-  }
+      : context_(context), dird_(context), cells_(context), rows_(context.config.gate.row_horizon_frames) {}
   std::string name() const override { return "dird"; }
   std::string mode() const override { return "gated"; }
 
-  // The gate's decision for this frame (frames without a usable pose are not gated and not stored) and the
-  // candidate-area update. All indices are sequence numbers.
-  void gate(FrameRecord& r) override {
-    const auto seq = static_cast<std::int64_t>(r.seq);
-    GateFrame& g = frames_[r.seq];
-    g.decision.frame = seq;
-    if (r.usable_pose()) {
-      try {
-        g.decision = pose_gate_.process(seq, r.odometry.pose);
-        g.ran = true;
-        ++frames_gate_ran_;
-        if (g.decision.gated) ++frames_gated_;
-      } catch (const DataError& e) {
-        add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
-        ++gate_errors_;
-        g.decision = GateDecision{};
-        g.decision.frame = seq;
-      }
-    }
-    AreaUpdate update = tracker_.update(g.decision);
-    g.area_id = update.joined_area;
-    g.cells = std::move(update.new_cells);
-    g.describe = std::move(update.new_descriptor_frames);
-    for (const std::int64_t k : g.describe) describe_requests_.emplace_back(k, seq);
-  }
+  void gate(FrameRecord& r) override { cells_.gate(r); }
 
-  // The descriptors the gate asked for, each computed once: the current frame's from its decoded image when
-  // decode has it, every other read again (recent frames from the image cache). Several in parallel.
+  // The descriptors the gate asked for, each computed once, several in parallel.
   void describe(FrameRecord& r) override {
-    const std::vector<std::int64_t>& seqs = frames_[r.seq].describe;
-    std::vector<std::string> problems(seqs.size());
-    const auto describe_one = [&](std::size_t index) {
-      const auto k = static_cast<std::size_t>(seqs[index]);
-      cv::Mat image;
-      bool ok = true;
-      if (k == r.seq && r.decoded) {
-        image = r.image;
-      } else {
-        try {
-          image = context_.images.read_again(k);
-        } catch (const DataError& e) {
-          ok = false;
-          problems[index] = fmt::format("describe: frame {} could not be read: {}",
-                                        context_.seqs.frame(seqs[index]), e.what());
-        }
-      }
-      if (ok) dird_.describe(k, image);
-      dird_.store().publish(k, ok);
-    };
-    if (seqs.size() > 1) {
-      parallel_for_with_handoff(seqs.size(), describe_one);
-    } else if (seqs.size() == 1) {
-      describe_one(0);
-    }
-    for (auto& problem : problems) {
-      if (!problem.empty()) add_message(r.warnings, std::move(problem));
-    }
+    describe_frames(r, cells_.describe_list(r.seq), context_, [this](std::size_t k, const cv::Mat* image) {
+      if (image) dird_.describe(k, *image);
+      dird_.store().publish(k, image != nullptr);
+    });
   }
 
   // The similarities of the cells this frame's gate update covered (every descriptor they need was requested
   // at this frame or earlier, so it has passed describe), into rows still open; rows older than the horizon
   // go to the matcher.
   void match(FrameRecord& r) override {
-    GateFrame& g = frames_[r.seq];
-    for (const CellSpan& span : g.cells) {
+    for (const CellSpan& span : cells_.take_cells(r.seq)) {
       std::vector<SimilarityEntry>& row = rows_.row(span.i);
-      row_cells_[static_cast<std::size_t>(span.i)] += static_cast<std::uint32_t>(span.j1 - span.j0 + 1);
       if (dird_.store().state(static_cast<std::size_t>(span.i)) != DescriptorStore::State::kValid) continue;
       dird_.similarity_range(static_cast<std::size_t>(span.i), static_cast<std::size_t>(span.j0),
                              static_cast<std::size_t>(span.j1) + 1, row);
     }
-    std::vector<CellSpan>().swap(g.cells);
-    std::vector<std::int64_t>().swap(g.describe);
     match_end_seq_ = r.seq + 1;
     MatchOutput output;
     rows_.advance(static_cast<std::int64_t>(r.seq), dird_.matcher(), output);
@@ -314,85 +249,34 @@ class DirdGated final : public DetectionMethod {
   }
 
   void finish() override {
-    tracker_.finish();
+    cells_.finish();
     MatchOutput output;
     rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.matcher(), output);
     dird_.matcher().flush(output);
     dird_.handle(output);
   }
 
-  // The gate: nearest past frame under the combined distance, d, threshold, decision, area joined.
-  void add_frame_cells(const FrameRecord& r, CsvRow& row) const override {
-    const GateFrame& g = frames_[r.seq];
-    const bool has_nearest = g.ran && g.decision.has_nearest;
-    row.add("nearest_frame",
-            has_nearest ? std::to_string(context_.seqs.frame(g.decision.nearest_frame)) : "");
-    row.add("gate_d_m", has_nearest ? format_fixed(g.decision.distance_m, 6) : "");
-    row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
-    row.add("gated", g.decision.gated ? "y" : "n");
-    row.add("area_id", std::to_string(g.area_id));
-  }
+  void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
 
   std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, [this](std::size_t s) { return row_cells_[s] == 0; });
+    return dird_.detection(seq, [this](std::size_t s) { return cells_.row_empty(s); });
   }
 
-  // candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
-  // columns = reference frames j, inclusive); candidate_cells.csv: the cells actually compared, per row as
-  // disjoint column intervals; descriptors.csv: every frame described, with the frame whose gate update asked
-  // for it. Dataset frame indices.
   void write_files(const std::filesystem::path& out_dir) const override {
-    if (match_end_seq_ == 0) return;
-    const auto last_seq = static_cast<std::int64_t>(match_end_seq_) - 1;
-    const auto frame = [&](std::int64_t seq) {
-      return std::to_string(context_.seqs.frame(std::min(seq, last_seq)));
-    };
-    CsvWriter areas(out_dir / "candidate_areas.csv", {"id", "row_begin", "row_end", "col_begin", "col_end",
-                                                      "i_first", "i_last", "j_min", "j_max", "gated_frames"});
-    for (const CandidateArea& a : tracker_.areas()) {
-      areas.write_row({std::to_string(a.id), frame(a.row_begin), frame(a.row_end), frame(a.col_begin),
-                       frame(a.col_end), frame(a.i_first), frame(a.i_last), frame(a.j_min), frame(a.j_max),
-                       std::to_string(a.gated_frames)});
-    }
-    areas.close();
-    CsvWriter cells(out_dir / "candidate_cells.csv", {"i", "j_first", "j_last"});
-    for (std::int64_t i = 0; i <= last_seq; ++i) {
-      for (const RowColumns& span : tracker_.covered_columns(i))
-        cells.write_row({frame(i), frame(span.j0), frame(span.j1)});
-    }
-    cells.close();
-    CsvWriter described(out_dir / "descriptors.csv", {"frame", "requested_by_frame", "computed"});
-    for (const auto& [k, by] : describe_requests_) {
-      const bool valid = dird_.store().state(static_cast<std::size_t>(k)) == DescriptorStore::State::kValid;
-      described.write_row({frame(k), frame(by), valid ? "y" : "n"});
-    }
-    described.close();
+    cells_.write_files(out_dir, match_end_seq_, [this](std::int64_t k) {
+      return dird_.store().state(static_cast<std::size_t>(k)) == DescriptorStore::State::kValid;
+    });
   }
 
   nlohmann::json summary() const override {
-    std::size_t cells = 0, rows = 0;
-    for (std::size_t seq = 0; seq < match_end_seq_; ++seq) {
-      cells += row_cells_[seq];
-      rows += row_cells_[seq] > 0 ? 1 : 0;
-    }
     nlohmann::json out = dird_.summary();
-    out["candidate_areas"] = tracker_.areas().size();
-    out["gate"] = {
-        {"enabled", true},
-        {"frames_with_pose", frames_gate_ran_},
-        {"frames_gated", frames_gated_},
-        {"pass_rate", frames_gate_ran_ ? static_cast<double>(frames_gated_) / frames_gate_ran_ : 0.0},
-        {"pose_errors", gate_errors_},
-        {"candidate_areas", tracker_.areas().size()},
-        {"cells", cells},
-        {"rows_with_cells", rows},
-        {"kdtree_frames", pose_gate_.frames_in_tree()}};
+    out.update(cells_.summary(match_end_seq_));
     return out;
   }
 
   MethodEvaluation evaluation() const override {
     MethodEvaluation e;
-    e.covers = [this](std::int64_t i, std::int64_t j) { return tracker_.covers(i, j); };
+    e.covers = [this](std::int64_t i, std::int64_t j) { return cells_.covers(i, j); };
     return e;
   }
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
@@ -400,24 +284,11 @@ class DirdGated final : public DetectionMethod {
   }
 
  private:
-  struct GateFrame {  // per sequence number
-    bool ran = false;
-    GateDecision decision;
-    int area_id = -1;
-    std::vector<std::int64_t> describe;  // seqs whose descriptors this frame's describe computes
-    std::vector<CellSpan> cells;         // cells its match computes
-  };
-
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
   DirdMatching dird_;
-  PoseGate pose_gate_;
-  CandidateAreaTracker tracker_;
+  PoseGatedCells cells_;
   RowAssembler rows_;
-  std::vector<GateFrame> frames_;
-  std::vector<std::uint32_t> row_cells_;  // cells per row (match node)
   std::size_t match_end_seq_ = 0;
-  std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
-  std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
 };
 
 }  // namespace

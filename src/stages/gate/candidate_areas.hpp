@@ -84,6 +84,9 @@ class CandidateAreaTracker {
   std::vector<RowColumns> covered_columns(std::int64_t i) const;
   bool covers(std::int64_t i, std::int64_t j) const;
   const DescriptorRequests& descriptor_requests() const { return requests_; }
+  // Marks `frame` as described outside the cells (a method's own request); true when it was not yet
+  // requested. Later updates never report it in new_descriptor_frames.
+  bool request_descriptor(std::int64_t frame) { return requests_.request(frame); }
 
  private:
   struct Interval {

@@ -1,0 +1,123 @@
+#include "pipeline/gated_cells.hpp"
+
+#include <algorithm>
+#include <string>
+
+#include "core/error.hpp"
+#include "io/writers.hpp"
+#include "pipeline/frame_steps.hpp"
+
+namespace loopgate {
+
+PoseGatedCells::PoseGatedCells(const MethodContext& context)
+    : context_(context),
+      pose_gate_(context.config.gate, "odometry (gate)"),
+      tracker_(context.config.gate, context.config.match.sequence_length, context.config.match.margin),
+      frames_(context.capacity),
+      row_cells_(context.capacity, 0) {
+  context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
+}
+
+void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
+  const auto seq = static_cast<std::int64_t>(r.seq);
+  GateFrame& g = frames_[r.seq];
+  g.decision.frame = seq;
+  if (r.usable_pose()) {
+    try {
+      g.decision = pose_gate_.process(seq, r.odometry.pose);
+      g.ran = true;
+      ++frames_gate_ran_;
+      if (g.decision.gated) ++frames_gated_;
+    } catch (const DataError& e) {
+      add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
+      ++gate_errors_;
+      g.decision = GateDecision{};
+      g.decision.frame = seq;
+    }
+  }
+  AreaUpdate update = tracker_.update(g.decision);
+  g.area_id = update.joined_area;
+  g.cells = std::move(update.new_cells);
+  g.describe = std::move(update.new_descriptor_frames);
+  // The method's own request goes through the tracker's set, so that no later cell asks for it again.
+  if (describe_own_frame && tracker_.request_descriptor(seq)) g.describe.push_back(seq);
+  for (const std::int64_t k : g.describe) describe_requests_.emplace_back(k, seq);
+}
+
+bool PoseGatedCells::described_at_own_time(std::size_t seq) const {
+  const std::vector<std::int64_t>& list = frames_[seq].describe;
+  return !list.empty() && list.back() == static_cast<std::int64_t>(seq);
+}
+
+std::vector<CellSpan> PoseGatedCells::take_cells(std::size_t seq) {
+  GateFrame& g = frames_[seq];
+  std::vector<CellSpan> cells;
+  cells.swap(g.cells);
+  for (const CellSpan& span : cells)
+    row_cells_[static_cast<std::size_t>(span.i)] += static_cast<std::uint32_t>(span.j1 - span.j0 + 1);
+  return cells;
+}
+
+void PoseGatedCells::add_frame_cells(const FrameRecord& r, CsvRow& row) const {
+  const GateFrame& g = frames_[r.seq];
+  const bool has_nearest = g.ran && g.decision.has_nearest;
+  row.add("nearest_frame", has_nearest ? std::to_string(context_.seqs.frame(g.decision.nearest_frame)) : "");
+  row.add("gate_d_m", has_nearest ? format_fixed(g.decision.distance_m, 6) : "");
+  row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
+  row.add("gated", g.decision.gated ? "y" : "n");
+  row.add("area_id", std::to_string(g.area_id));
+}
+
+// candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
+// columns = reference frames j, inclusive); candidate_cells.csv: the cells actually compared, per row as
+// disjoint column intervals; descriptors.csv: every frame described, with the frame whose gate update asked
+// for it. Dataset frame indices.
+void PoseGatedCells::write_files(const std::filesystem::path& out_dir, std::size_t end_seq,
+                                 const std::function<bool(std::int64_t)>& computed) const {
+  if (end_seq == 0) return;
+  const auto last_seq = static_cast<std::int64_t>(end_seq) - 1;
+  const auto frame = [&](std::int64_t seq) {
+    return std::to_string(context_.seqs.frame(std::min(seq, last_seq)));
+  };
+  CsvWriter areas(out_dir / "candidate_areas.csv", {"id", "row_begin", "row_end", "col_begin", "col_end",
+                                                    "i_first", "i_last", "j_min", "j_max", "gated_frames"});
+  for (const CandidateArea& a : tracker_.areas()) {
+    areas.write_row({std::to_string(a.id), frame(a.row_begin), frame(a.row_end), frame(a.col_begin),
+                     frame(a.col_end), frame(a.i_first), frame(a.i_last), frame(a.j_min), frame(a.j_max),
+                     std::to_string(a.gated_frames)});
+  }
+  areas.close();
+  CsvWriter cells(out_dir / "candidate_cells.csv", {"i", "j_first", "j_last"});
+  for (std::int64_t i = 0; i <= last_seq; ++i) {
+    for (const RowColumns& span : tracker_.covered_columns(i))
+      cells.write_row({frame(i), frame(span.j0), frame(span.j1)});
+  }
+  cells.close();
+  CsvWriter described(out_dir / "descriptors.csv", {"frame", "requested_by_frame", "computed"});
+  for (const auto& [k, by] : describe_requests_)
+    described.write_row({frame(k), frame(by), computed(k) ? "y" : "n"});
+  described.close();
+}
+
+nlohmann::json PoseGatedCells::summary(std::size_t end_seq) const {
+  std::size_t cells = 0, rows = 0;
+  for (std::size_t seq = 0; seq < end_seq; ++seq) {
+    cells += row_cells_[seq];
+    rows += row_cells_[seq] > 0 ? 1 : 0;
+  }
+  nlohmann::json out;
+  out["candidate_areas"] = tracker_.areas().size();
+  out["gate"] = {
+      {"enabled", true},
+      {"frames_with_pose", frames_gate_ran_},
+      {"frames_gated", frames_gated_},
+      {"pass_rate", frames_gate_ran_ ? static_cast<double>(frames_gated_) / frames_gate_ran_ : 0.0},
+      {"pose_errors", gate_errors_},
+      {"candidate_areas", tracker_.areas().size()},
+      {"cells", cells},
+      {"rows_with_cells", rows},
+      {"kdtree_frames", pose_gate_.frames_in_tree()}};
+  return out;
+}
+
+}  // namespace loopgate

@@ -1,0 +1,118 @@
+// The pose gate of a gated method (pose-gating.md): the gate (eq. 8-10) and the candidate-area tracker
+// per frame, the cells each frame's update newly covers and the frames that newly need a descriptor, and
+// everything the run reports about them (frames.csv gate columns, candidate_areas.csv, candidate_cells.csv,
+// descriptors.csv, the summary's "gate" block, the evaluation's coverage). Every gated method (DIRD raw or
+// standardised, SeqSLAM) owns one and differs only in what it computes for the cells.
+//
+// Threading: gate() is called serially in sequence order (the gate node); describe_list(seq) may be read by
+// the describe node of frame seq after its gate(); take_cells(seq) by the serial match node; the rest
+// after finish().
+#pragma once
+
+#include <spdlog/fmt/fmt.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/mat.hpp>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/error.hpp"
+#include "pipeline/csv_row.hpp"
+#include "pipeline/detection_method.hpp"
+#include "pipeline/frame_record.hpp"
+#include "pipeline/frame_steps.hpp"
+#include "pipeline/parallel_handoff.hpp"
+#include "stages/gate/candidate_areas.hpp"
+#include "stages/gate/pose_gate.hpp"
+
+namespace loopgate {
+
+class PoseGatedCells {
+ public:
+  // Keeps the image cache (run.image_cache_frames) so that describe can read recent frames again.
+  explicit PoseGatedCells(const MethodContext& context);
+
+  // The gate's decision for frame r.seq (frames without a usable pose are not gated and not stored) and
+  // the candidate-area update. `describe_own_frame`: the method wants frame r.seq's descriptor at its own
+  // time even when the gate does not ask for it (e.g. every k-th frame for causal statistics).
+  void gate(FrameRecord& r, bool describe_own_frame = false);
+
+  // The frames (seqs, ascending) whose descriptors frame seq's describe computes.
+  const std::vector<std::int64_t>& describe_list(std::size_t seq) const { return frames_[seq].describe; }
+  // Whether frame seq's own descriptor is computed at its own time (by its own describe).
+  bool described_at_own_time(std::size_t seq) const;
+  // The cells frame seq's update covered (moved out; counted per row). Call once per frame, in order.
+  std::vector<CellSpan> take_cells(std::size_t seq);
+  // No cell was ever added to row seq (the frame lies outside every candidate area).
+  bool row_empty(std::size_t seq) const { return row_cells_[seq] == 0; }
+  void finish() { tracker_.finish(); }
+
+  // frames.csv: nearest_frame, gate_d_m, gate_threshold_m, gated, area_id.
+  void add_frame_cells(const FrameRecord& r, CsvRow& row) const;
+  // candidate_areas.csv, candidate_cells.csv and descriptors.csv (`computed(seq)`: the descriptor exists)
+  // for the frames [0, end_seq).
+  void write_files(const std::filesystem::path& out_dir, std::size_t end_seq,
+                   const std::function<bool(std::int64_t)>& computed) const;
+  // "candidate_areas" and "gate" of summary.json, over the frames [0, end_seq).
+  nlohmann::json summary(std::size_t end_seq) const;
+  bool covers(std::int64_t i, std::int64_t j) const { return tracker_.covers(i, j); }
+  const CandidateAreaTracker& tracker() const { return tracker_; }
+
+ private:
+  struct GateFrame {  // per sequence number
+    bool ran = false;
+    GateDecision decision;
+    int area_id = -1;
+    std::vector<std::int64_t> describe;  // seqs whose descriptors this frame's describe computes
+    std::vector<CellSpan> cells;         // cells its match computes
+  };
+
+  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  PoseGate pose_gate_;
+  CandidateAreaTracker tracker_;
+  std::vector<GateFrame> frames_;
+  std::vector<std::uint32_t> row_cells_;  // cells per row (match node)
+  std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
+};
+
+// The describe step of a gated method: work(seq, image) for every frame of `seqs` (several in parallel),
+// with the current frame's decoded image when decode has it and every other frame read again (recent ones
+// from the image cache); a frame that cannot be read gets work(seq, nullptr) and a warning on r.
+template <class Work>
+void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, const MethodContext& context,
+                     Work work) {
+  std::vector<std::string> problems(seqs.size());
+  const auto describe_one = [&](std::size_t index) {
+    const auto k = static_cast<std::size_t>(seqs[index]);
+    if (k == r.seq && r.decoded) {
+      work(k, &r.image);
+      return;
+    }
+    cv::Mat image;
+    try {
+      image = context.images.read_again(k);
+    } catch (const DataError& e) {
+      problems[index] =
+          fmt::format("describe: frame {} could not be read: {}", context.seqs.frame(seqs[index]), e.what());
+      work(k, static_cast<const cv::Mat*>(nullptr));
+      return;
+    }
+    work(k, &image);
+  };
+  if (seqs.size() > 1) {
+    parallel_for_with_handoff(seqs.size(), describe_one);
+  } else if (seqs.size() == 1) {
+    describe_one(0);
+  }
+  for (auto& problem : problems) {
+    if (!problem.empty()) add_message(r.warnings, std::move(problem));
+  }
+}
+
+}  // namespace loopgate
