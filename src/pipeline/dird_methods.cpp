@@ -7,8 +7,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <deque>
-#include <mutex>
 #include <stdexcept>
 
 #include "io/dataset.hpp"
@@ -16,9 +14,8 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loop_matching.hpp"
 #include "stages/dird/dird_similarity.hpp"
-#include "stages/match/match_outcome.hpp"
 #include "stages/match/row_assembler.hpp"
 #include "stages/match/sequence_matcher.hpp"
 
@@ -26,8 +23,7 @@ namespace loopgate {
 
 namespace {
 
-// What full and gated DIRD share: descriptors by sequence number, similarity rows, the matcher, and the
-// statuses the matcher finalised (written by match, read by the sink).
+// What full and gated DIRD share: descriptors by sequence number, similarity rows, and the loop matching.
 class DirdMatching {
  public:
   explicit DirdMatching(const MethodContext& context)
@@ -35,7 +31,7 @@ class DirdMatching {
         extractor_(context.config.dird),
         similarity_(context.config.dird),
         store_(context.capacity),
-        matcher_(context.config.match, SequenceMatcher::Mode::kSingleSequence, 0) {}
+        loops_(context) {}
 
   void describe(std::size_t seq, const cv::Mat& image) {
     extractor_.extract(image, store_.slot(seq));
@@ -43,7 +39,6 @@ class DirdMatching {
   }
   DescriptorStore& store() { return store_; }
   const DescriptorStore& store() const { return store_; }
-  SequenceMatcher& matcher() { return matcher_; }
 
   // Appends to `out` the similarities of frame `seq` against the earlier frames [j_begin, j_end) of the
   // store (each must be published), skipping frames without a descriptor; returns the comparisons made.
@@ -76,53 +71,22 @@ class DirdMatching {
     return compared;
   }
 
-  // Loop closures to loops.csv; finalised frame statuses to the queue the sink reads.
-  void handle(const MatchOutput& output) {
-    LoopsWriter& loops = context_.loops;
-    for (const LoopClosure& loop : output.loops) {
-      if (!first_loop_seq_) first_loop_seq_ = loop.i;
-      loops.write(context_.seqs.frame(loop.i), context_.seqs.frame(loop.j), context_.seqs.t_ns(loop.i),
-                  context_.seqs.t_ns(loop.j), loop.score);
-    }
-    if (!output.loops.empty()) loops.flush();
-    if (output.frames.empty()) return;
-    std::lock_guard lock(finished_mutex_);
-    for (const FrameMatchStatus& status : output.frames) finished_.push_back(status);
-  }
-
-  // The detection row of `seq` when the matcher has finalised it; `outside_areas(seq)` (gated) says
-  // whether its row had no cell.
-  template <class OutsideAreas>
-  std::optional<FrameVerdict> detection(std::size_t seq, OutsideAreas outside_areas) {
-    std::lock_guard lock(finished_mutex_);
-    while (!finished_.empty() && static_cast<std::size_t>(finished_.front().i) < seq) finished_.pop_front();
-    if (finished_.empty()) return std::nullopt;
-    const FrameMatchStatus status = finished_.front();
-    if (static_cast<std::size_t>(status.i) != seq) {
-      throw std::logic_error(fmt::format("match status of seq {} while seq {} waits", status.i, seq));
-    }
-    finished_.pop_front();
-    const MatchConfig& match = context_.config.match;
-    MatchOutcomeContext c;
-    c.described = store_.state(seq) == DescriptorStore::State::kValid;
-    c.outside_areas = outside_areas(seq);
-    c.before_margin = seq < static_cast<std::size_t>(match.margin);
-    c.margin_frames = match.margin;
-    c.tau1 = context_.config.dird.tau1;
-    c.dp_threshold = match.dp_threshold();
-    return FrameVerdict{c.described, match_detection(status, c)};
+  LoopMatching& loops() { return loops_; }
+  // The detection row of `seq` once final; `outside_areas` (gated): its row had no cell.
+  std::optional<FrameVerdict> detection(std::size_t seq, bool outside_areas) {
+    return loops_.detection(seq, store_.state(seq) == DescriptorStore::State::kValid, outside_areas);
   }
 
   nlohmann::json summary() const {
-    return {{"descriptors_computed", descriptors_computed_.load()},
-            {"similarities_computed", similarities_computed_.load()},
-            {"detection", {{"nms_delay_frames", matcher_.emission_delay()}}}};
+    nlohmann::json out = loops_.summary();
+    out["descriptors_computed"] = descriptors_computed_.load();
+    out["similarities_computed"] = similarities_computed_.load();
+    return out;
   }
 
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const {
-    if (first_loop_seq_) {
-      const auto seq = static_cast<std::size_t>(*first_loop_seq_);
-      return std::pair{context_.seqs.frame(*first_loop_seq_), store_.descriptor(seq)};
+    if (const auto first = loops_.first_loop_seq()) {
+      return std::pair{context_.seqs.frame(*first), store_.descriptor(static_cast<std::size_t>(*first))};
     }
     const Dataset& dataset = context_.images.dataset();
     const std::size_t frame = dataset.frame_count() / 2;
@@ -134,12 +98,9 @@ class DirdMatching {
   DirdExtractor extractor_;
   DirdSimilarity similarity_;
   DescriptorStore store_;
-  SequenceMatcher matcher_;
+  LoopMatching loops_;
   std::atomic<std::size_t> descriptors_computed_{0};
   mutable std::atomic<std::size_t> similarities_computed_{0};  // counted by the const similarity_range
-  std::optional<std::int64_t> first_loop_seq_;
-  std::mutex finished_mutex_;
-  std::deque<FrameMatchStatus> finished_;
 };
 
 // run.mode full. describe extracts the frame's descriptor and computes its similarities against the frames
@@ -181,21 +142,13 @@ class DirdFull final : public DetectionMethod {
       const std::size_t j_begin = seq + 1 >= in_flight() ? seq + 1 - in_flight() : 0;
       dird_.similarity_range(seq, j_begin, seq - margin() + 1, row);
     }
-    MatchOutput output;
-    dird_.matcher().push(static_cast<std::int64_t>(seq), row, output);
+    dird_.loops().push(seq, row);
     std::vector<SimilarityEntry>().swap(row);
-    dird_.handle(output);
   }
 
-  void finish() override {
-    MatchOutput output;
-    dird_.matcher().flush(output);
-    dird_.handle(output);
-  }
+  void finish() override { dird_.loops().flush(); }
 
-  std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, [](std::size_t) { return false; });
-  }
+  std::optional<FrameVerdict> detection(std::size_t seq) override { return dird_.detection(seq, false); }
   nlohmann::json summary() const override { return dird_.summary(); }
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
     return dird_.example_descriptor();
@@ -244,22 +197,22 @@ class DirdGated final : public DetectionMethod {
     }
     match_end_seq_ = r.seq + 1;
     MatchOutput output;
-    rows_.advance(static_cast<std::int64_t>(r.seq), dird_.matcher(), output);
-    dird_.handle(output);
+    rows_.advance(static_cast<std::int64_t>(r.seq), dird_.loops().matcher(), output);
+    dird_.loops().handle(output);
   }
 
   void finish() override {
     cells_.finish();
     MatchOutput output;
-    rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.matcher(), output);
-    dird_.matcher().flush(output);
-    dird_.handle(output);
+    rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.loops().matcher(), output);
+    dird_.loops().handle(output);
+    dird_.loops().flush();
   }
 
   void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
 
   std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, [this](std::size_t s) { return cells_.row_empty(s); });
+    return dird_.detection(seq, cells_.row_empty(seq));
   }
 
   void write_files(const std::filesystem::path& out_dir) const override {
