@@ -359,10 +359,13 @@ TEST(DirdStandardize, ConfigValidationNamesTheKey) {
   c = {};
   c.refresh_every = 0;
   EXPECT_NE(message(c).find("standardize.refresh_every"), std::string::npos);
+  c = {};
+  c.observe_every = 0;
+  EXPECT_NE(message(c).find("standardize.observe_every"), std::string::npos);
   // fields() lists every key once.
   std::vector<std::string> keys;
   StandardizeConfig::fields(c, [&](const char* key, auto&) { keys.emplace_back(key); });
-  EXPECT_EQ(keys.size(), 7u);
+  EXPECT_EQ(keys.size(), 8u);
 }
 
 }  // namespace

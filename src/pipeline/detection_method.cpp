@@ -42,6 +42,23 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     throw DataError(dataset_root, "run.mode " + std::string(enum_name(run.mode)) +
                                       " needs images, and this dataset has none (use --mode odometry)");
   }
+  const PipelineConfig& config = context.config;
+  if (config.standardize.mode == "batch") {
+    throw ConfigError(
+        "standardize.mode: 'batch' needs the whole sequence before the first comparison (two-sequence runs); "
+        "a single sequence streams: use 'causal'");
+  }
+  if (config.scale.online() && run.mode == RunMode::kGated) {
+    throw ConfigError(
+        "scale.mode: 'online' estimates the scale from the distances computed, assuming few of them are "
+        "revisits; the gate computes them where revisits are likely, so it needs run.mode full (gated runs: "
+        "standardize.mode causal with the fixed standardised scale)");
+  }
+  if (config.standardize.enabled() || config.scale.online()) {
+    spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", config.standardize.mode,
+                 config.standardize.distance, config.scale.mode);
+    return run.mode == RunMode::kFull ? make_standard_dird_full(context) : make_standard_dird_gated(context);
+  }
   return run.mode == RunMode::kFull ? make_dird_full(context) : make_dird_gated(context);
 }
 

@@ -94,8 +94,10 @@ class DetectionMethod {
 };
 
 // run.method seqslam -> SeqSLAM (on every frame, whatever run.mode says); else run.mode full -> DIRD full,
-// gated -> DIRD gated, odometry -> none. Throws DataError when the method needs images and the dataset has
-// none.
+// gated -> DIRD gated, odometry -> none; DIRD with standardize.mode causal or scale.mode online -> the
+// standardised DIRD methods. Throws DataError when the method needs images and the dataset has none,
+// ConfigError for an option the single-sequence run cannot take (standardize.mode batch; scale.mode online
+// with run.mode gated).
 std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& context, bool dataset_has_images,
                                                        const std::filesystem::path& dataset_root);
 
@@ -104,5 +106,8 @@ std::unique_ptr<DetectionMethod> make_no_detection(const MethodContext& context)
 std::unique_ptr<DetectionMethod> make_dird_full(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_dird_gated(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_seqslam(const MethodContext& context);
+// DIRD with causal standardisation and/or the online scale (standard_dird_methods.cpp).
+std::unique_ptr<DetectionMethod> make_standard_dird_full(const MethodContext& context);
+std::unique_ptr<DetectionMethod> make_standard_dird_gated(const MethodContext& context);
 
 }  // namespace loopgate

@@ -35,6 +35,7 @@ void StandardizeConfig::validate() const {
     throw ConfigError("standardize.window: must be 0 (all observations) or >= standardize.warm_up");
   }
   if (refresh_every < 1) throw ConfigError("standardize.refresh_every: must be >= 1");
+  if (observe_every < 1) throw ConfigError("standardize.observe_every: must be >= 1 (frames)");
 }
 
 // ---------------------------------------------------------------------------------------------------------

@@ -68,6 +68,10 @@ struct StandardizeConfig {
   std::int64_t warm_up = 50;        // causal: observations before the statistics are used (>= 2)
   std::int64_t window = 100;        // causal: statistics of the last `window` observations; 0 = all of them
   std::int64_t refresh_every = 10;  // causal: a snapshot every N observations (27.6 KB each, all kept)
+  // causal, single sequence: the frames observed for the statistics are those with seq % observe_every == 0
+  // (full and gated runs alike, so both give every frame the same codes); a gated run describes them at
+  // their own time even outside the candidate areas. warm_up and window count observations.
+  std::int64_t observe_every = 1;
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -78,10 +82,11 @@ struct StandardizeConfig {
     v("warm_up", self.warm_up);
     v("window", self.window);
     v("refresh_every", self.refresh_every);
+    v("observe_every", self.observe_every);
   }
   // Throws ConfigError naming "standardize.<key>": mode in {off, batch, causal}, distance in {l1, cosine},
   // clamp_sigma in [0.5, 127], min_stddev > 0, warm_up >= 2, window == 0 or window >= warm_up,
-  // refresh_every >= 1.
+  // refresh_every >= 1, observe_every >= 1.
   void validate() const;
 
   bool enabled() const { return mode != "off"; }
