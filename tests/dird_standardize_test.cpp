@@ -368,5 +368,24 @@ TEST(DirdStandardize, ConfigValidationNamesTheKey) {
   EXPECT_EQ(keys.size(), 8u);
 }
 
+// Spans of frames become counts of observations of every observe_every-th frame.
+TEST(StandardizeConfig, ObservationsConfigDividesTheFrameSpansByTheStride) {
+  StandardizeConfig c;
+  c.observe_every = 3;
+  c.warm_up = 50;
+  c.window = 100;
+  c.refresh_every = 10;
+  const StandardizeConfig o = observations_config(c);
+  EXPECT_EQ(o.warm_up, 17);  // ceil(50 / 3)
+  EXPECT_EQ(o.window, 34);
+  EXPECT_EQ(o.refresh_every, 4);
+  EXPECT_EQ(o.observe_every, 1);
+  c.window = 0;
+  c.warm_up = 4;
+  c.observe_every = 4;
+  EXPECT_EQ(observations_config(c).window, 0);
+  EXPECT_EQ(observations_config(c).warm_up, 2);  // at least 2 observations
+}
+
 }  // namespace
 }  // namespace loopgate

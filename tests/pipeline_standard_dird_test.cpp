@@ -87,7 +87,7 @@ std::vector<std::vector<SimilarityEntry>> reference_columns(const Dataset& datas
   const DirdExtractor extractor(config.dird);
   std::vector<Descriptor> raw;
   for (std::size_t k = 0; k < frames; ++k) raw.push_back(extractor.extract(dataset.load_image(k)));
-  CausalStandardizer standardizer(config.standardize);
+  CausalStandardizer standardizer(observations_config(config.standardize));
   for (std::size_t k = 0; k < frames; ++k) {
     if (k % static_cast<std::size_t>(config.standardize.observe_every) == 0)
       standardizer.observe(static_cast<std::int64_t>(k), raw[k]);
@@ -96,8 +96,8 @@ std::vector<std::vector<SimilarityEntry>> reference_columns(const Dataset& datas
   for (std::size_t k = 0; k < frames; ++k)
     codes[k] = standardizer.statistics_for(static_cast<std::int64_t>(k)).apply(raw[k]);
   const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
-  const auto ready_frame =
-      static_cast<std::size_t>((config.standardize.warm_up - 1) * config.standardize.observe_every);
+  const auto ready_frame = static_cast<std::size_t>((observations_config(config.standardize).warm_up - 1) *
+                                                    config.standardize.observe_every);
   std::vector<std::vector<SimilarityEntry>> columns(frames);
   for (std::size_t i = ready_frame; i < frames; ++i) {
     for (std::size_t j = 0; j + static_cast<std::size_t>(config.match.margin) <= i; ++j) {

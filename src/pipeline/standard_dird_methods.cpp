@@ -54,7 +54,7 @@ class StandardDird {
         coded_(context.capacity, 0),
         loops_(context) {
     const PipelineConfig& config = context.config;
-    if (config.standardize.enabled()) standardizer_.emplace(config.standardize);
+    if (config.standardize.enabled()) standardizer_.emplace(observations_config(config.standardize));
     if (standardizer_) {
       prior_ = standard_default_scale(config.standardize, config.dird.tau1);
     } else {

@@ -38,6 +38,18 @@ void StandardizeConfig::validate() const {
   if (observe_every < 1) throw ConfigError("standardize.observe_every: must be >= 1 (frames)");
 }
 
+StandardizeConfig observations_config(const StandardizeConfig& config) {
+  config.validate();
+  const std::int64_t k = config.observe_every;
+  const auto up = [k](std::int64_t frames) { return (frames + k - 1) / k; };
+  StandardizeConfig out = config;
+  out.warm_up = std::max<std::int64_t>(2, up(config.warm_up));
+  out.window = config.window == 0 ? 0 : std::max(out.warm_up, up(config.window));
+  out.refresh_every = up(config.refresh_every);
+  out.observe_every = 1;
+  return out;
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // DescriptorMoments
 

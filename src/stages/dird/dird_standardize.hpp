@@ -70,8 +70,10 @@ struct StandardizeConfig {
   std::int64_t refresh_every = 10;  // causal: a snapshot every N observations (27.6 KB each, all kept)
   // causal, single sequence: the frames observed for the statistics are those with seq % observe_every == 0
   // (full and gated runs alike, so both give every frame the same codes); a gated run describes them at
-  // their own time even outside the candidate areas. warm_up and window count observations.
-  std::int64_t observe_every = 1;
+  // their own time even outside the candidate areas. warm_up, window and refresh_every are then spans of
+  // frames (observations_config() divides them by observe_every): the window covers the same stretch of
+  // the drive whatever the stride (measured: the span matters, docs/standardize.md).
+  std::int64_t observe_every = 2;
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -92,6 +94,10 @@ struct StandardizeConfig {
   bool enabled() const { return mode != "off"; }
   bool cosine() const { return distance == "cosine"; }
 };
+
+// The configuration in observations for a CausalStandardizer fed every observe_every-th frame: warm_up,
+// window and refresh_every divided by observe_every (rounded up; warm_up at least 2, window 0 stays 0).
+StandardizeConfig observations_config(const StandardizeConfig& config);
 
 // Unclamped float z-scores of one descriptor (measurement path).
 using StandardizedFloat = std::array<float, kDirdBytes>;
