@@ -61,7 +61,8 @@ DESCRIPTOR_SHAPE = (54, 64)  # DIRD (byte): 3456 values, row-major
 DEFAULT_RADIUS_M = 2.0  # evaluation.md defaults when the summary does not say
 DEFAULT_GAP_FRAMES = 20
 PAIR_BLOCK_CELLS = 1 << 21  # (i, j) cells per block when computing true loops from ground truth
-METHOD_LABELS = {"full": "full DIRD", "gated": "gated DIRD", "seqslam": "SeqSLAM"}
+METHOD_LABELS = {"full": "full DIRD", "gated": "gated DIRD", "seqslam": "SeqSLAM",
+                 "seqslam-gated": "gated SeqSLAM", "std-full": "full std. DIRD", "std-gated": "gated std. DIRD"}
 AXES = "xyz"
 
 

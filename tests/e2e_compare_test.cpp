@@ -23,7 +23,7 @@ std::string run(const std::string& args, int* status) {
   return output;
 }
 
-TEST(E2eCompare, ThreeMethodsSideBySide) {
+TEST(E2eCompare, EveryMethodSideBySide) {
   const fs::path data = testing::make_temp_dir("e2e-compare-data");
   int status = -1;
   std::string output = run("simulate --preset aliasing --out " + data.string(), &status);
@@ -38,7 +38,7 @@ TEST(E2eCompare, ThreeMethodsSideBySide) {
     EXPECT_NE(output.find(row), std::string::npos) << row << "\n" << output;
 
   const auto compare = nlohmann::json::parse(testing::read_file(out / "compare.json"));
-  for (const char* method : {"full", "gated", "seqslam"}) {
+  for (const char* method : {"full", "gated", "seqslam", "seqslam-gated", "std-full", "std-gated"}) {
     ASSERT_TRUE(compare.contains(method)) << method;
     EXPECT_TRUE(fs::exists(out / method / "frames.csv")) << method;
     EXPECT_TRUE(fs::exists(out / method / "loops.csv")) << method;
@@ -47,6 +47,9 @@ TEST(E2eCompare, ThreeMethodsSideBySide) {
   EXPECT_EQ(compare["full"]["mode"], "full");
   EXPECT_EQ(compare["gated"]["mode"], "gated");
   EXPECT_EQ(compare["seqslam"]["method"], "seqslam");
+  EXPECT_EQ(compare["std-gated"]["mode"], "gated");
+  EXPECT_EQ(compare["std-gated"]["standardize"]["mode"], "causal");
+  EXPECT_FALSE(compare["gated"].contains("standardize"));
   EXPECT_EQ(compare["seqslam"]["score_order"], "lower_is_better");
   const auto& full = compare["full"];
   const auto& gated = compare["gated"];
@@ -69,7 +72,7 @@ TEST(E2eCompare, UnknownMethodIsAClearError) {
                                      " --dataset /nonexistent --methods full,bogus --out " + out.string(),
                                  &status);
   EXPECT_NE(status, 0);
-  EXPECT_NE(output.find("'bogus' is not one of full, gated, seqslam"), std::string::npos) << output;
+  EXPECT_NE(output.find("'bogus' is not one of full,gated,seqslam,seqslam-gated,std-full,std-gated"), std::string::npos) << output;
 }
 
 }  // namespace

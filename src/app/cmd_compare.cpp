@@ -1,5 +1,6 @@
-// loopgate compare: the same dataset and configuration through full DIRD, gated DIRD and SeqSLAM, one after
-// the other (each run alone on the machine), side by side: a table on stdout, compare.json (one object per
+// loopgate compare: the same dataset and configuration through the methods of kCompareMethods (DIRD raw and
+// standardised, SeqSLAM, each full and gated; --methods picks), one after the other (each run alone on the
+// machine), side by side: a table on stdout, compare.json (one object per
 // method holding that run's summary.json, plus the ratios), each run's outputs in OUT/<method>, and the
 // plots of scripts/plot.py in OUT/plots.
 #include <spdlog/fmt/fmt.h>
@@ -36,7 +37,7 @@ struct CompareOptions {
   std::string config_file;
   std::string dataset;
   std::string out_dir;
-  std::string methods = "full,gated,seqslam";
+  std::string methods = "full,gated,seqslam,seqslam-gated,std-full,std-gated";
   std::string frames;
   int threads = 0;
   bool no_plots = false;
@@ -50,6 +51,37 @@ extern "C" void on_compare_sigint(int) {
   std::signal(SIGINT, SIG_DFL);
 }
 
+// The methods compare runs, by name: detector, mode and descriptor standardisation (everything else is the
+// shared configuration). One table: a new method is one line here.
+struct CompareMethod {
+  const char* name;
+  Detector detector;
+  RunMode mode;
+  const char* standardize;  // standardize.mode
+  const char* what;
+};
+constexpr CompareMethod kCompareMethods[] = {
+    {"full", Detector::kDird, RunMode::kFull, "off", "DIRD on every frame (the paper's baseline)"},
+    {"gated", Detector::kDird, RunMode::kGated, "off", "DIRD in the pose gate's candidate areas (the paper)"},
+    {"seqslam", Detector::kSeqSlam, RunMode::kFull, "off", "SeqSLAM on every frame"},
+    {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas"},
+    {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame"},
+    {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas"},
+};
+
+std::string method_names() {
+  std::string out;
+  for (const CompareMethod& m : kCompareMethods) out += (out.empty() ? "" : ",") + std::string(m.name);
+  return out;
+}
+
+const CompareMethod& find_method(const std::string& name) {
+  for (const CompareMethod& m : kCompareMethods) {
+    if (name == m.name) return m;
+  }
+  throw ConfigError("--methods: '" + name + "' is not one of " + method_names());
+}
+
 std::vector<std::string> split_methods(const std::string& text) {
   std::vector<std::string> out;
   std::size_t start = 0;
@@ -57,9 +89,7 @@ std::vector<std::string> split_methods(const std::string& text) {
     const std::size_t comma = text.find(',', start);
     const std::string name =
         text.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
-    if (name != "full" && name != "gated" && name != "seqslam") {
-      throw ConfigError("--methods: '" + name + "' is not one of full, gated, seqslam");
-    }
+    find_method(name);
     for (const auto& seen : out) {
       if (seen == name) throw ConfigError("--methods: '" + name + "' listed twice");
     }
@@ -72,9 +102,11 @@ std::vector<std::string> split_methods(const std::string& text) {
 
 // The shared configuration made into one method's (validated again: the mode changes what must hold).
 PipelineConfig method_config(const PipelineConfig& base, const std::string& method) {
+  const CompareMethod& m = find_method(method);
   PipelineConfig config = base;
-  config.run.mode = method == "gated" ? RunMode::kGated : RunMode::kFull;
-  config.run.method = method == "seqslam" ? Detector::kSeqSlam : Detector::kDird;
+  config.run.mode = m.mode;
+  config.run.method = m.detector;
+  config.standardize.mode = m.standardize;
   config.validate();
   return config;
 }
@@ -221,7 +253,7 @@ int compare_command(const CompareOptions& options) {
       break;
     }
     if (result.interrupted) break;
-    if (method == "gated") write_descriptor_example(result, out_dir / method);
+    if (method == "gated" || method == "std-gated") write_descriptor_example(result, out_dir / method);
   }
   std::signal(SIGINT, previous);
 
@@ -317,8 +349,9 @@ void add_compare_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", options->out_dir,
                   "output folder: compare.json, plots/, and one run folder per method")
       ->required();
-  cmd->add_option("--methods", options->methods, "comma-separated subset of full,gated,seqslam")
-      ->capture_default_str();
+  std::string methods_help = "comma-separated subset of:";
+  for (const CompareMethod& m : kCompareMethods) methods_help += fmt::format("\n  {:<14} {}", m.name, m.what);
+  cmd->add_option("--methods", options->methods, methods_help)->capture_default_str();
   cmd->add_option("--frames", options->frames, "frame range A:B (indices, B exclusive; A: or :B)");
   cmd->add_option("--threads", options->threads, "worker threads of each run (default 2)")
       ->check(CLI::Range(1, 256));
