@@ -61,7 +61,8 @@ DESCRIPTOR_SHAPE = (54, 64)  # DIRD (byte): 3456 values, row-major
 DEFAULT_RADIUS_M = 2.0  # evaluation.md defaults when the summary does not say
 DEFAULT_GAP_FRAMES = 20
 PAIR_BLOCK_CELLS = 1 << 21  # (i, j) cells per block when computing true loops from ground truth
-METHOD_LABELS = {"full": "full DIRD", "gated": "gated DIRD", "seqslam": "SeqSLAM"}
+METHOD_LABELS = {"full": "full DIRD", "gated": "gated DIRD", "seqslam": "SeqSLAM",
+                 "seqslam-gated": "gated SeqSLAM"}
 AXES = "xyz"
 
 
@@ -511,7 +512,11 @@ def cmd_run(run_dir, out):
     plot_timing(run, out / "timing.png", written)
     if precision_recall(run.summary):
         method = run.summary.get("method", "dird")
-        name = method if method != "dird" else run.summary.get("mode", method)  # "full"/"gated" DIRD
+        mode = run.summary.get("mode", "full")
+        if method == "dird":
+            name = mode  # "full" / "gated" DIRD
+        else:
+            name = method if mode != "gated" else f"{method}-gated"  # "seqslam" / "seqslam-gated"
         plot_pr({name: run.summary}, out / "pr.png", written, run_dir / "summary.json")
     plot_descriptor(run_dir, out / "descriptor.png", written)
     return written
