@@ -512,7 +512,11 @@ def cmd_run(run_dir, out):
     plot_timing(run, out / "timing.png", written)
     if precision_recall(run.summary):
         method = run.summary.get("method", "dird")
-        name = method if method != "dird" else run.summary.get("mode", method)  # "full"/"gated" DIRD
+        mode = run.summary.get("mode", "full")
+        if method == "dird":
+            name = mode  # "full" / "gated" DIRD
+        else:
+            name = method if mode != "gated" else f"{method}-gated"  # "seqslam" / "seqslam-gated"
         plot_pr({name: run.summary}, out / "pr.png", written, run_dir / "summary.json")
     plot_descriptor(run_dir, out / "descriptor.png", written)
     return written

@@ -1,9 +1,13 @@
-// Behaviour is pinned: the deterministic outputs of full DIRD, gated DIRD and SeqSLAM (loops.csv, frames.csv,
-// trajectory.tum, candidate_cells.csv and the evaluation block of summary.json) have the digests in
-// tests/golden/run_digests.txt, recorded before the pipeline was reorganised (issue 11). A refactor must
-// leave them unchanged; a change of behaviour updates the file on purpose, in the same commit, saying why:
-//   /usr/bin/python3 scripts/run_digest.py OUT/aliasing OUT/thumbs OUT/nordland-dird OUT/nordland-seqslam
-// The rendered aliasing preset always runs; the KITTI 00 thumbnails and Nordland need ../shared/data.
+// Behaviour is pinned: the deterministic outputs of full DIRD, gated DIRD, full SeqSLAM and gated SeqSLAM
+// (loops.csv, frames.csv, trajectory.tum, candidate_cells.csv and the evaluation block of summary.json) have
+// the digests in tests/golden/run_digests.txt, recorded before the pipeline was reorganised (issue 11; gated
+// SeqSLAM's when it was added, issue 12). A refactor must leave them unchanged; a change of behaviour updates
+// the file on purpose, in the same commit, saying why:
+//   /usr/bin/python3 scripts/run_digest.py OUT/aliasing OUT/aliasing-seqslam-gated OUT/thumbs
+//     OUT/thumbs-seqslam-gated OUT/nordland-dird OUT/nordland-seqslam   (one command line)
+// The SeqSLAM of `compare` is the full one (compare sets run.mode full for it); gated SeqSLAM is a `run
+// --method seqslam --mode gated`. The two-sequence (Nordland) runs have no pose gate: run.mode does not
+// apply. The rendered aliasing preset always runs; the KITTI 00 thumbnails and Nordland need ../shared/data.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -65,7 +69,7 @@ void expect_digests(const std::string& label, const std::string& args) {
   }
 }
 
-TEST(E2eGolden, AliasingPresetFullGatedSeqSlam) {
+TEST(E2eGolden, AliasingPresetDirdAndSeqSlamFullAndGated) {
   const fs::path data = testing::make_temp_dir("e2e-golden-data") / "aliasing";
   std::string log;
   ASSERT_EQ(testing::run_command(testing::loopgate_binary().string() +
@@ -76,13 +80,20 @@ TEST(E2eGolden, AliasingPresetFullGatedSeqSlam) {
   expect_digests("aliasing", "compare --no-plots --config " +
                                  (kSource / "configs" / "aliasing.yaml").string() + " --dataset " +
                                  data.string());
+  expect_digests("aliasing-seqslam-gated", "run --method seqslam --mode gated --config " +
+                                               (kSource / "configs" / "aliasing.yaml").string() +
+                                               " --dataset " + data.string());
 }
 
-TEST(E2eGolden, KittiThumbsFullGatedSeqSlam) {
+TEST(E2eGolden, KittiThumbsDirdAndSeqSlamFullAndGated) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs");
   expect_digests("thumbs", "compare --no-plots --config " +
                                (kSource / "configs" / "kitti00-thumbs.yaml").string() + " --dataset " +
                                (testing::shared_data_dir() / "kitti/00/thumbs").string());
+  expect_digests("thumbs-seqslam-gated", "run --method seqslam --mode gated --config " +
+                                             (kSource / "configs" / "kitti00-thumbs.yaml").string() +
+                                             " --dataset " +
+                                             (testing::shared_data_dir() / "kitti/00/thumbs").string());
 }
 
 TEST(E2eGolden, NordlandTwoSequences) {

@@ -50,6 +50,21 @@ TEST(SeqSlamOutcome, SingleSequence) {
   EXPECT_DOUBLE_EQ(d.score, 0.5);
 }
 
+TEST(SeqSlamOutcome, GatedSingleSequence) {
+  SeqSlamOutcomeContext c;
+  c.query_count = 1000;
+  c.gated = true;
+  EXPECT_EQ(seqslam_detection(match(500, false, 0, 0), config(), c).reason,
+            "every sequence matching a candidate-area cell touches the exclusion (past 200 frames)");
+  c.outside_areas = true;
+  const FrameDetection outside = seqslam_detection(match(2, false, 0, 0), config(), c);
+  EXPECT_EQ(outside.label, "no match");
+  EXPECT_EQ(outside.outcome, FrameOutcome::kNoCandidate);
+  EXPECT_EQ(outside.reason, "outside every candidate area");
+  c.outside_areas = false;
+  EXPECT_EQ(seqslam_detection(match(500, true, 120, 0.5), config(), c).reason, "ratio 0.5000 <= 0.9000");
+}
+
 TEST(SeqSlamOutcome, TwoSequences) {
   SeqSlamOutcomeContext c;
   c.two_sequence = true;

@@ -128,10 +128,11 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--dataset", options->dataset,
                   "dataset folder (EuRoC, KITTI or image folder); overrides run.dataset");
   cmd->add_option("--mode", options->mode,
-                  "gated (default: DIRD only inside the pose gate's candidate areas), full (DIRD on every "
+                  "gated (default: the method only inside the pose gate's candidate areas), full (on every "
                   "frame) or odometry (no loop detection); overrides run.mode");
   cmd->add_option("--method", options->method,
-                  "dird (default) or seqslam (the SeqSLAM baseline on every frame); overrides run.method");
+                  "dird (default) or seqslam (the SeqSLAM baseline, gated or full as --mode says); overrides "
+                  "run.method");
   cmd->add_option("--reference", options->reference,
                   "two-sequence mode (with --query): reference dataset folder, e.g. Nordland summer");
   cmd->add_option("--query", options->query, "two-sequence mode (with --reference): query dataset folder");

@@ -32,9 +32,16 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
   if (run.seqslam()) {
     if (!dataset_has_images)
       throw DataError(dataset_root, "run.method seqslam needs images, and this dataset has none");
+    if (run.mode == RunMode::kGated) {
+      spdlog::info(
+          "run: SeqSLAM gated (run.mode gated): only inside the pose gate's candidate areas, the frames "
+          "their "
+          "cells and sequences need; matches at the end of the stream");
+      return make_seqslam_gated(context);
+    }
     spdlog::info(
-        "run: SeqSLAM on every frame (run.mode {} does not apply to it); matches at the end of the stream",
-        enum_name(run.mode));
+        "run: SeqSLAM full (run.mode full): every frame, the whole difference matrix; matches at the end of "
+        "the stream");
     return make_seqslam(context);
   }
   if (!run.detects_loops()) return make_no_detection(context);

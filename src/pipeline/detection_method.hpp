@@ -1,5 +1,6 @@
 // The loop-detection method of a run, chosen once when the run is built (make_detection_method): none
-// (odometry only), DIRD on every frame (full), DIRD inside the pose gate's candidate areas (gated), SeqSLAM.
+// (odometry only), DIRD on every frame (full), DIRD inside the pose gate's candidate areas (gated), SeqSLAM
+// on every frame (full) or inside the candidate areas (gated).
 // The graph calls one hook per node; a method owns all of its state (descriptors, matcher, gate, areas) and
 // nothing outside it branches on which method runs. To add a method, implement this interface in a new file
 // and add one line to make_detection_method (docs/architecture.md § Adding a method).
@@ -93,19 +94,20 @@ class DetectionMethod {
   }
 };
 
-// run.method seqslam -> SeqSLAM (on every frame, whatever run.mode says); else run.mode full -> DIRD full,
-// gated -> DIRD gated, odometry -> none; DIRD with standardize.mode causal or scale.mode online -> the
-// standardised DIRD methods. Throws DataError when the method needs images and the dataset has none,
-// ConfigError for an option the single-sequence run cannot take (standardize.mode batch; scale.mode online
-// with run.mode gated).
+// run.method seqslam: run.mode full -> SeqSLAM on every frame, gated -> SeqSLAM inside the candidate areas;
+// run.method dird: run.mode full -> DIRD full, gated -> DIRD gated, odometry -> none (seqslam with odometry
+// is rejected by the config); DIRD with standardize.mode causal or scale.mode online -> the standardised DIRD
+// methods. Throws DataError when the method needs images and the dataset has none, ConfigError for an option
+// the single-sequence run cannot take (standardize.mode batch; scale.mode online with run.mode gated).
 std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& context, bool dataset_has_images,
                                                        const std::filesystem::path& dataset_root);
 
-// The methods (detection_method.cpp, dird_methods.cpp, seqslam_method.cpp).
+// The methods (detection_method.cpp, dird_methods.cpp, seqslam_method.cpp, seqslam_gated_method.cpp).
 std::unique_ptr<DetectionMethod> make_no_detection(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_dird_full(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_dird_gated(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_seqslam(const MethodContext& context);
+std::unique_ptr<DetectionMethod> make_seqslam_gated(const MethodContext& context);
 // DIRD with causal standardisation and/or the online scale (standard_dird_methods.cpp).
 std::unique_ptr<DetectionMethod> make_standard_dird_full(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_standard_dird_gated(const MethodContext& context);

@@ -1,6 +1,7 @@
 #include "pipeline/gated_cells.hpp"
 
 #include <algorithm>
+#include <stdexcept>
 #include <string>
 
 #include "core/error.hpp"
@@ -42,6 +43,18 @@ void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
   // The method's own request goes through the tracker's set, so that no later cell asks for it again.
   if (describe_own_frame && tracker_.request_descriptor(seq)) g.describe.push_back(seq);
   for (const std::int64_t k : g.describe) describe_requests_.emplace_back(k, seq);
+}
+
+bool PoseGatedCells::request_descriptor(std::size_t by_seq, std::int64_t frame) {
+  if (frame < 0 || frame > static_cast<std::int64_t>(by_seq)) {
+    throw std::logic_error("descriptor of frame seq " + std::to_string(frame) + " requested by seq " +
+                           std::to_string(by_seq) + ": only frames up to the requesting one");
+  }
+  if (!tracker_.request_descriptor(frame)) return false;
+  std::vector<std::int64_t>& list = frames_[by_seq].describe;
+  list.insert(std::upper_bound(list.begin(), list.end(), frame), frame);
+  describe_requests_.emplace_back(frame, static_cast<std::int64_t>(by_seq));
+  return true;
 }
 
 bool PoseGatedCells::described_at_own_time(std::size_t seq) const {

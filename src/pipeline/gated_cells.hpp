@@ -5,8 +5,9 @@
 // standardised, SeqSLAM) owns one and differs only in what it computes for the cells.
 //
 // Threading: gate() is called serially in sequence order (the gate node); describe_list(seq) may be read by
-// the describe node of frame seq after its gate(); take_cells(seq) by the serial match node; the rest
-// after finish().
+// the describe node of frame seq after its gate(); take_cells(seq) by one serial node, after gate(seq) (DIRD:
+// the match node; gated SeqSLAM: its gate node, which needs the cells to request their neighbours);
+// request_descriptor(seq, ...) by the gate node right after gate(seq); the rest after finish().
 #pragma once
 
 #include <spdlog/fmt/fmt.h>
@@ -41,6 +42,12 @@ class PoseGatedCells {
   // the candidate-area update. `describe_own_frame`: the method wants frame r.seq's descriptor at its own
   // time even when the gate does not ask for it (e.g. every k-th frame for causal statistics).
   void gate(FrameRecord& r, bool describe_own_frame = false);
+
+  // The method also wants the descriptor of `frame` (<= by_seq), outside the cells (gated SeqSLAM: the
+  // sequence and contrast-window neighbours of its cells), computed by frame by_seq's describe. Call after
+  // gate(by_seq). True when the frame was not requested before: it then joins describe_list(by_seq) and
+  // descriptors.csv, and no later update asks for it again.
+  bool request_descriptor(std::size_t by_seq, std::int64_t frame);
 
   // The frames (seqs, ascending) whose descriptors frame seq's describe computes.
   const std::vector<std::int64_t>& describe_list(std::size_t seq) const { return frames_[seq].describe; }

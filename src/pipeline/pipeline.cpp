@@ -213,6 +213,10 @@ RunResult PipelineRun::run() {
   }
   if (!workers.wait_until_all_left(kWorkerLeaveTimeout)) spdlog::debug("run: TBB workers still in the arena");
   finish_stream(arena, result, cpu_start_s);
+  // The method's finish() may have run parallel work in the arena (SeqSLAM's search): wait for those workers
+  // too, so that none leaves after the observer is gone. Its exit would never be counted, and every later run
+  // in this process (compare, tests) would wait kWorkerLeaveTimeout above, inside its wall time.
+  if (!workers.wait_until_all_left(kWorkerLeaveTimeout)) spdlog::debug("run: TBB workers still in the arena");
   return result;
 }
 

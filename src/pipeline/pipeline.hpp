@@ -11,7 +11,7 @@
 //   sync        FrameSteps::sync              IMU samples between this frame and the previous one; decide whether to decode
 //   decode      FrameSteps::decode            the frame's pixels, when a later stage needs them now (lazy)
 //   odometry    FrameSteps::odometry          pose + covariance from the odometry source (drift, file, ekf)
-//   gate        DetectionMethod::gate         gated DIRD: the pose gate and the candidate areas; others: nothing
+//   gate        DetectionMethod::gate         gated DIRD / SeqSLAM: the pose gate and the candidate areas; others: nothing
 //   describe    DetectionMethod::describe     DIRD descriptors / SeqSLAM preprocessing (parallel)
 //   match       DetectionMethod::match        similarities, sequence DP + NMS, loops.csv (serial, in order)
 //   sink        RunOutputs::sink              frames.csv, trajectory.tum, timing.csv, counters, trace
@@ -20,8 +20,8 @@
 //
 // Every serial node sits behind a sequencer: a serial node's outputs can overtake each other.
 // - The detection method is chosen once (pipeline/detection_method.hpp): none (run.mode odometry), DIRD full,
-//   DIRD gated (default), SeqSLAM (run.method seqslam). After the drain its finish() runs (matcher flush,
-//   SeqSLAM's search), then the rows held for their detection are written and summary.json.
+//   DIRD gated (default), SeqSLAM full or gated (run.method seqslam). After the drain its finish() runs
+//   (matcher flush, SeqSLAM's search), then the rows held for their detection are written and summary.json.
 // - The producer runs on the calling thread, outside the worker arena (ReplayClock: `rate: max` waits for a
 // free
 //   slot, `rate: R` releases frame i at start + (t_i - t_first) / R and drops it when K frames are in

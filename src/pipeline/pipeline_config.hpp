@@ -24,6 +24,7 @@ namespace loopgate {
 // similarities are computed only inside them (past frames re-read on demand), then sequence match and NMS;
 // "full": DIRD on every frame and its similarity against every earlier frame beyond match.margin, same
 // sequence match and NMS (the paper's pure-DIRD baseline); "odometry": sync, decode, odometry only.
+// With run.method seqslam, gated and full choose gated SeqSLAM (docs/seqslam-gated.md) or full SeqSLAM.
 enum class RunMode { kGated, kFull, kOdometry };
 inline constexpr EnumName<RunMode> kRunModeNames[] = {
     {RunMode::kGated, "gated"}, {RunMode::kFull, "full"}, {RunMode::kOdometry, "odometry"}};
@@ -32,8 +33,8 @@ constexpr std::span<const EnumName<RunMode>> enum_names(RunMode) {
 }
 
 // run.method: "dird" (the paper's detector, in the chosen mode) or "seqslam" (the SeqSLAM baseline with the
-// OpenSeqSLAM defaults of section seqslam, on every frame; its score is the ratio best/second, lower is
-// better).
+// OpenSeqSLAM defaults of section seqslam, in the chosen mode: full = every frame, gated = only inside the
+// candidate areas; its score is the ratio best/second, lower is better).
 enum class Detector { kDird, kSeqSlam };
 inline constexpr EnumName<Detector> kDetectorNames[] = {{Detector::kDird, "dird"},
                                                         {Detector::kSeqSlam, "seqslam"}};
@@ -52,7 +53,7 @@ constexpr std::span<const EnumName<DecodePolicy>> enum_names(DecodePolicy) {
 struct RunConfig {
   std::string dataset;                        // dataset folder (the --dataset flag overrides it)
   RunMode mode = RunMode::kGated;             // gated | full | odometry (see RunMode)
-  Detector method = Detector::kDird;          // dird | seqslam (see Detector); SeqSLAM runs on every frame
+  Detector method = Detector::kDird;          // dird | seqslam (see Detector), each gated or full
   std::string rate = "max";                   // "max" (as fast as the graph drains) or R > 0 (R x real time)
   int threads = 2;                            // worker threads of the graph
   int max_in_flight = 8;                      // limiter: frames inside the graph at once

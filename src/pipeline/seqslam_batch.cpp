@@ -39,11 +39,11 @@ void SeqSlamBatch::add_missing(std::size_t seq) {
   std::memset(bytes_.get() + seq * pixel_count_, 0, pixel_count_);
 }
 
-std::vector<SeqSlamMatch> SeqSlamBatch::run(std::size_t count) const {
+std::vector<SeqSlamMatch> SeqSlamBatch::run(std::size_t count, std::size_t* differences_computed) const {
   if (count > capacity_)
     throw std::out_of_range("SeqSlamBatch: " + std::to_string(count) + " frames beyond capacity");
   const SeqSlamImages all = images(0, count);
-  return search(all, all);
+  return search(all, all, differences_computed);
 }
 
 std::vector<SeqSlamMatch> SeqSlamBatch::run_two_sequence(std::size_t reference_count,
@@ -66,12 +66,13 @@ SeqSlamImages SeqSlamBatch::images(std::size_t first, std::size_t count) const {
   return out;
 }
 
-std::vector<SeqSlamMatch> SeqSlamBatch::search(const SeqSlamImages& reference,
-                                               const SeqSlamImages& query) const {
+std::vector<SeqSlamMatch> SeqSlamBatch::search(const SeqSlamImages& reference, const SeqSlamImages& query,
+                                               std::size_t* differences_computed) const {
   const std::size_t rows = reference.size();
   const std::size_t count = query.size();
   std::vector<SeqSlamMatch> matches(count);
   for (std::size_t q = 0; q < count; ++q) matches[q].query = q;
+  if (differences_computed) *differences_computed = 0;
   if (count == 0 || rows == 0) return matches;
   const SeqSlamConfig& config = seqslam_.config();
   const SeqSlamExclusion exclusion = SeqSlamExclusion::from_config(config);
@@ -84,11 +85,15 @@ std::vector<SeqSlamMatch> SeqSlamBatch::search(const SeqSlamImages& reference,
   // global minimum is subtracted, then step 4 per query column. parallel_for_with_handoff makes the
   // hand-overs visible to ThreadSanitizer.
   std::vector<double> block_minimum(blocks, std::numeric_limits<double>::infinity());
+  std::vector<std::size_t> block_differences(blocks, 0);
   parallel_for_with_handoff(blocks, [&](std::size_t b) {
     const auto [q0, q1] = block_range(b);
-    seqslam_difference_block(reference, query, exclusion, 0, rows, q0, q1, M);
+    block_differences[b] = seqslam_difference_block(reference, query, exclusion, 0, rows, q0, q1, M);
     block_minimum[b] = seqslam_enhance_contrast(M, config.contrast_window_rows, q0, q1);
   });
+  if (differences_computed) {
+    for (const std::size_t d : block_differences) *differences_computed += d;
+  }
   const double minimum = *std::min_element(block_minimum.begin(), block_minimum.end());
   if (std::isfinite(minimum)) {
     parallel_for_with_handoff(blocks, [&](std::size_t b) {

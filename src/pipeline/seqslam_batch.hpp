@@ -31,7 +31,8 @@ class SeqSlamBatch {
 
   // Steps 2-4 over frames [0, count) (count <= capacity, every one added), one match per frame, with
   // tbb::parallel_for over blocks of query columns (call it inside the run's task arena).
-  std::vector<SeqSlamMatch> run(std::size_t count) const;
+  // `differences_computed` (optional): the difference-matrix entries computed (the excluded ones are not).
+  std::vector<SeqSlamMatch> run(std::size_t count, std::size_t* differences_computed = nullptr) const;
 
   // Two sequences in one store (two_sequence.hpp): frames [0, reference_count) are the reference
   // sequence, frames [reference_count, reference_count + query_count) the query sequence (every one
@@ -42,12 +43,15 @@ class SeqSlamBatch {
 
   const SeqSlamConfig& config() const { return seqslam_.config(); }
   std::size_t pixel_count() const { return pixel_count_; }
+  // The preprocessed pixels of frame `seq` (pixel_count() bytes; meaningful once added).
+  const std::uint8_t* image(std::size_t seq) const { return bytes_.get() + seq * pixel_count_; }
 
  private:
   // Frames [first, first + count) of the store as a set of images.
   SeqSlamImages images(std::size_t first, std::size_t count) const;
   // Steps 2-4 of `query` columns against `reference` rows, in parallel blocks of query columns.
-  std::vector<SeqSlamMatch> search(const SeqSlamImages& reference, const SeqSlamImages& query) const;
+  std::vector<SeqSlamMatch> search(const SeqSlamImages& reference, const SeqSlamImages& query,
+                                   std::size_t* differences_computed = nullptr) const;
 
   SeqSlam seqslam_;
   std::size_t capacity_;

@@ -1,4 +1,5 @@
-// SeqSLAM as a detection method (run.method seqslam, seqslam.md): describe preprocesses every frame
+// Full SeqSLAM as a detection method (run.method seqslam, run.mode full; seqslam.md; the gated one is
+// seqslam_gated_method.cpp): describe preprocesses every frame
 // (parallel, stored by sequence number in a SeqSlamBatch); the search runs over the whole run at the end of
 // the stream (a query's sequence needs ds/2 later frames and the contrast statistics need neighbouring
 // rows), so every frame's detection row is known only then.
@@ -26,7 +27,7 @@ class SeqSlamMethod final : public DetectionMethod {
         described_(context.capacity, 0) {}
 
   std::string name() const override { return "seqslam"; }
-  std::string mode() const override { return "full"; }  // SeqSLAM always sees every frame
+  std::string mode() const override { return "full"; }  // every frame
   bool needs_every_image() const override { return true; }
 
   void describe(FrameRecord& r) override {
@@ -47,7 +48,7 @@ class SeqSlamMethod final : public DetectionMethod {
 
   // The search over every frame seen; loops.csv for the accepted matches.
   void finish() override {
-    matches_ = batch_.run(frames_);
+    matches_ = batch_.run(frames_, &differences_computed_);
     searched_ = true;
     for (const SeqSlamMatch& m : matches_) {
       if (!m.has_match || !std::isfinite(m.ratio)) continue;
@@ -69,7 +70,9 @@ class SeqSlamMethod final : public DetectionMethod {
   }
 
   nlohmann::json summary() const override {
-    return {{"score_order", "lower_is_better"}, {"descriptors_computed", descriptors_computed_.load()}};
+    return {{"score_order", "lower_is_better"},
+            {"descriptors_computed", descriptors_computed_.load()},
+            {"similarities_computed", differences_computed_}};  // difference-matrix entries
   }
   // The PR sweep runs over every query's match, accepted or not: the ratio is the threshold.
   MethodEvaluation evaluation() const override {
@@ -85,6 +88,7 @@ class SeqSlamMethod final : public DetectionMethod {
   std::vector<std::uint8_t> described_;  // per seq, written once by describe, read after the search
   std::atomic<std::size_t> descriptors_computed_{0};
   std::size_t frames_ = 0;  // frames through match
+  std::size_t differences_computed_ = 0;
   bool searched_ = false;
   std::vector<SeqSlamMatch> matches_;
   std::vector<Detection> ranked_;  // every query's finite match, dataset frame indices

@@ -94,9 +94,10 @@ std::uint32_t seqslam_sad(const std::uint8_t* a, const std::uint8_t* b, std::siz
   return total + scalar_sad(a, b, i, n);
 }
 
-void seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImages& query,
-                              const SeqSlamExclusion& exclusion, std::size_t r_begin, std::size_t r_end,
-                              std::size_t q_begin, std::size_t q_end, SeqSlamMatrix& D) {
+std::size_t seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImages& query,
+                                     const SeqSlamExclusion& exclusion, std::size_t r_begin,
+                                     std::size_t r_end, std::size_t q_begin, std::size_t q_end,
+                                     SeqSlamMatrix& D) {
   if (reference.pixel_count() != query.pixel_count()) {
     throw std::invalid_argument("SeqSLAM: reference and query images differ in size");
   }
@@ -106,6 +107,7 @@ void seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImage
   }
   const std::size_t n = reference.pixel_count();
   const double pixels = static_cast<double>(n);
+  std::size_t computed = 0;
   std::array<const std::uint8_t*, kQueriesPerPass> q_images{};
   std::array<std::uint32_t, kQueriesPerPass> sads{};
   for (std::size_t qt = q_begin; qt < q_end; qt += kTileQueries) {
@@ -125,50 +127,57 @@ void seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImage
           for (std::size_t k = 0; k < kQueriesPerPass; ++k) q_images[k] = query.image(q + k);
           sad_1x4(r_image, q_images, n, sads);
           for (std::size_t k = 0; k < kQueriesPerPass; ++k) {
-            D.at(r, q + k) = exclusion.excluded(r, q + k) ? kInf : static_cast<double>(sads[k]) / pixels;
+            const bool excluded = exclusion.excluded(r, q + k);
+            D.at(r, q + k) = excluded ? kInf : static_cast<double>(sads[k]) / pixels;
+            computed += excluded ? 0 : 1;
           }
         }
         for (; q < qt_end; ++q) {
-          D.at(r, q) = exclusion.excluded(r, q)
-                           ? kInf
-                           : static_cast<double>(seqslam_sad(r_image, query.image(q), n)) / pixels;
+          const bool excluded = exclusion.excluded(r, q);
+          D.at(r, q) =
+              excluded ? kInf : static_cast<double>(seqslam_sad(r_image, query.image(q), n)) / pixels;
+          computed += excluded ? 0 : 1;
         }
       }
     }
   }
+  return computed;
+}
+
+double seqslam_enhanced_entry(const double* d, std::size_t first, std::size_t reference_count,
+                              int window_rows, std::size_t r) {
+  const double value = d[r - first];
+  if (!std::isfinite(value)) return kInf;
+  const auto half = static_cast<std::size_t>(window_rows / 2);
+  const std::size_t a = r >= half ? r - half : 0;
+  const std::size_t b = std::min(reference_count - 1, r + half);
+  double sum = 0.0;
+  std::size_t count = 0;
+  for (std::size_t k = a; k <= b; ++k) {
+    if (std::isfinite(d[k - first])) {
+      sum += d[k - first];
+      ++count;
+    }
+  }
+  const double mean = sum / static_cast<double>(count);
+  double ss = 0.0;
+  for (std::size_t k = a; k <= b; ++k) {
+    if (std::isfinite(d[k - first])) ss += (d[k - first] - mean) * (d[k - first] - mean);
+  }
+  const double sd = count > 1 ? std::sqrt(ss / static_cast<double>(count - 1)) : 0.0;
+  return sd == 0.0 ? 0.0 : (value - mean) / sd;
 }
 
 double seqslam_enhance_contrast(SeqSlamMatrix& M, int window_rows, std::size_t q_begin, std::size_t q_end) {
   const std::size_t n = M.reference_count();
-  const auto half = static_cast<std::size_t>(window_rows / 2);
   std::vector<double> original(n);
   double minimum = kInf;
   for (std::size_t q = q_begin; q < q_end; ++q) {
     double* col = M.column(q);
     std::copy(col, col + n, original.begin());
     for (std::size_t r = 0; r < n; ++r) {
-      if (!std::isfinite(original[r])) {
-        col[r] = kInf;
-        continue;
-      }
-      const std::size_t a = r >= half ? r - half : 0;
-      const std::size_t b = std::min(n - 1, r + half);
-      double sum = 0.0;
-      std::size_t count = 0;
-      for (std::size_t k = a; k <= b; ++k) {
-        if (std::isfinite(original[k])) {
-          sum += original[k];
-          ++count;
-        }
-      }
-      const double mean = sum / static_cast<double>(count);
-      double ss = 0.0;
-      for (std::size_t k = a; k <= b; ++k) {
-        if (std::isfinite(original[k])) ss += (original[k] - mean) * (original[k] - mean);
-      }
-      const double sd = count > 1 ? std::sqrt(ss / static_cast<double>(count - 1)) : 0.0;
-      col[r] = sd == 0.0 ? 0.0 : (original[r] - mean) / sd;
-      minimum = std::min(minimum, col[r]);
+      col[r] = seqslam_enhanced_entry(original.data(), 0, n, window_rows, r);
+      if (std::isfinite(col[r])) minimum = std::min(minimum, col[r]);
     }
   }
   return minimum;
@@ -204,20 +213,21 @@ std::vector<double> seqslam_sequence_scores(const SeqSlamMatrix& E, std::size_t 
   return scores;
 }
 
-SeqSlamMatch seqslam_match_query(const SeqSlamMatrix& E, std::size_t query, const SeqSlamConfig& config) {
+SeqSlamMatch seqslam_match_from_scores(std::size_t query, const double* scores, std::size_t count,
+                                       std::size_t first_start, const SeqSlamConfig& config) {
   SeqSlamMatch match;
   match.query = query;
-  const std::vector<double> scores = seqslam_sequence_scores(E, query, config);
-  if (scores.empty()) return match;
-  const auto best_it = std::min_element(scores.begin(), scores.end());  // first on ties
+  if (count == 0) return match;
+  const double* best_it = std::min_element(scores, scores + count);  // first on ties
   if (!std::isfinite(*best_it)) return match;
-  const auto best = static_cast<std::size_t>(best_it - scores.begin());
+  const std::size_t best = first_start + static_cast<std::size_t>(best_it - scores);
   const auto half_window = static_cast<std::size_t>(config.second_best_window_rows / 2);
   const std::size_t lo = best >= half_window ? best - half_window : 0;
   const std::size_t hi = best + half_window;
   double second = kInf;
-  for (std::size_t s = 0; s < scores.size(); ++s) {
-    if (s < lo || s > hi) second = std::min(second, scores[s]);
+  for (std::size_t k = 0; k < count; ++k) {
+    const std::size_t s = first_start + k;
+    if (s < lo || s > hi) second = std::min(second, scores[k]);
   }
   match.has_match = true;
   match.reference = best + static_cast<std::size_t>(config.sequence_length_frames / 2);
@@ -232,6 +242,11 @@ SeqSlamMatch seqslam_match_query(const SeqSlamMatrix& E, std::size_t query, cons
   }
   match.accepted = match.ratio <= config.ratio_threshold;
   return match;
+}
+
+SeqSlamMatch seqslam_match_query(const SeqSlamMatrix& E, std::size_t query, const SeqSlamConfig& config) {
+  const std::vector<double> scores = seqslam_sequence_scores(E, query, config);
+  return seqslam_match_from_scores(query, scores.data(), scores.size(), 0, config);
 }
 
 SeqSlam::SeqSlam(const SeqSlamConfig& config) : config_(config) {

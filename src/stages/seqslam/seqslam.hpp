@@ -59,10 +59,12 @@ std::uint32_t seqslam_sad(const std::uint8_t* a, const std::uint8_t* b, std::siz
 
 // Step 2 on a block: D(r, q) = mean absolute difference of reference r and query q for
 // r in [r_begin, r_end), q in [q_begin, q_end); excluded entries are set to +infinity without being
-// computed. Blocks may be computed concurrently (they write disjoint entries).
-void seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImages& query,
-                              const SeqSlamExclusion& exclusion, std::size_t r_begin, std::size_t r_end,
-                              std::size_t q_begin, std::size_t q_end, SeqSlamMatrix& D);
+// computed. Returns the entries computed (the block minus its excluded entries). Blocks may be computed
+// concurrently (they write disjoint entries).
+std::size_t seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImages& query,
+                                     const SeqSlamExclusion& exclusion, std::size_t r_begin,
+                                     std::size_t r_end, std::size_t q_begin, std::size_t q_end,
+                                     SeqSlamMatrix& D);
 
 // Step 3 on columns [q_begin, q_end), in place: for each row r, over the finite entries of rows
 // max(0, r - R/2) .. min(n - 1, r + R/2) of the same column, E = (D - mean) / sample std (0 when
@@ -71,6 +73,14 @@ void seqslam_difference_block(const SeqSlamImages& reference, const SeqSlamImage
 // seqslam_subtract(); columns are independent, so blocks may run concurrently.
 double seqslam_enhance_contrast(SeqSlamMatrix& M, int window_rows, std::size_t q_begin, std::size_t q_end);
 void seqslam_subtract(SeqSlamMatrix& M, double value, std::size_t q_begin, std::size_t q_end);
+
+// Step 3 for one entry, the arithmetic seqslam_enhance_contrast uses: E of row r of a column with
+// `reference_count` rows whose D values of rows [first, ...) are at `d` (d[k - first] = D(k); the window
+// max(0, r - R/2) .. min(reference_count - 1, r + R/2) must lie at or after `first` and be readable).
+// +infinity when D(r) is not finite. A caller holding only some rows of a column (gated SeqSLAM) gets the
+// values of the whole column, bit for bit.
+double seqslam_enhanced_entry(const double* d, std::size_t first, std::size_t reference_count,
+                              int window_rows, std::size_t r);
 
 // The result for one query column.
 struct SeqSlamMatch {
@@ -96,6 +106,12 @@ SeqSlamMatch seqslam_match_query(const SeqSlamMatrix& E, std::size_t query, cons
 // The per-start-row scores of step 4 (size = reference count), exposed for tests and plots.
 std::vector<double> seqslam_sequence_scores(const SeqSlamMatrix& E, std::size_t query,
                                             const SeqSlamConfig& config);
+
+// The best / second / ratio part of step 4 for query `query` from its sequence scores: scores[k] is the
+// score of start row first_start + k (+infinity: no sequence). best = first argmin, second = min outside
+// best +- Rwindow/2 (both over the rows given); no match when every score is infinite.
+SeqSlamMatch seqslam_match_from_scores(std::size_t query, const double* scores, std::size_t count,
+                                       std::size_t first_start, const SeqSlamConfig& config);
 
 // Steps 2-4 end to end on preprocessed images, single thread.
 class SeqSlam {

@@ -22,10 +22,14 @@ FrameDetection seqslam_detection(const SeqSlamMatch& m, const SeqSlamConfig& con
                      ? fmt::format("best sequence centred on reference {} beyond the last reference frame",
                                    context.reference_first + m.reference)
                      : std::string("no sequence with a finite score");
+    } else if (context.outside_areas) {
+      d.reason = "outside every candidate area";
+    } else if (near_end) {
+      d.reason = fmt::format("within ds/2 = {} frames of an end of the run", half);
     } else {
-      d.reason = near_end ? fmt::format("within ds/2 = {} frames of an end of the run", half)
-                          : fmt::format("every sequence touches the exclusion ({} {} frames)",
-                                        config.exclusion, config.exclusion_margin_frames);
+      d.reason = fmt::format("every sequence{} touches the exclusion ({} {} frames)",
+                             context.gated ? " matching a candidate-area cell" : "", config.exclusion,
+                             config.exclusion_margin_frames);
     }
     return d;
   }

@@ -18,6 +18,10 @@ struct SeqSlamOutcomeContext {
   // match) and the dataset index of its first frame (for the message). Single sequence: unlimited.
   std::size_t reference_count = std::numeric_limits<std::size_t>::max();
   std::size_t reference_first = 0;
+  // Gated SeqSLAM (single sequence): the search ran only inside the candidate areas; `outside_areas`: the
+  // query's row has no covered cell.
+  bool gated = false;
+  bool outside_areas = false;
 };
 
 // outcome: no match -> kNoCandidate, rejected -> kBelowThreshold, loop -> kLoop. match / score: the best
