@@ -61,6 +61,18 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
         "revisits; the gate computes them where revisits are likely, so it needs run.mode full (gated runs: "
         "standardize.mode causal with the fixed standardised scale)");
   }
+  if (run.dird_seqslam()) {
+    spdlog::info(
+        "run: dird-seqslam {} ({} descriptors): contrast enhancement over {} references, sequences of {} "
+        "frames; a frame's verdict {} frames after its row",
+        enum_name(run.mode),
+        config.standardize.enabled()
+            ? "standardised " + config.standardize.mode + " " + config.standardize.distance
+            : std::string("raw DIRD"),
+        2 * config.dird_seqslam.contrast_half_window_frames + 1, config.match.sequence_length,
+        config.match.sequence_length - 1);
+    return run.mode == RunMode::kFull ? make_dird_seqslam_full(context) : make_dird_seqslam_gated(context);
+  }
   if (config.standardize.enabled() || config.scale.online()) {
     spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", config.standardize.mode,
                  config.standardize.distance, config.scale.mode);

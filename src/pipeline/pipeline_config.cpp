@@ -54,8 +54,9 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 }
 
 void RunConfig::validate() const {
-  if (method == Detector::kSeqSlam && mode == RunMode::kOdometry) {
-    throw ConfigError("run.method: seqslam detects loops; it needs run.mode gated or full, not odometry");
+  if (method != Detector::kDird && mode == RunMode::kOdometry) {
+    throw ConfigError("run.method: " + std::string(enum_name(method)) +
+                      " detects loops; it needs run.mode gated or full, not odometry");
   }
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
