@@ -195,12 +195,12 @@ TEST(ContrastSearch, ConfigErrorsNameTheKey) {
   c = {};
   c.min_score = std::nan("");
   expect_key(c, "dird_seqslam.min_score");
-  // The velocity grid: geometric, both ends exact, 1.0 in the middle of 0.8 .. 1.25.
+  // The velocity grid: geometric, both ends exact, 1.0 in the middle of 2/3 .. 3/2.
   const std::vector<double> v = ContrastSearchConfig{}.velocities();
-  ASSERT_EQ(v.size(), 5u);
-  EXPECT_EQ(v.front(), 0.8);
-  EXPECT_EQ(v.back(), 1.25);
-  EXPECT_NEAR(v[2], 1.0, 1e-12);
+  ASSERT_EQ(v.size(), 7u);
+  EXPECT_EQ(v.front(), 2.0 / 3.0);
+  EXPECT_EQ(v.back(), 1.5);
+  EXPECT_NEAR(v[3], 1.0, 1e-12);
 }
 
 }  // namespace

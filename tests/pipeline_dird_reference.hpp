@@ -20,13 +20,13 @@ struct ReferenceCodes {
   std::size_t ready_frame = 0;
 };
 
-inline ReferenceCodes reference_codes(const Dataset& dataset, const PipelineConfig& config,
-                                      std::size_t frames) {
-  const DirdExtractor extractor(config.dird);
+inline ReferenceCodes reference_codes(const Dataset& dataset, const DirdConfig& dird,
+                                      const StandardizeConfig& standardize, std::size_t frames) {
+  const DirdExtractor extractor(dird);
   std::vector<Descriptor> raw;
   for (std::size_t k = 0; k < frames; ++k) raw.push_back(extractor.extract(dataset.load_image(k)));
-  CausalStandardizer standardizer(observations_config(config.standardize));
-  const auto every = static_cast<std::size_t>(config.standardize.observe_every);
+  CausalStandardizer standardizer(observations_config(standardize));
+  const auto every = static_cast<std::size_t>(standardize.observe_every);
   for (std::size_t k = 0; k < frames; ++k) {
     if (k % every == 0) standardizer.observe(static_cast<std::int64_t>(k), raw[k]);
   }
@@ -34,7 +34,7 @@ inline ReferenceCodes reference_codes(const Dataset& dataset, const PipelineConf
   out.codes.resize(frames);
   for (std::size_t k = 0; k < frames; ++k)
     out.codes[k] = standardizer.statistics_for(static_cast<std::int64_t>(k)).apply(raw[k]);
-  out.ready_frame = static_cast<std::size_t>(observations_config(config.standardize).warm_up - 1) * every;
+  out.ready_frame = static_cast<std::size_t>(observations_config(standardize).warm_up - 1) * every;
   return out;
 }
 

@@ -4,13 +4,14 @@
 //     the margin;
 //   - the gated run's are the batch search on the same distances restricted to the cells it reports;
 //   - causal: a run over the first frames gives the whole run's rows restricted to them;
-//   - 1 and 2 threads give identical outputs; raw distances (standardize.mode off) work the same way;
-//   - standardize.mode auto resolves to causal for dird-seqslam, off for dird.
+//   - 1 and 2 threads give identical outputs; raw distances (dird_seqslam.standardize off) work the same way;
+//   - dird-seqslam takes its descriptors from section dird_seqslam, not from dird / standardize.mode.
 #include <gtest/gtest.h>
 
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "core/error.hpp"
 #include "io/config.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline_dird_reference.hpp"
@@ -48,13 +49,14 @@ PipelineConfig seqslam_config(RunMode mode, int threads = 2) {
   config.gate.area_margin_reference_frames = 10;
   config.gate.area_max_hole_frames = 5;
   config.gate.row_horizon_frames = 20;
-  config.dird.normalization = "l2";
-  config.standardize.mode = "causal";
+  config.dird_seqslam.normalization = "l2";
+  config.dird_seqslam.resize = "area";
+  config.dird_seqslam.standardize = "causal";
   config.standardize.warm_up = 20;
   config.standardize.window = 40;
   config.standardize.refresh_every = 3;
   config.standardize.observe_every = 2;
-  config.dird_seqslam.contrast_half_window_frames = 5;
+  config.dird_seqslam.search.contrast_half_window_frames = 5;
   config.validate();
   return config;
 }
@@ -70,14 +72,17 @@ std::set<Cell> read_cells(const fs::path& file) {
   return cells;
 }
 
-// Distance rows of the first `frames` frames: every pair i - j >= margin, from the reference codes (raw
-// bytes and L1 when standardize.mode is off); rows before the statistics are ready are empty.
+// Distance rows of the first `frames` frames: every pair i - j >= margin, from the reference codes of the
+// method's descriptors (raw bytes and L1 when dird_seqslam.standardize is off); rows before the statistics
+// are ready are empty.
 std::vector<std::vector<DistanceEntry>> reference_rows(const Dataset& dataset, const PipelineConfig& config,
                                                        std::size_t frames) {
   std::vector<std::vector<DistanceEntry>> rows(frames);
   const auto margin = static_cast<std::size_t>(config.match.margin);
-  if (!config.standardize.enabled()) {
-    const DirdExtractor extractor(config.dird);
+  const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
+  const StandardizeConfig standardize = config.dird_seqslam.standardization(config.standardize);
+  if (!standardize.enabled()) {
+    const DirdExtractor extractor(dird);
     std::vector<Descriptor> raw;
     for (std::size_t k = 0; k < frames; ++k) raw.push_back(extractor.extract(dataset.load_image(k)));
     for (std::size_t i = margin; i < frames; ++i) {
@@ -86,7 +91,7 @@ std::vector<std::vector<DistanceEntry>> reference_rows(const Dataset& dataset, c
     }
     return rows;
   }
-  const auto [codes, ready_frame] = testing::reference_codes(dataset, config, frames);
+  const auto [codes, ready_frame] = testing::reference_codes(dataset, dird, standardize, frames);
   for (std::size_t i = std::max(ready_frame, margin); i < frames; ++i) {
     for (std::size_t j = 0; j + margin <= i; ++j)
       rows[i].push_back({static_cast<std::int64_t>(j), standard_cosine_distance(codes[i], codes[j])});
@@ -96,7 +101,7 @@ std::vector<std::vector<DistanceEntry>> reference_rows(const Dataset& dataset, c
 
 ContrastOutput reference_search(const std::vector<std::vector<DistanceEntry>>& rows,
                                 const PipelineConfig& c) {
-  return contrast_search_batch(rows, c.dird_seqslam, c.match.sequence_length,
+  return contrast_search_batch(rows, c.dird_seqslam.search, c.match.sequence_length,
                                ContrastSequenceSearch::Mode::kSingleSequence, c.match.margin);
 }
 
@@ -175,7 +180,7 @@ TEST(PipelineDirdSeqSlam, CausalAPrefixRunGivesTheWholeRunsRowsRestrictedToIt) {
 TEST(PipelineDirdSeqSlam, RawDistancesWhenStandardisationIsOff) {
   const RevisitDataset dataset(kPeriod, kLaps);
   PipelineConfig config = seqslam_config(RunMode::kFull);
-  config.standardize.mode = "off";
+  config.dird_seqslam.standardize = "off";
   const auto out = testing::make_temp_dir("pipeline-dseq-raw");
   ASSERT_FALSE(run_pipeline(config, dataset, out).failed);
   expect_run_is(out, reference_search(reference_rows(dataset, config, kPeriod * kLaps), config));
@@ -195,16 +200,27 @@ TEST(PipelineDirdSeqSlam, OneAndTwoThreadsGiveIdenticalOutputs) {
   }
 }
 
-TEST(PipelineDirdSeqSlam, StandardizeAutoIsCausalForDirdSeqSlamAndOffForDird) {
-  const auto load = [](const std::string& method) {
-    return load_config<PipelineConfig>("", {"run.method=" + method});
-  };
-  EXPECT_EQ(load("dird-seqslam").standardize.mode, "causal");
-  EXPECT_EQ(load("dird").standardize.mode, "off");
-  EXPECT_EQ(load("seqslam").standardize.mode, "off");
-  EXPECT_EQ(
-      load_config<PipelineConfig>("", {"run.method=dird-seqslam", "standardize.mode=off"}).standardize.mode,
-      "off");
+TEST(PipelineDirdSeqSlam, TakesItsDescriptorsFromItsOwnSection) {
+  // dird / standardize.mode are the DIRD DP's (the paper's descriptor, bit-exact); dird-seqslam's defaults
+  // are l2 normalisation, area resize, causal standardisation, whatever those say.
+  const PipelineConfig loaded = load_config<PipelineConfig>("", {"run.method=dird-seqslam"});
+  EXPECT_EQ(loaded.dird.normalization, "libdird");
+  EXPECT_EQ(loaded.standardize.mode, "off");
+  const DirdConfig dird = loaded.dird_seqslam.descriptor(loaded.dird);
+  EXPECT_EQ(dird.normalization, "l2");
+  EXPECT_EQ(dird.resize, "area");
+  EXPECT_EQ(loaded.dird_seqslam.standardization(loaded.standardize).mode, "causal");
+  // A single sequence streams: batch statistics are refused, naming the key.
+  const RevisitDataset dataset(kPeriod, 1);
+  PipelineConfig batch = seqslam_config(RunMode::kFull);
+  batch.dird_seqslam.standardize = "batch";
+  try {
+    run_pipeline(batch, dataset, testing::make_temp_dir("pipeline-dseq-batch"));
+    FAIL() << "dird_seqslam.standardize batch accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("dird_seqslam.standardize"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(load_config<PipelineConfig>("", {"dird_seqslam.resize=bicubic"}), ConfigError);
 }
 
 }  // namespace

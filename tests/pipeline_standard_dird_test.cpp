@@ -85,7 +85,8 @@ std::vector<LoopClosure> read_loops(const fs::path& file) {
 std::vector<std::vector<SimilarityEntry>> reference_columns(const Dataset& dataset,
                                                             const PipelineConfig& config,
                                                             std::size_t frames) {
-  const auto [codes, ready_frame] = testing::reference_codes(dataset, config, frames);
+  const auto [codes, ready_frame] =
+      testing::reference_codes(dataset, config.dird, config.standardize, frames);
   const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
   std::vector<std::vector<SimilarityEntry>> columns(frames);
   for (std::size_t i = ready_frame; i < frames; ++i) {

@@ -54,8 +54,9 @@ extern "C" void on_compare_sigint(int) {
   std::signal(SIGINT, SIG_DFL);
 }
 
-// The methods compare runs, by name: detector, mode and descriptor standardisation (everything else is the
-// shared configuration). One table: a new method is one line here.
+// The methods compare runs, by name: detector, mode and the DIRD DP's descriptor standardisation
+// (standardize.mode; dird-seqslam takes its own descriptors from section dird_seqslam). Everything else is
+// the shared configuration. One table: a new method is one line here.
 struct CompareMethod {
   const char* name;
   Detector detector;
@@ -70,10 +71,10 @@ constexpr CompareMethod kCompareMethods[] = {
     {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas"},
     {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame"},
     {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas"},
-    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "causal",
-     "standardised DIRD + contrast-enhanced sequence search, every frame"},
-    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "causal",
-     "standardised DIRD + contrast-enhanced sequence search, in the candidate areas"},
+    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
+     "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame"},
+    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
+     "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)"},
 };
 
 // The methods of a two-sequence compare (no poses: no gate).

@@ -135,8 +135,7 @@ void apply_section(const std::string& section_name, const std::map<std::string, 
   }
 }
 
-// Applies every raw value to `config` (a struct with sections()), resolves what depends on other sections
-// (config.resolve(), when the configuration has one), then validates it once: config.validate()
+// Applies every raw value to `config` (a struct with sections()), then validates it once: config.validate()
 // when the configuration has one (every section and the rules between sections), else every section's
 // validate().
 template <class Config>
@@ -156,7 +155,6 @@ void apply_config(const RawConfig& raw, Config& config) {
       config_detail::throw_unknown("section", section_name, origin, names);
     }
   }
-  if constexpr (requires { config.resolve(); }) config.resolve();
   if constexpr (requires { config.validate(); }) {
     config.validate();
   } else {

@@ -62,15 +62,19 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
         "standardize.mode causal with the fixed standardised scale)");
   }
   if (run.dird_seqslam()) {
+    const DirdSeqSlamConfig& d = config.dird_seqslam;
+    if (d.standardize == "batch") {
+      throw ConfigError(
+          "dird_seqslam.standardize: 'batch' needs the whole sequence before the first comparison "
+          "(two-sequence "
+          "runs); a single sequence streams: use 'causal'");
+    }
     spdlog::info(
-        "run: dird-seqslam {} ({} descriptors): contrast enhancement over {} references, sequences of {} "
-        "frames; a frame's verdict {} frames after its row",
-        enum_name(run.mode),
-        config.standardize.enabled()
-            ? "standardised " + config.standardize.mode + " " + config.standardize.distance
-            : std::string("raw DIRD"),
-        2 * config.dird_seqslam.contrast_half_window_frames + 1, config.match.sequence_length,
-        config.match.sequence_length - 1);
+        "run: dird-seqslam {} (DIRD {} normalisation, {} resize, {} standardisation): contrast over {} "
+        "references, sequences of {} frames at {} velocities; a frame's verdict {} frames after its row",
+        enum_name(run.mode), d.normalization, d.resize, d.standardize,
+        2 * d.search.contrast_half_window_frames + 1, config.match.sequence_length,
+        d.search.velocities().size(), config.match.sequence_length - 1);
     return run.mode == RunMode::kFull ? make_dird_seqslam_full(context) : make_dird_seqslam_gated(context);
   }
   if (config.standardize.enabled() || config.scale.online()) {

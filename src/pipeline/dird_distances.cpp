@@ -14,14 +14,16 @@
 
 namespace loopgate {
 
-DirdDistances::DirdDistances(const MethodContext& context)
+DirdDistances::DirdDistances(const MethodContext& context, const DirdConfig& dird,
+                             const StandardizeConfig& standardize)
     : context_(context),
-      extractor_(context.config.dird),
+      dird_(dird),
+      standardize_(standardize),
+      extractor_(dird),
       raw_(context.capacity),
       codes_(new Descriptor[context.capacity]),
       norms_(context.capacity, 0.0),
       coded_(context.capacity, 0) {
-  const StandardizeConfig& standardize = context.config.standardize;
   if (standardize.enabled()) {
     standardizer_.emplace(observations_config(standardize));
     observe_every_ = static_cast<std::size_t>(standardize.observe_every);
@@ -92,7 +94,7 @@ bool DirdDistances::code(std::size_t seq) {
     return false;
   } else {
     standardizer_->standardize(static_cast<std::int64_t>(seq), raw_.descriptor(seq), codes_[seq]);
-    if (context_.config.standardize.cosine()) norms_[seq] = standard_norm(codes_[seq]);
+    if (standardize_.cosine()) norms_[seq] = standard_norm(codes_[seq]);
   }
   coded_[seq] = 1;
   ++frames_coded_;
@@ -101,10 +103,10 @@ bool DirdDistances::code(std::size_t seq) {
 
 double DirdDistances::distance(std::size_t a, std::size_t b) const {
   if (!standardizer_) {
-    return context_.config.dird.l2_metric() ? l2_distance(codes_[a], codes_[b])
-                                            : static_cast<double>(l1_distance(codes_[a], codes_[b]));
+    return dird_.l2_metric() ? l2_distance(codes_[a], codes_[b])
+                             : static_cast<double>(l1_distance(codes_[a], codes_[b]));
   }
-  if (context_.config.standardize.cosine()) {
+  if (standardize_.cosine()) {
     return standard_cosine_distance(codes_[a], norms_[a], codes_[b], norms_[b]);
   }
   return static_cast<double>(l1_distance(codes_[a], codes_[b]));
@@ -113,8 +115,8 @@ double DirdDistances::distance(std::size_t a, std::size_t b) const {
 nlohmann::json DirdDistances::summary() const {
   if (!standardizer_) return nlohmann::json::object();
   return {{"standardize",
-           {{"mode", context_.config.standardize.mode},
-            {"distance", context_.config.standardize.distance},
+           {{"mode", standardize_.mode},
+            {"distance", standardize_.distance},
             {"observations", standardizer_->observations()},
             {"snapshots", standardizer_->snapshots()},
             {"frames_coded", frames_coded_},

@@ -31,8 +31,9 @@ namespace loopgate {
 
 class DirdDistances {
  public:
-  // Standardised when context.config.standardize.enabled() (mode causal; the caller rejects batch).
-  explicit DirdDistances(const MethodContext& context);
+  // Descriptors extracted with `dird`, standardised when `standardize` is enabled (mode causal; the caller
+  // rejects batch).
+  DirdDistances(const MethodContext& context, const DirdConfig& dird, const StandardizeConfig& standardize);
 
   bool standardized() const { return standardizer_.has_value(); }
   // Frames whose raw descriptor feeds the statistics.
@@ -67,6 +68,8 @@ class DirdDistances {
   double distance(std::size_t a, std::size_t b) const;
 
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  DirdConfig dird_;
+  StandardizeConfig standardize_;
   DirdExtractor extractor_;
   DescriptorStore raw_;                  // written by describe (parallel), published
   std::unique_ptr<Descriptor[]> codes_;  // match node only

@@ -33,7 +33,7 @@ class ContrastMatching {
  public:
   explicit ContrastMatching(const MethodContext& context)
       : context_(context),
-        search_(context.config.dird_seqslam, context.config.match.sequence_length,
+        search_(context.config.dird_seqslam.search, context.config.match.sequence_length,
                 ContrastSequenceSearch::Mode::kSingleSequence, context.config.match.margin, 0) {}
 
   // Row `seq` (the next one): its distances.
@@ -62,7 +62,7 @@ class ContrastMatching {
     c.outside_areas = outside_areas;
     c.before_margin = seq < static_cast<std::size_t>(context_.config.match.margin);
     c.margin_frames = context_.config.match.margin;
-    c.min_score = context_.config.dird_seqslam.min_score;
+    c.min_score = context_.config.dird_seqslam.search.min_score;
     return FrameVerdict{described, contrast_detection(verdict, c)};
   }
 
@@ -77,7 +77,7 @@ class ContrastMatching {
   nlohmann::json summary() const {
     return {{"detection", {{"delay_frames", search_.emission_delay()}}},
             {"dird_seqslam",
-             {{"velocities", context_.config.dird_seqslam.velocities()},
+             {{"velocities", context_.config.dird_seqslam.search.velocities()},
               {"sequence_length", search_.sequence_length()},
               {"queries_with_a_line", queries_with_line_},
               {"cells", cells_},
@@ -114,6 +114,13 @@ class ContrastMatching {
   std::size_t cells_ = 0, defined_ = 0, queries_with_line_ = 0;
 };
 
+// The method's descriptors: DIRD with its own normalisation and resize, its own standardisation.
+DirdDistances make_distances(const MethodContext& context) {
+  const PipelineConfig& c = context.config;
+  return DirdDistances(context, c.dird_seqslam.descriptor(c.dird),
+                       c.dird_seqslam.standardization(c.standardize));
+}
+
 // What the full and gated methods report alike.
 nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatching& matching) {
   nlohmann::json out = matching.summary();
@@ -134,7 +141,7 @@ MethodEvaluation method_evaluation(const ContrastMatching& matching) {
 class DirdSeqSlamFull final : public DetectionMethod {
  public:
   explicit DirdSeqSlamFull(const MethodContext& context)
-      : context_(context), distances_(context), matching_(context) {}
+      : context_(context), distances_(make_distances(context)), matching_(context) {}
   std::string name() const override { return "dird-seqslam"; }
   std::string mode() const override { return "full"; }
   bool needs_every_image() const override { return true; }
@@ -171,7 +178,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
  public:
   explicit DirdSeqSlamGated(const MethodContext& context)
       : context_(context),
-        distances_(context),
+        distances_(make_distances(context)),
         matching_(context),
         cells_(context),
         rows_(context.config.gate.row_horizon_frames) {}

@@ -67,6 +67,13 @@ void RunConfig::validate() const {
   if (!frames.empty()) frame_range(static_cast<std::size_t>(-1));
 }
 
+void DirdSeqSlamConfig::validate() const {
+  require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
+  require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
+  require_one_of("dird_seqslam.standardize", standardize, {"off", "causal", "batch"});
+  search.validate();
+}
+
 void EvalConfig::validate() const {
   require(std::isfinite(truth_radius_m) && truth_radius_m > 0, "eval.truth_radius_m", "> 0",
           std::to_string(truth_radius_m));

@@ -141,11 +141,43 @@ struct EvalConfig {
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
 };
 
-inline StandardizeConfig auto_standardize() {
-  StandardizeConfig config;
-  config.mode = "auto";
-  return config;
-}
+// Section dird_seqslam: the descriptors dird-seqslam compares and its search. The DIRD section keeps the
+// paper's descriptor (libdird normalisation, nearest-neighbour resize: bit-exact with the reference, with
+// the logistic constants calibrated for it); dird-seqslam's default is the one measured best across day,
+// night and seasons (docs/illumination.md): l2 normalisation (no invalid pixels in dark regions), area resize
+// (sensor noise averaged before sampling) and causal standardisation (per-dimension statistics of the recent
+// frames). Needs no logistic constants: the search's score is in units of the local spread of distances.
+struct DirdSeqSlamConfig {
+  std::string normalization = "l2";  // replaces dird.normalization for this method: libdird | l2
+  std::string resize = "area";       // replaces dird.resize: nearest | area
+  // off | causal | batch (two sequences only): replaces standardize.mode for this method; the statistics
+  // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
+  // of section standardize.
+  std::string standardize = "causal";
+  ContrastSearchConfig search;
+
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("normalization", self.normalization);
+    v("resize", self.resize);
+    v("standardize", self.standardize);
+    ContrastSearchConfig::fields(self.search, v);
+  }
+  void validate() const;
+
+  // The DIRD configuration its descriptors are extracted with, and the standardisation they get.
+  DirdConfig descriptor(const DirdConfig& dird) const {
+    DirdConfig out = dird;
+    out.normalization = normalization;
+    out.resize = resize;
+    return out;
+  }
+  StandardizeConfig standardization(const StandardizeConfig& standardize_section) const {
+    StandardizeConfig out = standardize_section;
+    out.mode = standardize;
+    return out;
+  }
+};
 
 inline SeqSlamConfig single_sequence_seqslam() {
   SeqSlamConfig config;
@@ -162,20 +194,21 @@ struct PipelineConfig {
   GateConfig gate;
   DirdConfig dird;
   MatchConfig match;
-  // Descriptor standardisation (docs/standardize.md): off = raw DIRD bytes; causal (single sequence) or
-  // batch (two sequences: each its own statistics) = z-scored codes compared by cosine or L1; auto (the
-  // default) = what the method recommends, resolved when the configuration is loaded: causal for
-  // run.method dird-seqslam, off for dird (the paper's DIRD, unchanged) and seqslam.
-  StandardizeConfig standardize = auto_standardize();
+  // Descriptor standardisation (docs/standardize.md) of the DIRD DP methods (run.method dird): off = raw
+  // DIRD bytes; causal (single sequence) or batch (two sequences: each its own statistics) = z-scored codes
+  // compared by cosine or L1. dird-seqslam chooses its own (dird_seqslam.standardize) and takes the
+  // statistics parameters of this section.
+  StandardizeConfig standardize;
   // The logistic's scale: off = dird.mu / dird.sigma (raw) or standard_default_scale() (standardised);
   // online = OnlineScale, from the distances seen so far.
   OnlineScaleConfig scale;
   // SeqSLAM (run.method seqslam). A single run is matched against itself: reference rows closer than
   // exclusion_margin_frames before the query are excluded ("past"); set the margin like match.margin.
   SeqSlamConfig seqslam = single_sequence_seqslam();
-  // run.method dird-seqslam: contrast enhancement and sequence search (stages/match/contrast_search.hpp);
-  // its sequence length is match.sequence_length, its margin match.margin.
-  ContrastSearchConfig dird_seqslam;
+  // run.method dird-seqslam: its descriptors (DIRD with its own normalisation, resize and standardisation)
+  // and the contrast enhancement and sequence search (stages/match/contrast_search.hpp); its sequence
+  // length is match.sequence_length, its margin match.margin.
+  DirdSeqSlamConfig dird_seqslam;
   EvalConfig eval;
   OutputConfig output;
 
@@ -196,11 +229,6 @@ struct PipelineConfig {
     v("dird_seqslam", self.dird_seqslam);
     v("eval", self.eval);
     v("output", self.output);
-  }
-  // Called once when the configuration is loaded, before validate(): standardize.mode auto -> the
-  // method's choice.
-  void resolve() {
-    if (standardize.mode == "auto") standardize.mode = run.dird_seqslam() ? "causal" : "off";
   }
   void validate() const {
     run.validate();

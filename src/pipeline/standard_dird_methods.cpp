@@ -46,7 +46,9 @@ namespace {
 class StandardDird {
  public:
   explicit StandardDird(const MethodContext& context)
-      : context_(context), distances_(context), loops_(context) {
+      : context_(context),
+        distances_(context, context.config.dird, context.config.standardize),
+        loops_(context) {
     const PipelineConfig& config = context.config;
     if (distances_.standardized()) {
       prior_ = standard_default_scale(config.standardize, config.dird.tau1);

@@ -158,22 +158,23 @@ CodedSequence code_sequence(const DescribedSequence& sequence, const Standardize
 
 // Distance of query frame q to reference frame r on their codes: raw L1 (or L2 with dird.metric l2),
 // standardised cosine or L1 (standardize.distance).
-double coded_distance(const PipelineConfig& config, const CodedSequence& query, std::size_t q,
-                      const CodedSequence& reference, std::size_t r) {
-  if (!config.standardize.enabled()) {
-    return config.dird.l2_metric() ? l2_distance(query.codes[q], reference.codes[r])
-                                   : static_cast<double>(l1_distance(query.codes[q], reference.codes[r]));
+double coded_distance(const DirdConfig& dird, const StandardizeConfig& standardize,
+                      const CodedSequence& query, std::size_t q, const CodedSequence& reference,
+                      std::size_t r) {
+  if (!standardize.enabled()) {
+    return dird.l2_metric() ? l2_distance(query.codes[q], reference.codes[r])
+                            : static_cast<double>(l1_distance(query.codes[q], reference.codes[r]));
   }
-  if (config.standardize.cosine()) {
+  if (standardize.cosine()) {
     return standard_cosine_distance(query.codes[q], query.norms[q], reference.codes[r], reference.norms[r]);
   }
   return static_cast<double>(l1_distance(query.codes[q], reference.codes[r]));
 }
 
-nlohmann::json standardize_json(const PipelineConfig& config, const CodedSequence& reference,
+nlohmann::json standardize_json(const StandardizeConfig& standardize, const CodedSequence& reference,
                                 const CodedSequence& query) {
-  nlohmann::json out = {{"mode", config.standardize.mode},
-                        {"distance", config.standardize.distance},
+  nlohmann::json out = {{"mode", standardize.mode},
+                        {"distance", standardize.distance},
                         {"reference_statistics", reference.statistics},
                         {"query_statistics", query.statistics}};
   nlohmann::json notes = nlohmann::json::array();
@@ -281,13 +282,13 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   if (config.standardize.enabled()) {
     const CodedSequence ref_codes = code_sequence(ref, config.standardize);
     const CodedSequence qry_codes = code_sequence(qry, config.standardize);
-    standardized = standardize_json(config, ref_codes, qry_codes);
+    standardized = standardize_json(config.standardize, ref_codes, qry_codes);
     const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
     parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
       if (!qry.valid[q]) return;
       for (std::size_t r = 0; r < ref_count; ++r) {
         if (!ref.valid[r]) continue;
-        const double d = coded_distance(config, qry_codes, q, ref_codes, r);
+        const double d = coded_distance(config.dird, config.standardize, qry_codes, q, ref_codes, r);
         if (d >= scale.cutoff_distance) continue;
         const double sim = logistic_similarity(d, scale.mu, scale.sigma);
         if (sim > config.dird.tau1) rows[q].push_back({static_cast<std::int64_t>(r), sim});
@@ -413,22 +414,24 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
   const Dataset& query = setup.query;
   const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
   const std::size_t query_first = setup.ranges.query_first, query_count = setup.ranges.query_count;
-  const DirdExtractor extractor(config.dird);
+  const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
+  const StandardizeConfig standardize = config.dird_seqslam.standardization(config.standardize);
+  const DirdExtractor extractor(dird);
 
   auto t0 = Clock::now();
   const DescribedSequence ref =
       describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor);
   const DescribedSequence qry =
       describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor);
-  const CodedSequence ref_codes = code_sequence(ref, config.standardize);
-  const CodedSequence qry_codes = code_sequence(qry, config.standardize);
+  const CodedSequence ref_codes = code_sequence(ref, standardize);
+  const CodedSequence qry_codes = code_sequence(qry, standardize);
   const double describe_s = seconds_since(t0);
 
   // Distances in blocks of queries (in parallel), each block then searched in query order: memory for
   // one block of rows, not the whole matrix.
   constexpr std::size_t kBlock = 256;
   double distance_s = 0.0, search_s = 0.0;
-  ContrastSequenceSearch search(config.dird_seqslam, config.match.sequence_length,
+  ContrastSequenceSearch search(config.dird_seqslam.search, config.match.sequence_length,
                                 ContrastSequenceSearch::Mode::kTwoSequence, 0, 0);
   ContrastOutput output;
   std::vector<std::vector<DistanceEntry>> rows(std::min(kBlock, query_count));
@@ -443,7 +446,7 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
       for (std::size_t r = 0; r < ref_count; ++r) {
         if (ref.valid[r])
           rows[k].push_back(
-              {static_cast<std::int64_t>(r), coded_distance(config, qry_codes, q, ref_codes, r)});
+              {static_cast<std::int64_t>(r), coded_distance(dird, standardize, qry_codes, q, ref_codes, r)});
       }
     });
     distance_s += seconds_since(t0);
@@ -483,7 +486,7 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
     ContrastOutcomeContext context;
     context.two_sequence = true;
     context.described = qry.valid[q] != 0;
-    context.min_score = config.dird_seqslam.min_score;
+    context.min_score = config.dird_seqslam.search.min_score;
     const FrameDetection detection = contrast_detection(verdict, context);
     const bool has_best = verdict.best_j >= 0;
     if (has_best) {
@@ -528,14 +531,17 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
         {"loop", outcome_counts[static_cast<std::size_t>(FrameOutcome::kLoop)]},
         {"delay_frames", search.emission_delay()}}},
       {"dird_seqslam",
-       {{"velocities", config.dird_seqslam.velocities()}, {"sequence_length", search.sequence_length()}}},
+       {{"normalization", dird.normalization},
+        {"resize", dird.resize},
+        {"velocities", config.dird_seqslam.search.velocities()},
+        {"sequence_length", search.sequence_length()}}},
       {"evaluation", std::move(evaluation)},
       {"stages_s", {{"describe", describe_s}, {"distances", distance_s}, {"search", search_s}}},
       {"wall_s", result.wall_s},
       {"peak_rss_mb", peak_rss_mb()},
   };
-  if (config.standardize.enabled())
-    result.summary["standardize"] = standardize_json(config, ref_codes, qry_codes);
+  if (standardize.enabled())
+    result.summary["standardize"] = standardize_json(standardize, ref_codes, qry_codes);
   result.summary.update(sequences_json(setup));
   if (setup.tolerance() >= 0) {
     result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},

@@ -18,8 +18,8 @@
 namespace loopgate {
 
 void StandardizeConfig::validate() const {
-  if (mode != "off" && mode != "batch" && mode != "causal" && mode != "auto") {
-    throw ConfigError("standardize.mode: '" + mode + "' is not one of off, batch, causal, auto");
+  if (mode != "off" && mode != "batch" && mode != "causal") {
+    throw ConfigError("standardize.mode: '" + mode + "' is not one of off, batch, causal");
   }
   if (distance != "l1" && distance != "cosine") {
     throw ConfigError("standardize.distance: '" + distance + "' is not one of l1, cosine");

@@ -61,9 +61,7 @@ namespace loopgate {
 // 100 observed frames, cosine on int8 codes; L1 on causally standardised codes is fragile (frames
 // standardised with different statistics become hubs or outliers) and is kept for measurements.
 struct StandardizeConfig {
-  // "off" (raw bytes), "batch" (one sequence), "causal" (streaming); "auto" (the run configuration's
-  // default): the run's method chooses (PipelineConfig::resolve); a stage never sees "auto".
-  std::string mode = "off";
+  std::string mode = "off";         // "off" (raw bytes), "batch" (one sequence), "causal" (streaming)
   std::string distance = "cosine";  // on the codes: "cosine" (1 - cos of the codes) or "l1" (SAD, psadbw)
   double clamp_sigma = 4.0;         // z-scores clamped to +-clamp_sigma, mapped to codes +-127
   double min_stddev = 1.0;          // floor of every dimension's standard deviation, in descriptor bytes
@@ -93,7 +91,7 @@ struct StandardizeConfig {
   // refresh_every >= 1, observe_every >= 1.
   void validate() const;
 
-  bool enabled() const { return mode == "batch" || mode == "causal"; }  // "auto" unresolved: off
+  bool enabled() const { return mode != "off"; }
   bool cosine() const { return distance == "cosine"; }
 };
 

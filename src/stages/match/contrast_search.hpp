@@ -46,9 +46,12 @@ namespace loopgate {
 struct ContrastSearchConfig {
   int contrast_half_window_frames = 10;  // w: the contrast window is 2 w + 1 references
   int contrast_min_cells = 5;            // fewer distances in the window: z undefined
-  double velocity_min = 0.8;             // reference frames per query frame along a line
-  double velocity_max = 1.25;
-  int velocity_steps = 5;  // geometric grid from velocity_min to velocity_max (1 value if min == max)
+  // Reference frames per query frame along a line: a geometric grid of velocity_steps values from
+  // velocity_min to velocity_max (1 value if min == max); the default, 2/3 .. 3/2 in 7 steps, holds 1 and
+  // allows either traversal to be 1.5 times as fast as the other.
+  double velocity_min = 2.0 / 3.0;
+  double velocity_max = 1.5;
+  int velocity_steps = 7;
   double min_score = 1.0;  // a loop closure: best line's mean z >= min_score (docs/illumination.md)
 
   // The keys, in order, for loading, printing and the JSON echo (section dird_seqslam).
