@@ -451,7 +451,7 @@ def plot_pr(summaries, path, written, source):
     for name, summary in summaries.items():
         pr = precision_recall(summary)
         if not pr.get("curve"):
-            note(f"{source}: '{name}' has no precision_recall curve")
+            note(f"{source}: '{name}' has no precision-recall curve (no detection): left out of pr.png")
             continue
         try:
             recall = [float(p["recall"]) for p in pr["curve"]]

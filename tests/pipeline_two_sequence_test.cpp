@@ -3,6 +3,7 @@
 // the aligned ground truth (eval.aligned_tolerance_frames).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -14,6 +15,8 @@
 #include "io/dataset.hpp"
 #include "pipeline/two_sequence.hpp"
 #include "pipeline_fake_dataset.hpp"
+#include "stages/dird/dird_extractor.hpp"
+#include "stages/dird/dird_similarity.hpp"
 #include "test_support.hpp"
 
 namespace loopgate {
@@ -104,6 +107,59 @@ TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
   EXPECT_DOUBLE_EQ(pr["curve"].back()["precision"].get<double>(), 1.0);
   // The aligned pairs: 2 for the first and last query frame, 3 for the others.
   EXPECT_EQ(read_csv(out / "truth_loops.csv").size(), 3 * kPeriod - 2);
+}
+
+// scale.mode online in two-sequence mode: mu and sigma from the distances of every (reference, query) pair
+// by the no-revisit rule (a hand computation: exact quantiles of the sorted distances), and the run equals
+// one with those constants configured.
+TEST(PipelineTwoSequence, OnlineScaleFollowsTheRuleOnEveryPair) {
+  const RevisitDataset reference(kPeriod, 1, 0);
+  const RevisitDataset query(kPeriod, 1, 12345);
+  PipelineConfig config = dird_config();
+  config.eval.aligned_tolerance_frames = 1;
+  config.dird.normalization = "l2";
+  config.scale.mode = "online";
+  config.scale.min_distances = 1000;
+  const auto out = testing::make_temp_dir("pipeline-two-seq-online");
+  run_two_sequences(config, reference, query, out);
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  const auto& scale = summary.at("scale");
+  ASSERT_TRUE(scale.at("estimated").get<bool>());
+  EXPECT_EQ(scale.at("distances").get<std::int64_t>(), static_cast<std::int64_t>(kPeriod * kPeriod));
+
+  const DirdExtractor extractor(config.dird);
+  const DirdSimilarity similarity(config.dird);
+  std::vector<Descriptor> ref_codes, qry_codes;
+  for (std::size_t k = 0; k < kPeriod; ++k) {
+    ref_codes.push_back(extractor.extract(reference.load_image(k)));
+    qry_codes.push_back(extractor.extract(query.load_image(k)));
+  }
+  std::vector<double> distances;
+  for (const Descriptor& q : qry_codes) {
+    for (const Descriptor& r : ref_codes) distances.push_back(similarity.distance(q, r));
+  }
+  std::sort(distances.begin(), distances.end());
+  const auto quantile = [&](double p) {
+    const double position = p * static_cast<double>(distances.size() - 1);
+    const auto below = static_cast<std::size_t>(std::floor(position));
+    const double above = distances[std::min(below + 1, distances.size() - 1)];
+    return distances[below] + (position - std::floor(position)) * (above - distances[below]);
+  };
+  const double mu = quantile(config.scale.mu_quantile);
+  const double cutoff = quantile(config.scale.cutoff_quantile);
+  const double sigma = (cutoff - mu) / std::log(1.0 / config.dird.tau1 - 1.0);
+  EXPECT_NEAR(scale.at("mu").get<double>(), mu, mu * 2e-3);
+  EXPECT_NEAR(scale.at("cutoff_distance").get<double>(), cutoff, cutoff * 2e-3);
+  EXPECT_NEAR(scale.at("sigma").get<double>(), sigma, sigma * 0.05);
+
+  PipelineConfig fixed = config;
+  fixed.scale.mode = "off";
+  fixed.dird.mu = scale.at("mu").get<double>();
+  fixed.dird.sigma = scale.at("sigma").get<double>();
+  const auto fixed_out = testing::make_temp_dir("pipeline-two-seq-fixed");
+  run_two_sequences(fixed, reference, query, fixed_out);
+  EXPECT_EQ(read_file(out / "loops.csv"), read_file(fixed_out / "loops.csv"));
+  EXPECT_FALSE(read_file(out / "loops.csv").empty());
 }
 
 TEST(PipelineTwoSequence, SeqSlamFindsTheAlignedReferences) {
@@ -281,7 +337,8 @@ TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
     apply_config(raw, loaded);
     FAIL() << "run.method=netvlad accepted";
   } catch (const ConfigError& e) {
-    EXPECT_STREQ(e.what(), "run.method: 'netvlad' is not one of dird|seqslam|dird-seqslam (--set run.method=netvlad)");
+    EXPECT_STREQ(e.what(),
+                 "run.method: 'netvlad' is not one of dird|seqslam|dird-seqslam (--set run.method=netvlad)");
   }
 }
 

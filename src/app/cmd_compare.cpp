@@ -118,6 +118,9 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   config.run.mode = m.mode;
   config.run.method = m.detector;
   config.standardize.mode = m.standardize;
+  // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
+  // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
+  if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
   config.validate();
   return config;
 }
@@ -255,6 +258,7 @@ void write_plots(const CompareOptions& options, const fs::path& out_dir) {
   const std::string command = "/usr/bin/python3 " + shell_quote(script.string()) + " compare " +
                               shell_quote(out_dir.string()) + " --out " +
                               shell_quote((out_dir / "plots").string());
+  std::fflush(stdout);  // the table before the plotter's own lines
   const int status = std::system(command.c_str());
   if (status != 0) {
     spdlog::warn("compare: plotting failed (exit status {}): {}", status, command);

@@ -274,21 +274,59 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
 
   // Similarity rows of every query against the whole reference (no margin), in parallel; frames
   // without a descriptor take part in no pair. Standardised: each sequence coded with its own statistics,
-  // the logistic of standard_default_scale() on their distances.
+  // the logistic of standard_default_scale() on their distances; raw: dird.mu / dird.sigma. scale.mode
+  // online: the logistic from the distances of every (reference, query) pair by the rule of OnlineScale
+  // (dird_online_scale.hpp; the no-revisit rule of `loopgate calibrate`), a first pass over the pairs.
   t0 = Clock::now();
   const bool any_ref_missing = ref.described != ref_count;
   std::vector<std::vector<SimilarityEntry>> rows(query_count);
   std::optional<nlohmann::json> standardized;
+  std::optional<CodedSequence> ref_codes, qry_codes;
   if (config.standardize.enabled()) {
-    const CodedSequence ref_codes = code_sequence(ref, config.standardize);
-    const CodedSequence qry_codes = code_sequence(qry, config.standardize);
-    standardized = standardize_json(config.standardize, ref_codes, qry_codes);
-    const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
+    ref_codes = code_sequence(ref, config.standardize);
+    qry_codes = code_sequence(qry, config.standardize);
+    standardized = standardize_json(config.standardize, *ref_codes, *qry_codes);
+  }
+  const auto distance_of = [&](std::size_t q, std::size_t r) {
+    return qry_codes ? coded_distance(config.dird, config.standardize, *qry_codes, q, *ref_codes, r)
+                     : similarity.distance(qry.descriptors[q], ref.descriptors[r]);
+  };
+  LogisticScale scale =
+      qry_codes ? standard_default_scale(config.standardize, config.dird.tau1)
+                : LogisticScale{config.dird.mu, config.dird.sigma,
+                                logistic_distance_at(config.dird.tau1, config.dird.mu, config.dird.sigma),
+                                false, 0};
+  std::int64_t scale_distances = 0;
+  if (config.scale.online()) {
+    OnlineScale online(config.scale, config.dird.tau1, scale);
+    std::mutex online_mutex;
+    parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
+      if (!qry.valid[q]) return;
+      std::vector<double> distances;
+      distances.reserve(ref_count);
+      for (std::size_t r = 0; r < ref_count; ++r) {
+        if (ref.valid[r]) distances.push_back(distance_of(q, r));
+      }
+      const std::lock_guard lock(online_mutex);
+      online.add(std::span<const double>(distances));
+    });
+    scale_distances = online.count();
+    scale = online.scale();
+    if (!scale.estimated) {
+      spdlog::warn(
+          "scale.mode online: {} pair distances are too few for an estimate (scale.min_distances {}): "
+          "the configured scale is used",
+          online.count(), config.scale.min_distances);
+    }
+    spdlog::info("scale: mu {:.6g}, sigma {:.6g}, cut-off {:.6g} ({} from {} pair distances)", scale.mu,
+                 scale.sigma, scale.cutoff_distance, scale.estimated ? "estimated" : "prior", online.count());
+  }
+  if (qry_codes || config.scale.online()) {
     parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
       if (!qry.valid[q]) return;
       for (std::size_t r = 0; r < ref_count; ++r) {
         if (!ref.valid[r]) continue;
-        const double d = coded_distance(config.dird, config.standardize, qry_codes, q, ref_codes, r);
+        const double d = distance_of(q, r);
         if (d >= scale.cutoff_distance) continue;
         const double sim = logistic_similarity(d, scale.mu, scale.sigma);
         if (sim > config.dird.tau1) rows[q].push_back({static_cast<std::int64_t>(r), sim});
@@ -394,6 +432,9 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   };
   result.summary.update(sequences_json(setup));
   if (standardized) result.summary["standardize"] = *standardized;
+  result.summary["scale"] = {{"mode", config.scale.mode},    {"mu", scale.mu},
+                             {"sigma", scale.sigma},         {"cutoff_distance", scale.cutoff_distance},
+                             {"estimated", scale.estimated}, {"distances", scale_distances}};
   if (setup.tolerance() >= 0) {
     result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
                                  {"loops_within_tolerance", loops_aligned},
@@ -694,12 +735,6 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
                query.root().string(), setup.ranges.query_count, config.run.threads);
   const auto start = Clock::now();
   std::filesystem::create_directories(out_dir);
-  if (config.scale.online()) {
-    throw ConfigError(
-        "scale.mode: 'online' estimates the scale while a single sequence streams; two-sequence runs take "
-        "dird.mu / dird.sigma, the standardised scale (standardize.mode batch or causal) or run.method "
-        "dird-seqslam, which needs no scale");
-  }
   TwoSequenceResult result = config.run.seqslam()        ? run_seqslam(setup, out_dir, start)
                              : config.run.dird_seqslam() ? run_dird_seqslam(setup, out_dir, start)
                                                          : run_dird(setup, out_dir, start);
