@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: installs dependencies, builds, renders the synthetic `demo`
-# dataset if it is absent (a street drive: a block by day, new streets with an aliased copy of it, the block again at dusk), then runs
-# `loopgate compare` on it: full DIRD, gated DIRD (the paper's method) and SeqSLAM side by side, printing
-# one table (time per stage, descriptors, loops true/false, PR figures) and writing the plots.
+# dataset if it is absent (a street drive: a block by day, new streets with an aliased copy of it, the block
+# again at night under street lamps and headlights), then runs `loopgate compare` on it: every method, full
+# and gated (DIRD, the paper's method; SeqSLAM; standardised DIRD; dird-seqslam) side by side, printing one
+# table (time per stage, descriptors, loops true/false, PR figures) and writing the plots.
 # Usage: scripts/demo.sh [OUT_DIR]   (default: out/demo; the comparison goes to OUT_DIR-compare)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -21,4 +22,4 @@ rm -rf "$compare_out"
 build/release/loopgate compare --config configs/demo.yaml --dataset "$out" --out "$compare_out" \
   --set output.progress=off
 echo "demo: open $compare_out/plots/*.png (pr.png, plane.png, trajectory.png, time_per_frame.png);" \
-  "per-run outputs in $compare_out/{full,gated,seqslam}" >&2
+  "per-run outputs in $compare_out/<method>/" >&2

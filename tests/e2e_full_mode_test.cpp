@@ -138,7 +138,7 @@ TEST(E2eFullMode, KittiThumbsFindsTheRevisits) {
   const fs::path out = testing::make_temp_dir("e2e-full-kitti00");
   int status = -1;
   const std::string output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) +
-                                     "/configs/kitti00-thumbs.yaml --mode full --dataset " +
+                                     "/configs/kitti00-thumbs.yaml --method dird --mode full --dataset " +
                                      (testing::shared_data_dir() / "kitti/00/thumbs").string() + " --out " +
                                      out.string() + " --set output.progress=off",
                                  &status);
