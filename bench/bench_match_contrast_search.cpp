@@ -1,7 +1,7 @@
 // Cost of dird-seqslam's matching per frame (stages/match/contrast_search.hpp), on one core: the contrast of
 // one row and one push of the streaming search (contrast + every line ending in the row + the cover), for a
 // gated row (a candidate area's ~100 references) and full rows of 1 000 to 100 000 references (a full run's
-// row grows with the map). L = 20, the default velocity grid (5 values), random distances.
+// row grows with the map). L = 20, the default velocity grid (7 values), random distances.
 // Run: build/release/bench_match_contrast_search --benchmark_repetitions=5 --benchmark_report_aggregates_only
 #include <benchmark/benchmark.h>
 
