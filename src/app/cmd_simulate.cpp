@@ -140,7 +140,7 @@ void add_simulate_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--frames", opt->frames, "Render only the first N frames (0 = all)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(std::int64_t{0}, std::int64_t{10'000'000}));
   cmd->add_option("--trajectory", opt->trajectory,
                   "Trajectory file replacing the preset's (KITTI poses.txt with times.txt beside it, EuRoC "
                   "ground-truth .csv, or TUM)");
