@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <fstream>
 #include <sstream>
@@ -165,6 +166,52 @@ TEST(IoConfig, FileErrorsNameTheFile) {
   const TestConfig config = load_config<TestConfig>(dir / "good.yaml", {"alpha.seed=9"});
   EXPECT_DOUBLE_EQ(config.beta.sigma_m, 2.0);
   EXPECT_EQ(config.alpha.seed, 9);
+}
+
+// Issue 15: a YAML key (or section) given twice is an error naming both lines; the last value no longer
+// wins silently.
+TEST(IoConfig, DuplicateKeysAreErrorsNamingBothLines) {
+  const auto error = [](const std::string& text) {
+    try {
+      RawConfig::from_yaml_string(text, "cfg.yaml");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error("alpha:\n  count: 4\n  gain: 2\n  count: 5\n"),
+            "alpha.count: key given twice, at cfg.yaml:2 and cfg.yaml:4 (each key once; the last value would "
+            "silently win)");
+  EXPECT_NE(error("alpha:\n  count: 4\nbeta:\n  sigma_m: 1\nalpha:\n  gain: 2\n")
+                .find("alpha: section given twice, at cfg.yaml:1 and cfg.yaml:5"),
+            std::string::npos);
+  EXPECT_EQ(error("alpha:\n  count: 4\nbeta:\n  count: 4\n"), "");  // same key, different sections
+}
+
+// Issue 15: a FIFO given as --config blocked open() forever.
+TEST(IoConfig, ConfigFileMustBeARegularFile) {
+  const auto dir = testing::make_temp_dir("config-fifo");
+  ASSERT_EQ(::mkfifo((dir / "config.yaml").c_str(), 0600), 0);
+  try {
+    RawConfig::from_yaml_file(dir / "config.yaml");
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("the configuration file is a FIFO (named pipe), expected a regular file"),
+        std::string::npos)
+        << e.what();
+  }
+}
+
+// Issue 15: a huge value is quoted capped in the error.
+TEST(IoConfig, HugeValuesAreQuotedCapped) {
+  try {
+    from_yaml("", {"alpha.count=" + std::string(1'000'000, '9') + "x"});
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_LT(std::string(e.what()).size(), 400u);
+    EXPECT_NE(std::string(e.what()).find("(1000001 bytes)"), std::string::npos) << e.what();
+  }
 }
 
 TEST(IoWriters, CsvQuotesAndChecksWidth) {

@@ -7,6 +7,8 @@
 #include <limits>
 #include <system_error>
 
+#include "io/file_guard.hpp"
+
 namespace loopgate::io_detail {
 
 namespace {
@@ -14,8 +16,9 @@ namespace {
 constexpr int kNsDigits = 9;  // decimals of a second in a nanosecond timestamp
 constexpr std::int64_t kNsPerSecond = 1'000'000'000;
 
+// A field in an error message: capped, so that a 20 MB field does not end up whole in summary.json.
 std::string quoted(std::string_view field) {
-  return "'" + std::string(field) + "'";
+  return quote_excerpt(field);
 }
 
 std::string column_label(std::size_t column, std::string_view name) {
@@ -93,6 +96,7 @@ TextFile::TextFile(const std::filesystem::path& file) : path_(file) {
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw DataError(file, "file not found");
   if (std::filesystem::is_directory(file, ec)) throw DataError(file, "expected a file, found a directory");
+  require_regular_file(file);  // a FIFO or a device would block open() or never end
   std::ifstream in(file, std::ios::binary);
   if (!in) throw DataError(file, "cannot open file for reading");
   in.seekg(0, std::ios::end);

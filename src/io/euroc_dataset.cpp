@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 #include "io/trajectory_io.hpp"
 
@@ -25,6 +26,7 @@ template <class Read>
 auto read_optional_yaml(const fs::path& file, io_detail::IssueLog& log, Read&& read)
     -> std::optional<decltype(read(file))> {
   std::error_code ec;
+  if (fs::exists(file, ec)) require_regular_file(file);  // a FIFO would block open() forever
   if (!fs::is_regular_file(file, ec)) {
     spdlog::debug("{}: absent", file.string());
     return std::nullopt;
@@ -114,6 +116,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
     }
   } else {
     for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
+      if (fs::exists(tum, ec)) require_regular_file(tum);
       if (!fs::is_regular_file(tum, ec)) continue;
       for (const StampedPose& pose : io_detail::read_tum(tum, log)) {
         GroundTruthState s;

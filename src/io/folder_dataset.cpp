@@ -9,6 +9,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 
 namespace loopgate {
@@ -31,6 +32,7 @@ std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, con
   d->images_present = true;
 
   const fs::path times_file = dir / "times.txt";
+  if (fs::exists(times_file, ec)) require_regular_file(times_file);  // a FIFO would block open() forever
   if (fs::is_regular_file(times_file, ec)) {
     const std::vector<std::optional<Timestamp>> times = io_detail::read_kitti_time_rows(times_file, log);
     if (times.size() != files.size()) {

@@ -21,6 +21,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 #include "io/trajectory_io.hpp"
 
@@ -50,6 +51,7 @@ fs::path default_image_name(const fs::path& image_dir, std::size_t index) {
 std::optional<fs::path> first_existing(const std::vector<fs::path>& candidates) {
   std::error_code ec;
   for (const fs::path& p : candidates) {
+    if (fs::exists(p, ec)) require_regular_file(p);  // a FIFO would block open() forever
     if (fs::is_regular_file(p, ec)) return p;
   }
   return std::nullopt;
@@ -68,6 +70,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
   // Where times.txt (and the sequence metadata) live.
   fs::path meta_dir = dir;
   bool subset = false;
+  if (fs::exists(dir / "times.txt", ec)) require_regular_file(dir / "times.txt");
   if (!fs::is_regular_file(dir / "times.txt", ec)) {
     const fs::path parent = fs::absolute(dir, ec).parent_path();
     if (fs::is_directory(image_dir, ec) && fs::is_regular_file(parent / "times.txt", ec)) {

@@ -105,7 +105,8 @@ double yaml_number(const std::filesystem::path& file, const YAML::Node& node, co
   double value = 0;
   const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
   if (text.empty() || ec != std::errc{} || ptr != text.data() + text.size() || !std::isfinite(value)) {
-    throw DataError(file, yaml_line(node), what + ": expected a finite number, got '" + node.Scalar() + "'");
+    throw DataError(file, yaml_line(node),
+                    what + ": expected a finite number, got " + quote_excerpt(node.Scalar()));
   }
   return value;
 }
@@ -563,9 +564,9 @@ CameraCalibration read_euroc_camera_yaml(const std::filesystem::path& yaml_file)
   } else if (model_name == "none") {
     camera.distortion_model = DistortionModel::kNone;
   } else {
-    throw DataError(
-        yaml_file, model ? yaml_line(model) : 0,
-        "distortion_model: '" + model_name + "', expected radial-tangential, equidistant or none");
+    throw DataError(yaml_file, model ? yaml_line(model) : 0,
+                    "distortion_model: " + quote_excerpt(model_name) +
+                        ", expected radial-tangential, equidistant or none");
   }
   if (camera.distortion_model != DistortionModel::kNone) {
     const YAML::Node coefficients = require_key(yaml_file, root, "distortion_coefficients");
