@@ -1,5 +1,6 @@
 #include "io/csv_text.hpp"
 
+#include <algorithm>
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -50,8 +51,34 @@ bool all_digits(std::string_view text) {
 }  // namespace
 
 void IssueLog::report(const std::filesystem::path& file, std::size_t line, const std::string& message) {
+  if (in_table_) {
+    held_.push_back(DataIssue{file, line, message});
+    return;
+  }
   if (strict_) throw DataError(file, line, message);
   if (sink_) sink_->push_back(DataIssue{file, line, message});
+}
+
+void IssueLog::begin_table() {
+  in_table_ = true;
+  held_.clear();
+}
+
+void IssueLog::end_table(const std::filesystem::path& file, std::size_t rows) {
+  in_table_ = false;
+  std::vector<DataIssue> issues = std::move(held_);
+  held_.clear();
+  std::stable_sort(issues.begin(), issues.end(),
+                   [](const DataIssue& a, const DataIssue& b) { return a.line < b.line; });
+  if (issues.empty()) return;
+  if (strict_) throw DataError(issues.front().file, issues.front().line, issues.front().message);
+  const std::size_t rejected = issues.size();
+  if (rows > 0 && 2 * rejected > rows) {
+    throw DataError(file, std::to_string(rejected) + " of its " + std::to_string(rows) +
+                              " rows are bad (first: " + issues.front().to_string() +
+                              "); more than half of the file is rejected, so the rest is not trusted either");
+  }
+  if (sink_) sink_->insert(sink_->end(), issues.begin(), issues.end());
 }
 
 double Row::number(std::size_t column, std::string_view name) const {

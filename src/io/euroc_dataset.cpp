@@ -74,7 +74,9 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   std::size_t missing = 0;
   d->frames.reserve(entries.size());
   for (std::size_t i = 0; i < entries.size(); ++i) {
-    d->frames.push_back(io_detail::FrameEntry{entries[i].t_ns, data_dir / entries[i].filename, i});
+    // The frame's number is its data row (rows rejected before it keep their numbers: a gap, not a shift).
+    d->frames.push_back(
+        io_detail::FrameEntry{entries[i].t_ns, data_dir / entries[i].filename, entries[i].index});
     if (data_dir_present && !fs::is_regular_file(d->frames.back().image, ec)) ++missing;
   }
   d->images_present = data_dir_present && missing < entries.size();
