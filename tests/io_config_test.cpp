@@ -221,6 +221,7 @@ TEST(IoWriters, CsvQuotesAndChecksWidth) {
     csv.write_row({"1", "a,b"});
     csv.write_row({"2", "say \"hi\""});
     EXPECT_THROW(csv.write_row({"3"}), DataError);
+    csv.close();
   }
   std::ifstream in(dir / "a.csv");
   std::stringstream buffer;
@@ -228,6 +229,49 @@ TEST(IoWriters, CsvQuotesAndChecksWidth) {
   const std::string content = buffer.str();
   EXPECT_EQ(content, "x,y\n1,\"a,b\"\n2,\"say \"\"hi\"\"\"\n");
   EXPECT_EQ(format_fixed(1.0 / 3.0, 3), "0.333");
+}
+
+// Issue 15: every output is whole or absent. While written it is FILE.partial; close() renames it; a writer
+// destroyed without close() (an exception on the way) leaves nothing; a failed write names the file and the
+// system's reason, and leaves nothing either.
+TEST(IoWriters, OutputsAreWholeOrAbsent) {
+  const auto dir = testing::make_temp_dir("writers-atomic");
+  {
+    CsvWriter csv(dir / "frames.csv", {"a", "b"});
+    csv.write_row({"1", "2"});
+    csv.flush();
+    EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv"));
+    EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv.partial"));
+    csv.close();
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv.partial"));
+  {
+    TumWriter tum(dir / "trajectory.tum");
+    tum.write(0, Eigen::Isometry3d::Identity());
+  }  // destroyed without close(): abandoned
+  EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum.partial"));
+
+  // A full disk: the temporary file is /dev/full, where every write fails with ENOSPC.
+  std::filesystem::create_symlink("/dev/full", dir / "loops.csv.partial");
+  CsvWriter full;
+  full.open(dir / "loops.csv", {"i", "j"});
+  std::string error;
+  try {
+    for (int k = 0; k < 100000; ++k) full.write_row({"1", "2"});  // beyond the stream's buffer
+    full.close();
+  } catch (const DataError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(error.find("loops.csv: write failed: No space left on device"), std::string::npos) << error;
+  full.abandon();
+  EXPECT_FALSE(std::filesystem::exists(dir / "loops.csv"));
+  EXPECT_FALSE(std::filesystem::is_symlink(dir / "loops.csv.partial"));
+
+  write_json_file(dir / "summary.json", {{"a", "\xff\xfe not utf-8"}});  // replaced, not a lost file
+  EXPECT_TRUE(std::filesystem::exists(dir / "summary.json"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "summary.json.partial"));
 }
 
 }  // namespace

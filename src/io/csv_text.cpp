@@ -227,11 +227,22 @@ void write_text_file(const std::filesystem::path& file, const std::string& text)
     std::filesystem::create_directories(file.parent_path(), ec);
     if (ec) throw DataError(file.parent_path(), "cannot create directory: " + ec.message());
   }
-  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  // Whole or absent: written under a temporary name, renamed when complete.
+  std::filesystem::path partial = file;
+  partial += ".partial";
+  std::ofstream out(partial, std::ios::binary | std::ios::trunc);
   if (!out) throw DataError(file, "cannot open file for writing");
   out.write(text.data(), static_cast<std::streamsize>(text.size()));
   out.close();
-  if (!out) throw DataError(file, "write failed");
+  if (!out) {
+    std::filesystem::remove(partial, ec);
+    throw DataError(file, "write failed (disk full?)");
+  }
+  std::filesystem::rename(partial, file, ec);
+  if (ec) {
+    std::filesystem::remove(partial, ec);
+    throw DataError(file, "cannot rename " + partial.string() + ": " + ec.message());
+  }
 }
 
 }  // namespace loopgate::io_detail
