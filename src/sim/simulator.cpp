@@ -17,6 +17,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "io/config.hpp"
+#include "io/file_guard.hpp"
 #include "io/trajectory_io.hpp"
 #include "io/writers.hpp"
 #include "sim/renderer.hpp"
@@ -447,7 +448,11 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   if (std::filesystem::exists(out_dir, ec)) {
     if (!std::filesystem::is_directory(out_dir, ec))
       throw DataError(out_dir, "--out exists and is not a directory");
-    if (!std::filesystem::is_empty(out_dir, ec)) {
+    // Empty apart from the lock of the command writing into it (io/file_guard.hpp).
+    bool empty = true;
+    for (const auto& entry : std::filesystem::directory_iterator(out_dir, ec))
+      empty = empty && entry.path().filename() == OutputLock::kFileName;
+    if (!empty) {
       if (!options.force)
         throw DataError(out_dir, "output directory is not empty (use --force to overwrite)");
       std::filesystem::remove_all(out_dir / "mav0", ec);
