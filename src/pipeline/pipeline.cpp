@@ -230,7 +230,7 @@ RunResult PipelineRun::run() {
     make_edge(*sink, limiter->decrementer());
   });
 
-  tsan_suppressions_anchor();  // TSan builds: links the oneTBB suppressions (parallel_handoff.hpp)
+  sanitizer_suppressions_anchor();  // sanitizer builds: links the oneTBB suppressions (parallel_handoff.hpp)
   RunResult result;
   const double cpu_start_s = cpu_seconds();
   clock_.restart();
