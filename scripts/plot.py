@@ -62,7 +62,8 @@ DEFAULT_RADIUS_M = 2.0  # evaluation.md defaults when the summary does not say
 DEFAULT_GAP_FRAMES = 20
 PAIR_BLOCK_CELLS = 1 << 21  # (i, j) cells per block when computing true loops from ground truth
 METHOD_LABELS = {"full": "full DIRD", "gated": "gated DIRD", "seqslam": "SeqSLAM",
-                 "seqslam-gated": "gated SeqSLAM", "std-full": "full std. DIRD", "std-gated": "gated std. DIRD"}
+                 "seqslam-gated": "gated SeqSLAM", "std-full": "full std. DIRD", "std-gated": "gated std. DIRD",
+                 "dird-seqslam": "full DIRD-SeqSLAM", "dird-seqslam-gated": "gated DIRD-SeqSLAM"}
 AXES = "xyz"
 
 
@@ -515,8 +516,8 @@ def cmd_run(run_dir, out):
         mode = run.summary.get("mode", "full")
         if method == "dird":
             name = mode  # "full" / "gated" DIRD
-        else:
-            name = method if mode != "gated" else f"{method}-gated"  # "seqslam" / "seqslam-gated"
+        else:  # "seqslam" / "seqslam-gated", "dird-seqslam" / "dird-seqslam-gated"
+            name = method if mode != "gated" else f"{method}-gated"
         plot_pr({name: run.summary}, out / "pr.png", written, run_dir / "summary.json")
     plot_descriptor(run_dir, out / "descriptor.png", written)
     return written
@@ -530,6 +531,9 @@ def cmd_compare(compare_dir, out):
     if not summaries:
         raise InputError(f"{source}:1: expected method summaries (full, gated, seqslam)")
     plot_pr(summaries, out / "pr.png", written, source)
+    if any(s.get("mode") == "two-sequence" for s in summaries.values()):
+        note(f"{source}: two-sequence runs (no poses): only pr.png")
+        return written
     runs = {}
     for name in ("full", "gated"):  # the run directories whose files are plotted
         if name in summaries:

@@ -13,6 +13,7 @@
 #include <numeric>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
@@ -286,6 +287,63 @@ TEST(DirdExtractor, FlipVertical) {
   cv::Mat odd_flipped;
   cv::flip(odd, odd_flipped, 0);
   EXPECT_EQ(extract(odd, "l2", true), extract(odd_flipped, "l2"));
+}
+
+Descriptor extract_area(const cv::Mat& image, const std::string& normalization = "l2", bool flip = false) {
+  DirdConfig config;
+  config.normalization = normalization;
+  config.flip_vertical = flip;
+  config.resize = "area";
+  return DirdExtractor(config).extract(image);
+}
+
+TEST(DirdExtractor, AreaResizeIsTheRoundedBlockMean) {
+  // 384 x 576: every working pixel covers 2 rows x 3 columns; the block (u, v) holds the values
+  // base + {0, 1, 2, 3, 4, 5} with base = (7u + 13v) mod 200: mean base + 2.5, rounded half up to base + 3.
+  const auto base = [](int u, int v) { return (7 * u + 13 * v) % 200; };
+  const cv::Mat big =
+      make_image(384, 576, [&](int x, int y) { return base(x / 3, y / 2) + (y % 2) * 3 + x % 3; });
+  const cv::Mat means = make_image(192, 192, [&](int u, int v) { return base(u, v) + 3; });
+  for (const char* normalization : {"libdird", "l2"}) {
+    EXPECT_EQ(extract_area(big, normalization), extract(means, normalization)) << normalization;
+  }
+  // Flipped: the same as flipping first. Colour: grey first (BT.601), then the means.
+  cv::Mat flipped;
+  cv::flip(big, flipped, 0);
+  EXPECT_EQ(extract_area(big, "l2", true), extract_area(flipped, "l2"));
+  cv::Mat channels[3] = {big, big, big}, colour;
+  cv::merge(channels, 3, colour);
+  EXPECT_EQ(extract_area(colour), extract_area(big));
+  // Smaller than the working image: one source pixel per working pixel (v H / 192 in integers).
+  const cv::Mat small = make_image(64, 32, [](int x, int y) { return (x * 5 + y * 11) % 256; });
+  const cv::Mat upsampled =
+      make_image(192, 192, [&](int u, int v) { return small.at<std::uint8_t>(v * 64 / 192, u * 32 / 192); });
+  EXPECT_EQ(extract_area(small), extract(upsampled, "l2"));
+}
+
+TEST(DirdExtractor, AreaResizeAveragesSensorNoiseAway) {
+  // A textured 1241 x 376 frame and the same with Gaussian noise of sigma 9 grey levels (the simulator's
+  // harsh night): the area working image keeps the descriptor much closer to the clean one.
+  cv::Mat clean(376, 1241, CV_8UC1);
+  cv::RNG rng(5);
+  cv::Mat coarse(24, 80, CV_8UC1);
+  rng.fill(coarse, cv::RNG::UNIFORM, 40, 216);
+  cv::resize(coarse, clean, clean.size(), 0, 0, cv::INTER_LINEAR);
+  cv::Mat noise(clean.size(), CV_16SC1), noisy16;
+  rng.fill(noise, cv::RNG::NORMAL, 0, 9);
+  clean.convertTo(noisy16, CV_16SC1);
+  noisy16 += noise;
+  cv::Mat noisy;
+  noisy16.convertTo(noisy, CV_8UC1);
+  const auto sad = [](const Descriptor& a, const Descriptor& b) {
+    int sum = 0;
+    for (std::size_t k = 0; k < a.size(); ++k) sum += std::abs(int{a[k]} - int{b[k]});
+    return sum;
+  };
+  const int nearest = sad(extract(clean, "l2"), extract(noisy, "l2"));
+  const int area = sad(extract_area(clean), extract_area(noisy));
+  std::printf("SAD clean vs noisy: nearest %d, area %d\n", nearest, area);
+  EXPECT_LT(area, nearest / 2);
 }
 
 TEST(DirdExtractor, DescriptorPictureLayout) {

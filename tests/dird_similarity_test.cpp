@@ -190,8 +190,17 @@ TEST(DirdConfig, ValidateNamesKeys) {
   std::vector<std::string> keys;
   const DirdConfig& const_config = config;
   DirdConfig::fields(const_config, [&](const char* key, const auto&) { keys.emplace_back(key); });
-  EXPECT_EQ(keys,
-            (std::vector<std::string>{"normalization", "flip_vertical", "metric", "mu", "sigma", "tau1"}));
+  EXPECT_EQ(keys, (std::vector<std::string>{"normalization", "flip_vertical", "resize", "metric", "mu",
+                                            "sigma", "tau1"}));
+  config = DirdConfig{};
+  config.resize = "bilinear";
+  try {
+    config.validate();
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("dird.resize"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("nearest, area"), std::string::npos);
+  }
 }
 
 }  // namespace

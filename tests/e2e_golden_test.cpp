@@ -77,7 +77,7 @@ TEST(E2eGolden, AliasingPresetDirdAndSeqSlamFullAndGated) {
                                  &log),
             0)
       << log;
-  expect_digests("aliasing", "compare --no-plots --config " +
+  expect_digests("aliasing", "compare --no-plots --methods full,gated,seqslam --config " +
                                  (kSource / "configs" / "aliasing.yaml").string() + " --dataset " +
                                  data.string());
   expect_digests("aliasing-seqslam-gated", "run --method seqslam --mode gated --config " +
@@ -87,7 +87,7 @@ TEST(E2eGolden, AliasingPresetDirdAndSeqSlamFullAndGated) {
 
 TEST(E2eGolden, KittiThumbsDirdAndSeqSlamFullAndGated) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs");
-  expect_digests("thumbs", "compare --no-plots --config " +
+  expect_digests("thumbs", "compare --no-plots --methods full,gated,seqslam --config " +
                                (kSource / "configs" / "kitti00-thumbs.yaml").string() + " --dataset " +
                                (testing::shared_data_dir() / "kitti/00/thumbs").string());
   expect_digests("thumbs-seqslam-gated", "run --method seqslam --mode gated --config " +

@@ -13,6 +13,7 @@
 
 #include "core/error.hpp"
 #include "pipeline/pipeline.hpp"
+#include "pipeline_dird_reference.hpp"
 #include "pipeline_fake_dataset.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_online_scale.hpp"
@@ -84,20 +85,9 @@ std::vector<LoopClosure> read_loops(const fs::path& file) {
 std::vector<std::vector<SimilarityEntry>> reference_columns(const Dataset& dataset,
                                                             const PipelineConfig& config,
                                                             std::size_t frames) {
-  const DirdExtractor extractor(config.dird);
-  std::vector<Descriptor> raw;
-  for (std::size_t k = 0; k < frames; ++k) raw.push_back(extractor.extract(dataset.load_image(k)));
-  CausalStandardizer standardizer(observations_config(config.standardize));
-  for (std::size_t k = 0; k < frames; ++k) {
-    if (k % static_cast<std::size_t>(config.standardize.observe_every) == 0)
-      standardizer.observe(static_cast<std::int64_t>(k), raw[k]);
-  }
-  std::vector<Descriptor> codes(frames);
-  for (std::size_t k = 0; k < frames; ++k)
-    codes[k] = standardizer.statistics_for(static_cast<std::int64_t>(k)).apply(raw[k]);
+  const auto [codes, ready_frame] =
+      testing::reference_codes(dataset, config.dird, config.standardize, frames);
   const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
-  const auto ready_frame = static_cast<std::size_t>((observations_config(config.standardize).warm_up - 1) *
-                                                    config.standardize.observe_every);
   std::vector<std::vector<SimilarityEntry>> columns(frames);
   for (std::size_t i = ready_frame; i < frames; ++i) {
     for (std::size_t j = 0; j + static_cast<std::size_t>(config.match.margin) <= i; ++j) {

@@ -282,7 +282,7 @@ TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
     apply_config(raw, loaded);
     FAIL() << "run.method=netvlad accepted";
   } catch (const ConfigError& e) {
-    EXPECT_STREQ(e.what(), "run.method: 'netvlad' is not one of dird|seqslam (--set run.method=netvlad)");
+    EXPECT_STREQ(e.what(), "run.method: 'netvlad' is not one of dird|seqslam|dird-seqslam (--set run.method=netvlad)");
   }
 }
 

@@ -392,7 +392,7 @@ TEST(Lights, NightFramesAreTheSameBytesWhateverTheThreadCount) {
 TEST(Lights, TheAmbientNoiseNightIsTheDefaultAndUnchanged) {
   // The default night model renders exactly what the renderer renders without lights (as before the lamps
   // model), and its simulation.json carries none of the lamps model's keys.
-  SimulationConfig config = make_preset("demo", "");
+  SimulationConfig config = make_preset("demo-dusk", "");
   EXPECT_EQ(config.illumination.night_model, "ambient_noise");
   const SimulationPlan plan = plan_simulation(config);
   EXPECT_FALSE(config.world.street_ground_exact_cells);
@@ -426,7 +426,7 @@ TEST(Lights, TheAmbientNoiseNightIsTheDefaultAndUnchanged) {
 }
 
 TEST(Lights, AnyPresetSwitchesToTheLampsNightWithSet) {
-  for (const std::string name : {"kitti00", "euroc-mh05", "demo", "aliasing"}) {
+  for (const std::string name : {"kitti00", "euroc-mh05", "demo-dusk", "aliasing"}) {
     SimulationConfig config = make_preset(name, "/data");
     RawConfig raw;
     raw.apply_override("illumination.night_model=lamps");

@@ -34,7 +34,7 @@ std::string error_of(const std::string& name_or_file) {
 
 TEST(SimPresets, EveryShippedPresetFileLoadsAndValidates) {
   EXPECT_EQ(preset_dir(), fs::path(LOOPGATE_SOURCE_DIR) / "configs" / "sim");
-  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-night", "euroc-mh05",
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-dusk", "euroc-mh05",
                                                       "kitti00", "night-loop"}));
   for (const std::string& name : preset_names()) {
     const fs::path file = preset_dir() / (name + ".yaml");
@@ -62,7 +62,8 @@ TEST(SimPresets, FilesHoldWhatTheCodePresetsSet) {
   EXPECT_EQ(demo.camera.q_b_c_w, -0.5);  // exactly what Eigen's Quaterniond(R_b_c) gave
   EXPECT_EQ(demo.world.alias_copy_target_y_m, -140.6);
   EXPECT_EQ(demo.illumination.transition_start, 0.70);
-  EXPECT_EQ(demo.illumination.night_noise_sigma, 3.0);
+  EXPECT_EQ(demo.illumination.night_model, "lamps");
+  EXPECT_EQ(make_preset("demo-dusk", "").illumination.night_noise_sigma, 3.0);
   EXPECT_EQ(demo.loops.min_travel_m, 10.0);
 
   const SimulationConfig aliasing = make_preset("aliasing", "");
@@ -140,7 +141,7 @@ TEST(SimPresets, BadKeysAndValuesNameTheFileAndLine) {
   EXPECT_NE(error_of((dir / "absent.yaml").string()).find("absent.yaml"), std::string::npos);
   error = error_of("kitti01");
   EXPECT_NE(error.find("kitti01"), std::string::npos) << error;
-  EXPECT_NE(error.find("aliasing|demo|demo-night|euroc-mh05|kitti00|night-loop"), std::string::npos) << error;
+  EXPECT_NE(error.find("aliasing|demo|demo-dusk|euroc-mh05|kitti00|night-loop"), std::string::npos) << error;
 }
 
 }  // namespace

@@ -57,10 +57,10 @@ int klt_tracked_between_consecutive_frames(SimulationConfig config, std::size_t 
 }
 
 TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
-  SimulationConfig demo = make_preset("demo", "");
+  SimulationConfig demo = make_preset("demo-dusk", "");
   const int demo_day = klt_tracked_between_consecutive_frames(demo, 120);
   const int demo_night = klt_tracked_between_consecutive_frames(demo, 480);
-  std::printf("KLT tracks: demo day %d, demo night %d\n", demo_day, demo_night);
+  std::printf("KLT tracks: demo-dusk day %d, dusk %d\n", demo_day, demo_night);
   EXPECT_GE(demo_day, 100);
   EXPECT_GE(demo_night, 100);
   if (!shared().empty() && std::filesystem::exists(shared() / "kitti/00/poses.txt")) {
@@ -76,7 +76,7 @@ TEST(SimulatorPresets, KltTracksConsecutiveFramesOfEachPreset) {
 }
 
 TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
-  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-night", "euroc-mh05",
+  ASSERT_EQ(preset_names(), (std::vector<std::string>{"aliasing", "demo", "demo-dusk", "euroc-mh05",
                                                       "kitti00", "night-loop"}));
   for (const std::string& name : preset_names()) {
     SimulationConfig c = make_preset(name, "/nonexistent");
@@ -207,7 +207,7 @@ TEST(SimulatorPresets, AliasingPresetCopiesOnePlaceOntoAFarPlaceDrivenOnce) {
   EXPECT_GE(loops.back().query - loops.front().query, 50);  // a revisit of 50+ frames
 }
 
-TEST(SimulatorPresets, DemoPresetShowsARevisitAtDuskNewStreetsAndAnAliasedPlace) {
+TEST(SimulatorPresets, DemoPresetShowsARevisitAtNightNewStreetsAndAnAliasedPlace) {
   SimulationConfig config = make_preset("demo", "");
   const SimulationPlan plan = plan_simulation(config);
   ASSERT_EQ(plan.frames_used, 600u);
@@ -215,8 +215,8 @@ TEST(SimulatorPresets, DemoPresetShowsARevisitAtDuskNewStreetsAndAnAliasedPlace)
   EXPECT_EQ(plan.camera.height_px, 200);
   EXPECT_EQ(config.route.shape, "waypoints");
 
-  // 1. One genuine revisit: every ground-truth query frame lies in one run of frames late in the drive, under
-  // dusk light (night factor 1), and revisits frames of the first loop, by day, more than 200 frames (the
+  // 1. One genuine revisit: every ground-truth query frame lies in one run of frames late in the drive, at
+  // full night (night factor 1), and revisits frames of the first loop, by day, more than 200 frames (the
   // configs/demo.yaml match margin) earlier.
   const std::vector<LoopInterval> loops = find_loop_truth(plan.T_w_c, plan.up_w, config.loops);
   ASSERT_FALSE(loops.empty());
@@ -335,9 +335,9 @@ TEST(SimulatorPresets, NightLoopClosesTheLoopAtFullNightUnderLamps) {
               lighting.lamps().lights.size(), lighting.lamps().out_count());
 }
 
-TEST(SimulatorPresets, DemoNightIsTheDemoWithItsRevisitAtFullNight) {
-  SimulationConfig demo = make_preset("demo", "");
-  SimulationConfig night = make_preset("demo-night", "");
+TEST(SimulatorPresets, TheDemoIsTheDuskDemoWithItsRevisitAtFullNight) {
+  SimulationConfig demo = make_preset("demo-dusk", "");
+  SimulationConfig night = make_preset("demo", "");
   // The same drive, world and loops: every section but the illumination is the demo's (the lamps model
   // keys the ground cells exactly: the demo's ground has holes where the legacy keys collide).
   nlohmann::json a = config_to_json(demo), b = config_to_json(night);
@@ -371,7 +371,7 @@ TEST(SimulatorPresets, DemoNightIsTheDemoWithItsRevisitAtFullNight) {
   std::size_t first_lamps = 0, first_headlight = 0;
   while (!lighting.lamps_on(plan.illumination_phase[first_lamps])) ++first_lamps;
   while (!lighting.headlight_on(plan.illumination_phase[first_headlight])) ++first_headlight;
-  EXPECT_EQ(first_lamps, 447u);  // as configs/sim/demo-night.yaml says
+  EXPECT_EQ(first_lamps, 447u);  // as configs/sim/demo.yaml says
   EXPECT_EQ(first_headlight, 439u);
 }
 

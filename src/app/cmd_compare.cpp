@@ -25,6 +25,7 @@
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
 #include "pipeline/pipeline.hpp"
+#include "pipeline/two_sequence.hpp"
 
 namespace loopgate::app {
 
@@ -36,8 +37,10 @@ using nlohmann::json;
 struct CompareOptions {
   std::string config_file;
   std::string dataset;
+  std::string reference, query;  // two-sequence compare
+  bool methods_given = false;
   std::string out_dir;
-  std::string methods = "full,gated,seqslam,seqslam-gated,std-full,std-gated";
+  std::string methods = "full,gated,seqslam,seqslam-gated,std-full,std-gated,dird-seqslam,dird-seqslam-gated";
   std::string frames;
   int threads = 0;
   bool no_plots = false;
@@ -45,8 +48,9 @@ struct CompareOptions {
   std::vector<std::string> overrides;
 };
 
-// The methods compare runs, by name: detector, mode and descriptor standardisation (everything else is the
-// shared configuration). One table: a new method is one line here.
+// The methods compare runs, by name: detector, mode and the DIRD DP's descriptor standardisation
+// (standardize.mode; dird-seqslam takes its own descriptors from section dird_seqslam). Everything else is
+// the shared configuration. One table: a new method is one line here.
 struct CompareMethod {
   const char* name;
   Detector detector;
@@ -61,7 +65,14 @@ constexpr CompareMethod kCompareMethods[] = {
     {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas"},
     {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame"},
     {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas"},
+    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
+     "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame"},
+    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
+     "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)"},
 };
+
+// The methods of a two-sequence compare (no poses: no gate).
+constexpr const char* kTwoSequenceMethods = "full,std-full,seqslam,dird-seqslam";
 
 std::string method_names() {
   std::string out;
@@ -134,7 +145,8 @@ const json* find_path(const json& root, const std::vector<std::string>& path) {
   return node;
 }
 
-std::string table(const std::vector<std::string>& methods, const std::map<std::string, json>& summaries) {
+std::string table(const std::vector<std::string>& methods, const std::map<std::string, json>& summaries,
+                  bool two_sequence) {
   struct Row {
     std::string label;
     std::function<std::string(const json&)> cell;
@@ -145,41 +157,60 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
       return v ? number(*v, decimals) : std::string("-");
     };
   };
-  const std::vector<Row> rows = {
-      {"wall time (s)", at({"wall_s"}, 2)},
-      {"cpu time (s)", at({"cpu_s"}, 2)},
-      {"real-time factor", at({"realtime_factor"}, 1)},
-      {"decode (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "decode")); }},
-      {"odometry (ms, sum)",
-       [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "odometry")); }},
-      {"gate (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "gate")); }},
-      {"describe (ms, sum)",
-       [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "describe")); }},
-      {"match (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "match")); }},
-      {"end of stream (ms)", at({"end_of_stream_ms"}, 1)},
-      {"describe+match+end (ms)", [](const json& s) { return fmt::format("{:.1f}", detection_ms(s)); }},
-      {"  with decode (ms)",
-       [](const json& s) { return fmt::format("{:.1f}", detection_with_decode_ms(s)); }},
-      {"peak RSS (MiB)", at({"peak_rss_mb"}, 0)},
-      {"images decoded", at({"images_decoded"})},
-      {"descriptors computed", at({"descriptors_computed"})},
-      {"similarities computed", at({"similarities_computed"})},
-      {"candidate areas", at({"candidate_areas"})},
+  const Row wall = {"wall time (s)", at({"wall_s"}, 2)};
+  const Row rss = {"peak RSS (MiB)", at({"peak_rss_mb"}, 0)};
+  const std::vector<Row> quality = {
       {"loops", at({"loops"})},
       {"loops true", at({"evaluation", "loop_truth", "loops_true"})},
       {"loops false", at({"evaluation", "loop_truth", "loops_false"})},
       {"positive query frames", at({"evaluation", "precision_recall", "positives"})},
       {"average precision", at({"evaluation", "precision_recall", "average_precision"}, 3)},
+      {"recall at 1 (top match)", at({"evaluation", "precision_recall", "recall_at_1"}, 3)},
       {"recall at 100% precision", at({"evaluation", "precision_recall", "recall_at_100"}, 3)},
       {"recall at 99% precision", at({"evaluation", "precision_recall", "recall_at_99"}, 3)},
       {"recall at 95% precision", at({"evaluation", "precision_recall", "recall_at_95"}, 3)},
   };
+  std::vector<Row> rows;
+  if (two_sequence) {
+    rows = {wall,
+            rss,
+            {"images decoded", at({"images_decoded"})},
+            {"similarities computed", at({"similarities_computed"})}};
+  } else {
+    rows = {
+        wall,
+        {"cpu time (s)", at({"cpu_s"}, 2)},
+        {"real-time factor", at({"realtime_factor"}, 1)},
+        {"decode (ms, sum)",
+         [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "decode")); }},
+        {"odometry (ms, sum)",
+         [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "odometry")); }},
+        {"gate (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "gate")); }},
+        {"describe (ms, sum)",
+         [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "describe")); }},
+        {"match (ms, sum)", [](const json& s) { return fmt::format("{:.1f}", stage_total_ms(s, "match")); }},
+        {"end of stream (ms)", at({"end_of_stream_ms"}, 1)},
+        {"describe+match+end (ms)", [](const json& s) { return fmt::format("{:.1f}", detection_ms(s)); }},
+        {"  with decode (ms)",
+         [](const json& s) { return fmt::format("{:.1f}", detection_with_decode_ms(s)); }},
+        rss,
+        {"images decoded", at({"images_decoded"})},
+        {"descriptors computed", at({"descriptors_computed"})},
+        {"similarities computed", at({"similarities_computed"})},
+        {"candidate areas", at({"candidate_areas"})},
+    };
+  }
+  rows.insert(rows.end(), quality.begin(), quality.end());
+  // Columns as wide as the longest method name.
+  std::size_t width = 12;
+  for (const auto& m : methods) width = std::max(width, m.size());
+  width += 2;
   std::string out = fmt::format("{:<26}", "");
-  for (const auto& m : methods) out += fmt::format("{:>14}", m);
+  for (const auto& m : methods) out += fmt::format("{:>{}}", m, width);
   out += "\n";
   for (const Row& row : rows) {
     out += fmt::format("{:<26}", row.label);
-    for (const auto& m : methods) out += fmt::format("{:>14}", row.cell(summaries.at(m)));
+    for (const auto& m : methods) out += fmt::format("{:>{}}", row.cell(summaries.at(m)), width);
     out += "\n";
   }
   return out;
@@ -207,7 +238,97 @@ std::string shell_quote(const std::string& text) {
   return out + "'";
 }
 
+// scripts/plot.py compare OUT --out OUT/plots; a failure is a warning (the runs' outputs stand).
+void write_plots(const CompareOptions& options, const fs::path& out_dir) {
+  const fs::path script = find_plot_script(options.plot_script);
+  if (!fs::exists(script)) {
+    spdlog::warn("compare: no plots: {} not found (--plot-script PATH or LOOPGATE_PLOT_SCRIPT)",
+                 script.string());
+    return;
+  }
+  const std::string command = "/usr/bin/python3 " + shell_quote(script.string()) + " compare " +
+                              shell_quote(out_dir.string()) + " --out " +
+                              shell_quote((out_dir / "plots").string());
+  const int status = std::system(command.c_str());
+  if (status != 0) {
+    spdlog::warn("compare: plotting failed (exit status {}): {}", status, command);
+  } else {
+    std::printf("plots in %s\n", (out_dir / "plots").c_str());
+  }
+}
+
+// Two sequences (--reference A --query B): the cross-condition methods, each run_two_sequences() with its
+// configuration, one table and the PR plot. The gated methods need poses, which two sequences do not have.
+int compare_two_sequences(const CompareOptions& options) {
+  if (options.reference.empty() || options.query.empty()) {
+    throw ConfigError("two-sequence compare needs both --reference DIR and --query DIR");
+  }
+  if (!options.dataset.empty()) throw ConfigError("--dataset and --reference/--query exclude each other");
+  const std::vector<std::string> methods =
+      split_methods(options.methods_given ? options.methods : kTwoSequenceMethods);
+  for (const std::string& method : methods) {
+    if (find_method(method).mode == RunMode::kGated) {
+      throw ConfigError(
+          "--methods: '" + method +
+          "' runs inside the pose gate's candidate areas, and two sequences have no poses (choose "
+          "from " +
+          std::string(kTwoSequenceMethods) + ")");
+    }
+  }
+  std::vector<FlagValue> flags;
+  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
+  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
+  log_config_lines(config_to_lines(base));
+  OpenOptions open_options;
+  open_options.strict = base.run.strict;
+  open_options.camera_index = base.run.camera_index;
+  const fs::path out_dir = options.out_dir;
+  // Before anything is written: no output over an input, one command at a time in the folder; SIGINT,
+  // SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is written
+  // (issue 15, as for the single-sequence compare).
+  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
+  for (const std::string& method : methods)
+    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
+  const OutputLock lock(out_dir, "loopgate compare --reference --query");
+  const StopSignals signals;
+  const auto reference = open_dataset(options.reference, open_options);
+  const auto query = open_dataset(options.query, open_options);
+
+  std::map<std::string, json> summaries;
+  json compare = json::object();
+  std::vector<std::string> ran;
+  for (const std::string& method : methods) {
+    const PipelineConfig config = method_config(base, method);
+    spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    const TwoSequenceResult result =
+        run_two_sequences(config, *reference, *query, out_dir / method, signals.flag());
+    summaries[method] = result.summary;
+    compare[method] = result.summary;
+    ran.push_back(method);
+    if (result.interrupted) break;
+  }
+  compare["comparison"] = json::object();
+  compare["methods"] = ran;
+  compare["two_sequence"] = {{"reference", options.reference}, {"query", options.query}};
+  write_json_file(out_dir / "compare.json", compare);
+
+  std::string header = fmt::format("compare on reference {} vs query {} ({} query frames)", options.reference,
+                                   options.query, summaries.at(ran.front()).value("query_frames", 0));
+  if (const json* tolerance = find_path(summaries.at(ran.front()), {"aligned", "tolerance_frames"})) {
+    header += fmt::format("; aligned sequences, a match is true within +-{} frames", number(*tolerance));
+  }
+  std::printf("%s\n%s", header.c_str(), table(ran, summaries, true).c_str());
+  if (!options.no_plots) write_plots(options, out_dir);
+  std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
+              fmt::format("{}", fmt::join(ran, "/, ")).c_str());
+  std::fflush(stdout);
+  if (signals.stopped()) return signals.exit_code();
+  return kExitOk;
+}
+
 int compare_command(const CompareOptions& options) {
+  if (!options.reference.empty() || !options.query.empty()) return compare_two_sequences(options);
   const std::vector<std::string> methods = split_methods(options.methods);
   std::vector<FlagValue> flags;
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
@@ -300,26 +421,10 @@ int compare_command(const CompareOptions& options) {
                       number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
                       number(truth->at("gap_frames")), number(truth->at("accept_radius_m"), 2));
     }
-    std::printf("%s\n%s%s", header.c_str(), table(ran, summaries).c_str(), ratios.c_str());
+    std::printf("%s\n%s%s", header.c_str(), table(ran, summaries, false).c_str(), ratios.c_str());
   }
 
-  if (!options.no_plots && !ran.empty()) {
-    const fs::path script = find_plot_script(options.plot_script);
-    if (!fs::exists(script)) {
-      spdlog::warn("compare: no plots: {} not found (--plot-script PATH or LOOPGATE_PLOT_SCRIPT)",
-                   script.string());
-    } else {
-      const std::string command = "/usr/bin/python3 " + shell_quote(script.string()) + " compare " +
-                                  shell_quote(out_dir.string()) + " --out " +
-                                  shell_quote((out_dir / "plots").string());
-      const int status = std::system(command.c_str());
-      if (status != 0) {
-        spdlog::warn("compare: plotting failed (exit status {}): {}", status, command);
-      } else {
-        std::printf("plots in %s\n", (out_dir / "plots").c_str());
-      }
-    }
-  }
+  if (!options.no_plots && !ran.empty()) write_plots(options, out_dir);
   std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
               fmt::format("{}", fmt::join(ran, "/, ")).c_str());
   std::fflush(stdout);
@@ -332,17 +437,26 @@ int compare_command(const CompareOptions& options) {
 
 void add_compare_command(CLI::App& app, int& exit_code) {
   auto options = std::make_shared<CompareOptions>();
-  CLI::App* cmd = app.add_subcommand(
-      "compare", "Run full DIRD, gated DIRD and SeqSLAM on one dataset and compare them side by side");
+  CLI::App* cmd = app.add_subcommand("compare",
+                                     "Run the detection methods (DIRD full and gated, SeqSLAM, standardised "
+                                     "DIRD, dird-seqslam) on one dataset, "
+                                     "or the cross-condition ones on two sequences (--reference A --query "
+                                     "B), and compare them side by side");
   cmd->add_option("--config", options->config_file, "YAML configuration (configs/*.yaml)")
       ->check(CLI::ExistingFile);
   cmd->add_option("--dataset", options->dataset, "dataset folder; overrides run.dataset");
+  cmd->add_option("--reference", options->reference,
+                  "two-sequence compare (with --query): reference dataset folder, e.g. Nordland summer; the "
+                  "methods default to " +
+                      std::string(kTwoSequenceMethods));
+  cmd->add_option("--query", options->query, "two-sequence compare (with --reference): query dataset folder");
   cmd->add_option("--out", options->out_dir,
                   "output folder: compare.json, plots/, and one run folder per method")
       ->required();
   std::string methods_help = "comma-separated subset of:";
   for (const CompareMethod& m : kCompareMethods) methods_help += fmt::format("\n  {:<14} {}", m.name, m.what);
-  cmd->add_option("--methods", options->methods, methods_help)->capture_default_str();
+  CLI::Option* methods_option =
+      cmd->add_option("--methods", options->methods, methods_help)->capture_default_str();
   cmd->add_option("--frames", options->frames, "frame range A:B (indices, B exclusive; A: or :B)");
   cmd->add_option("--threads", options->threads, "worker threads of each run (default 2)")
       ->check(CLI::Range(1, 256));
@@ -351,7 +465,10 @@ void add_compare_command(CLI::App& app, int& exit_code) {
                   "path of plot.py (default: the source tree's scripts/plot.py)");
   cmd->add_option("--set", options->overrides, "override any config key: section.key=value (repeatable)")
       ->allow_extra_args(false);
-  cmd->callback([options, &exit_code] { exit_code = compare_command(*options); });
+  cmd->callback([options, methods_option, &exit_code] {
+    options->methods_given = methods_option->count() > 0;
+    exit_code = compare_command(*options);
+  });
 }
 
 }  // namespace loopgate::app

@@ -15,6 +15,11 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
   for (const Detection& d : loops) loops_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
   const std::vector<Detection> best = best_detection_per_query(loops, pr_config.lower_is_better());
   for (const Detection& d : best) best_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
+  // R@1: positives whose top-ranked candidate (accepted or not) is a true match.
+  std::size_t top1_true = 0;
+  for (const Detection& d : best_detection_per_query(ranked, pr_config.lower_is_better())) {
+    if (truth.is_positive(d.query) && truth.is_true_match(d.query, d.reference)) ++top1_true;
+  }
   nlohmann::json curve = nlohmann::json::array();
   for (const PrPoint& point : pr.curve) {
     curve.push_back({{"threshold", point.threshold},
@@ -38,6 +43,8 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
             {"recall_at_100", pr.recall_at_100},
             {"recall_at_99", pr.recall_at_99},
             {"recall_at_95", pr.recall_at_95},
+            {"recall_at_1",
+             pr.positives == 0 ? 0.0 : static_cast<double>(top1_true) / static_cast<double>(pr.positives)},
             {"curve", curve}}}};
 }
 

@@ -20,8 +20,8 @@ namespace loopgate {
 // {"loop_truth": {loops, loops_true, loops_false, query_frames_with_loops, query_best_loop_true,
 //                 query_best_loop_false},
 //  "precision_recall": {score_order, positives, queries_with_detection, average_precision, recall_at_100,
-//                       recall_at_99, recall_at_95, curve: [{threshold, precision, recall, detections,
-//                       true_positives}, ...]}}
+//                       recall_at_99, recall_at_95, recall_at_1 (positives whose top-ranked detection is
+//                       true), curve: [{threshold, precision, recall, detections, true_positives}, ...]}}
 // `loops`: the reported detections (loops.csv); `ranked`: the detections the PR sweep runs over (DIRD: the
 // loops; SeqSLAM: every query's match, accepted or not). Indices as `truth` expects them.
 nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,

@@ -61,6 +61,22 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
         "revisits; the gate computes them where revisits are likely, so it needs run.mode full (gated runs: "
         "standardize.mode causal with the fixed standardised scale)");
   }
+  if (run.dird_seqslam()) {
+    const DirdSeqSlamConfig& d = config.dird_seqslam;
+    if (d.standardize == "batch") {
+      throw ConfigError(
+          "dird_seqslam.standardize: 'batch' needs the whole sequence before the first comparison "
+          "(two-sequence "
+          "runs); a single sequence streams: use 'causal'");
+    }
+    spdlog::info(
+        "run: dird-seqslam {} (DIRD {} normalisation, {} resize, {} standardisation): contrast over {} "
+        "references, sequences of {} frames at {} velocities; a frame's verdict {} frames after its row",
+        enum_name(run.mode), d.normalization, d.resize, d.standardize,
+        2 * d.search.contrast_half_window_frames + 1, config.match.sequence_length,
+        d.search.velocities().size(), config.match.sequence_length - 1);
+    return run.mode == RunMode::kFull ? make_dird_seqslam_full(context) : make_dird_seqslam_gated(context);
+  }
   if (config.standardize.enabled() || config.scale.online()) {
     spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", config.standardize.mode,
                  config.standardize.distance, config.scale.mode);

@@ -97,8 +97,9 @@ class DetectionMethod {
 // run.method seqslam: run.mode full -> SeqSLAM on every frame, gated -> SeqSLAM inside the candidate areas;
 // run.method dird: run.mode full -> DIRD full, gated -> DIRD gated, odometry -> none (seqslam with odometry
 // is rejected by the config); DIRD with standardize.mode causal or scale.mode online -> the standardised DIRD
-// methods. Throws DataError when the method needs images and the dataset has none, ConfigError for an option
-// the single-sequence run cannot take (standardize.mode batch; scale.mode online with run.mode gated).
+// methods; run.method dird-seqslam: full or gated dird-seqslam (raw or standardised distances). Throws
+// DataError when the method needs images and the dataset has none, ConfigError for an option the
+// single-sequence run cannot take (standardize.mode batch; scale.mode online with run.mode gated).
 std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& context, bool dataset_has_images,
                                                        const std::filesystem::path& dataset_root);
 
@@ -111,5 +112,8 @@ std::unique_ptr<DetectionMethod> make_seqslam_gated(const MethodContext& context
 // DIRD with causal standardisation and/or the online scale (standard_dird_methods.cpp).
 std::unique_ptr<DetectionMethod> make_standard_dird_full(const MethodContext& context);
 std::unique_ptr<DetectionMethod> make_standard_dird_gated(const MethodContext& context);
+// DIRD distances matched by contrast enhancement and sequence search (dird_seqslam_methods.cpp).
+std::unique_ptr<DetectionMethod> make_dird_seqslam_full(const MethodContext& context);
+std::unique_ptr<DetectionMethod> make_dird_seqslam_gated(const MethodContext& context);
 
 }  // namespace loopgate

@@ -75,8 +75,9 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
 }
 
 void RunConfig::validate() const {
-  if (method == Detector::kSeqSlam && mode == RunMode::kOdometry) {
-    throw ConfigError("run.method: seqslam detects loops; it needs run.mode gated or full, not odometry");
+  if (method != Detector::kDird && mode == RunMode::kOdometry) {
+    throw ConfigError("run.method: " + std::string(enum_name(method)) +
+                      " detects loops; it needs run.mode gated or full, not odometry");
   }
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
@@ -86,6 +87,13 @@ void RunConfig::validate() const {
   require_in("run.image_cache_frames", image_cache_frames, 0, 100'000, "images");
   // The form of A:B and A < B (the dataset's size is checked when the run opens it).
   if (!frames.empty()) frame_range(std::numeric_limits<std::size_t>::max());
+}
+
+void DirdSeqSlamConfig::validate() const {
+  require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
+  require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
+  require_one_of("dird_seqslam.standardize", standardize, {"off", "causal", "batch"});
+  search.validate();
 }
 
 void EvalConfig::validate() const {

@@ -13,6 +13,7 @@
 #include "stages/dird/dird_config.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/gate/gate_config.hpp"
+#include "stages/match/contrast_search.hpp"
 #include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
 #include "stages/seqslam/seqslam_config.hpp"
@@ -32,12 +33,15 @@ constexpr std::span<const EnumName<RunMode>> enum_names(RunMode) {
   return kRunModeNames;
 }
 
-// run.method: "dird" (the paper's detector, in the chosen mode) or "seqslam" (the SeqSLAM baseline with the
+// run.method: "dird" (the paper's detector, in the chosen mode), "seqslam" (the SeqSLAM baseline with the
 // OpenSeqSLAM defaults of section seqslam, in the chosen mode: full = every frame, gated = only inside the
-// candidate areas; its score is the ratio best/second, lower is better).
-enum class Detector { kDird, kSeqSlam };
-inline constexpr EnumName<Detector> kDetectorNames[] = {{Detector::kDird, "dird"},
-                                                        {Detector::kSeqSlam, "seqslam"}};
+// candidate areas; its score is the ratio best/second, lower is better) or "dird-seqslam" (DIRD descriptors,
+// standardised by default, matched by SeqSLAM's contrast enhancement and sequence search: the method robust
+// to day/night and seasons, section dird_seqslam and docs/illumination.md; score = mean z, higher is
+// better).
+enum class Detector { kDird, kSeqSlam, kDirdSeqSlam };
+inline constexpr EnumName<Detector> kDetectorNames[] = {
+    {Detector::kDird, "dird"}, {Detector::kSeqSlam, "seqslam"}, {Detector::kDirdSeqSlam, "dird-seqslam"}};
 constexpr std::span<const EnumName<Detector>> enum_names(Detector) {
   return kDetectorNames;
 }
@@ -53,7 +57,7 @@ constexpr std::span<const EnumName<DecodePolicy>> enum_names(DecodePolicy) {
 struct RunConfig {
   std::string dataset;                        // dataset folder (the --dataset flag overrides it)
   RunMode mode = RunMode::kGated;             // gated | full | odometry (see RunMode)
-  Detector method = Detector::kDird;          // dird | seqslam (see Detector), each gated or full
+  Detector method = Detector::kDird;          // dird | seqslam | dird-seqslam (see Detector), gated or full
   std::string rate = "max";                   // "max" (as fast as the graph drains) or R > 0 (R x real time)
   int threads = 2;                            // worker threads of the graph
   int max_in_flight = 8;                      // limiter: frames inside the graph at once
@@ -87,6 +91,7 @@ struct RunConfig {
 
   bool detects_loops() const { return mode != RunMode::kOdometry; }
   bool seqslam() const { return method == Detector::kSeqSlam; }
+  bool dird_seqslam() const { return method == Detector::kDirdSeqSlam; }
   // nullopt for "max", else the rate factor R.
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
@@ -136,6 +141,44 @@ struct EvalConfig {
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
 };
 
+// Section dird_seqslam: the descriptors dird-seqslam compares and its search. The DIRD section keeps the
+// paper's descriptor (libdird normalisation, nearest-neighbour resize: bit-exact with the reference, with
+// the logistic constants calibrated for it); dird-seqslam's default is the one measured best across day,
+// night and seasons (docs/illumination.md): l2 normalisation (no invalid pixels in dark regions), area resize
+// (sensor noise averaged before sampling) and causal standardisation (per-dimension statistics of the recent
+// frames). Needs no logistic constants: the search's score is in units of the local spread of distances.
+struct DirdSeqSlamConfig {
+  std::string normalization = "l2";  // replaces dird.normalization for this method: libdird | l2
+  std::string resize = "area";       // replaces dird.resize: nearest | area
+  // off | causal | batch (two sequences only): replaces standardize.mode for this method; the statistics
+  // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
+  // of section standardize.
+  std::string standardize = "causal";
+  ContrastSearchConfig search;
+
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("normalization", self.normalization);
+    v("resize", self.resize);
+    v("standardize", self.standardize);
+    ContrastSearchConfig::fields(self.search, v);
+  }
+  void validate() const;
+
+  // The DIRD configuration its descriptors are extracted with, and the standardisation they get.
+  DirdConfig descriptor(const DirdConfig& dird) const {
+    DirdConfig out = dird;
+    out.normalization = normalization;
+    out.resize = resize;
+    return out;
+  }
+  StandardizeConfig standardization(const StandardizeConfig& standardize_section) const {
+    StandardizeConfig out = standardize_section;
+    out.mode = standardize;
+    return out;
+  }
+};
+
 inline SeqSlamConfig single_sequence_seqslam() {
   SeqSlamConfig config;
   config.exclusion = "past";
@@ -151,8 +194,10 @@ struct PipelineConfig {
   GateConfig gate;
   DirdConfig dird;
   MatchConfig match;
-  // Descriptor standardisation (docs/standardize.md): off = raw DIRD bytes; causal (single sequence) or
-  // batch (two sequences: each its own statistics) = z-scored codes compared by cosine or L1.
+  // Descriptor standardisation (docs/standardize.md) of the DIRD DP methods (run.method dird): off = raw
+  // DIRD bytes; causal (single sequence) or batch (two sequences: each its own statistics) = z-scored codes
+  // compared by cosine or L1. dird-seqslam chooses its own (dird_seqslam.standardize) and takes the
+  // statistics parameters of this section.
   StandardizeConfig standardize;
   // The logistic's scale: off = dird.mu / dird.sigma (raw) or standard_default_scale() (standardised);
   // online = OnlineScale, from the distances seen so far.
@@ -160,6 +205,10 @@ struct PipelineConfig {
   // SeqSLAM (run.method seqslam). A single run is matched against itself: reference rows closer than
   // exclusion_margin_frames before the query are excluded ("past"); set the margin like match.margin.
   SeqSlamConfig seqslam = single_sequence_seqslam();
+  // run.method dird-seqslam: its descriptors (DIRD with its own normalisation, resize and standardisation)
+  // and the contrast enhancement and sequence search (stages/match/contrast_search.hpp); its sequence
+  // length is match.sequence_length, its margin match.margin.
+  DirdSeqSlamConfig dird_seqslam;
   EvalConfig eval;
   OutputConfig output;
 
@@ -177,6 +226,7 @@ struct PipelineConfig {
     v("standardize", self.standardize);
     v("scale", self.scale);
     v("seqslam", self.seqslam);
+    v("dird_seqslam", self.dird_seqslam);
     v("eval", self.eval);
     v("output", self.output);
   }
@@ -191,6 +241,7 @@ struct PipelineConfig {
     standardize.validate();
     scale.validate();
     seqslam.validate();
+    dird_seqslam.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
     output.validate();

@@ -27,8 +27,8 @@
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
-#include "pipeline/descriptor_store.hpp"
 #include "pipeline/detection_method.hpp"
+#include "pipeline/dird_distances.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
 #include "pipeline/loop_matching.hpp"
@@ -42,20 +42,15 @@ namespace loopgate {
 
 namespace {
 
-// The descriptors (raw and coded), the causal statistics, the scale and the loop matching of one run.
+// The distances (raw or standardised), the scale and the loop matching of one run.
 class StandardDird {
  public:
   explicit StandardDird(const MethodContext& context)
       : context_(context),
-        extractor_(context.config.dird),
-        raw_(context.capacity),
-        codes_(new Descriptor[context.capacity]),
-        norms_(context.capacity, 0.0),
-        coded_(context.capacity, 0),
+        distances_(context, context.config.dird, context.config.standardize),
         loops_(context) {
     const PipelineConfig& config = context.config;
-    if (config.standardize.enabled()) standardizer_.emplace(observations_config(config.standardize));
-    if (standardizer_) {
+    if (distances_.standardized()) {
       prior_ = standard_default_scale(config.standardize, config.dird.tau1);
     } else {
       prior_.mu = config.dird.mu;
@@ -63,32 +58,15 @@ class StandardDird {
       prior_.cutoff_distance = logistic_distance_at(config.dird.tau1, config.dird.mu, config.dird.sigma);
     }
     if (config.scale.online()) online_.emplace(config.scale, config.dird.tau1, prior_);
-    observe_every_ = standardizer_ ? static_cast<std::size_t>(config.standardize.observe_every) : 1;
   }
 
-  // Frames whose raw descriptor feeds the statistics.
-  bool observed_frame(std::size_t seq) const { return standardizer_ && seq % observe_every_ == 0; }
+  bool observed_frame(std::size_t seq) const { return distances_.observed_frame(seq); }
+  void describe(std::size_t seq, const cv::Mat* image) { distances_.describe(seq, image); }
 
-  // Describe node (parallel): the raw descriptor of `seq`, or none when there is no image.
-  void describe(std::size_t seq, const cv::Mat* image) {
-    if (image) {
-      extractor_.extract(*image, raw_.slot(seq));
-      descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
-    }
-    raw_.publish(seq, image != nullptr);
-  }
-
-  // Match node, first for frame seq: its raw descriptor joins the statistics when it is an observed frame;
-  // the frames waiting for the warm-up are coded once it is over. The scale for this frame's similarities
-  // is frozen.
+  // Match node, first for frame seq: the statistics (DirdDistances::begin_frame), then the scale for this
+  // frame's similarities is frozen.
   void begin_frame(std::size_t seq) {
-    if (observed_frame(seq) && valid(seq)) {
-      standardizer_->observe(static_cast<std::int64_t>(seq), raw_.descriptor(seq));
-      if (standardizer_->ready() && !waiting_.empty()) {
-        for (const std::size_t k : waiting_) code(k);
-        waiting_.clear();
-      }
-    }
+    distances_.begin_frame(seq);
     scale_ = online_ ? online_->scale() : prior_;
   }
 
@@ -96,43 +74,18 @@ class StandardDird {
   // published), skipping frames without a descriptor or codes; returns the comparisons made.
   std::size_t similarity_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
                                std::vector<SimilarityEntry>& out) {
-    if (j_begin >= j_end || !code(seq)) return 0;
-    for (std::size_t j = j_begin; j < j_end; ++j) {
-      if (raw_.state(j) == DescriptorStore::State::kEmpty) {
-        throw std::logic_error(fmt::format("similarity of seq {}: earlier seq {} not described yet", seq, j));
-      }
-      code(j);
+    row_.clear();
+    const std::size_t compared = distances_.distance_range(seq, j_begin, j_end, row_);
+    for (const DistanceEntry& e : row_) {
+      if (online_) online_->add(e.distance);
+      if (e.distance >= scale_.cutoff_distance) continue;
+      const double sim = logistic_similarity(e.distance, scale_.mu, scale_.sigma);
+      if (sim > context_.config.dird.tau1) out.push_back({e.j, sim});
     }
-    const std::size_t count = j_end - j_begin;
-    distances_.assign(count, std::numeric_limits<double>::quiet_NaN());
-    const auto block_distances = [&](std::size_t block) {
-      const std::size_t begin = block * kBlock, end = std::min(count, begin + kBlock);
-      for (std::size_t k = begin; k < end; ++k) {
-        const std::size_t j = j_begin + k;
-        if (coded_[j]) distances_[k] = distance(seq, j);
-      }
-    };
-    const std::size_t blocks = (count + kBlock - 1) / kBlock;
-    if (blocks > 1) {
-      parallel_for_with_handoff(blocks, block_distances);
-    } else {
-      block_distances(0);
-    }
-    std::size_t compared = 0;
-    for (std::size_t k = 0; k < count; ++k) {
-      const double d = distances_[k];
-      if (std::isnan(d)) continue;
-      ++compared;
-      if (online_) online_->add(d);
-      if (d >= scale_.cutoff_distance) continue;
-      const double sim = logistic_similarity(d, scale_.mu, scale_.sigma);
-      if (sim > context_.config.dird.tau1) out.push_back({static_cast<std::int64_t>(j_begin + k), sim});
-    }
-    similarities_computed_ += compared;
     return compared;
   }
 
-  bool valid(std::size_t seq) const { return raw_.state(seq) == DescriptorStore::State::kValid; }
+  bool valid(std::size_t seq) const { return distances_.valid(seq); }
   LoopMatching& loops() { return loops_; }
   std::optional<FrameVerdict> detection(std::size_t seq, bool outside_areas) {
     return loops_.detection(seq, valid(seq), outside_areas);
@@ -140,8 +93,8 @@ class StandardDird {
 
   nlohmann::json summary() const {
     nlohmann::json out = loops_.summary();
-    out["descriptors_computed"] = descriptors_computed_.load();
-    out["similarities_computed"] = similarities_computed_;
+    out["descriptors_computed"] = distances_.descriptors_computed();
+    out["similarities_computed"] = distances_.distances_computed();
     const LogisticScale scale = online_ ? online_->scale() : prior_;
     out["scale"] = {{"mode", context_.config.scale.mode},
                     {"mu", scale.mu},
@@ -149,77 +102,21 @@ class StandardDird {
                     {"cutoff_distance", scale.cutoff_distance},
                     {"estimated", scale.estimated},
                     {"distances", online_ ? online_->count() : 0}};
-    if (standardizer_) {
-      out["standardize"] = {{"mode", context_.config.standardize.mode},
-                            {"distance", context_.config.standardize.distance},
-                            {"observations", standardizer_->observations()},
-                            {"snapshots", standardizer_->snapshots()},
-                            {"frames_coded", frames_coded_},
-                            {"frames_before_statistics", frames_before_statistics_}};
-    }
+    out.update(distances_.summary());
     return out;
   }
 
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const {
-    if (const auto first = loops_.first_loop_seq()) {
-      return std::pair{context_.seqs.frame(*first), raw_.descriptor(static_cast<std::size_t>(*first))};
-    }
-    const Dataset& dataset = context_.images.dataset();
-    const std::size_t frame = dataset.frame_count() / 2;
-    return std::pair{frame, extractor_.extract(dataset.load_image(frame))};
+    return distances_.example_descriptor(loops_.first_loop_seq());
   }
 
  private:
-  static constexpr std::size_t kBlock = 256;  // comparisons per parallel block
-
-  // Codes (and norm) of `seq` once; false when it has no descriptor or the statistics are not ready yet
-  // (then it waits for them).
-  bool code(std::size_t seq) {
-    if (coded_[seq]) return true;
-    if (!valid(seq)) return false;
-    if (!standardizer_) {
-      codes_[seq] = raw_.descriptor(seq);
-    } else if (!standardizer_->ready()) {
-      if (std::find(waiting_.begin(), waiting_.end(), seq) == waiting_.end()) {
-        waiting_.push_back(seq);
-        ++frames_before_statistics_;
-      }
-      return false;
-    } else {
-      standardizer_->standardize(static_cast<std::int64_t>(seq), raw_.descriptor(seq), codes_[seq]);
-      if (context_.config.standardize.cosine()) norms_[seq] = standard_norm(codes_[seq]);
-    }
-    coded_[seq] = 1;
-    ++frames_coded_;
-    return true;
-  }
-
-  double distance(std::size_t a, std::size_t b) const {
-    if (!standardizer_) {
-      return context_.config.dird.l2_metric() ? l2_distance(codes_[a], codes_[b])
-                                              : static_cast<double>(l1_distance(codes_[a], codes_[b]));
-    }
-    if (context_.config.standardize.cosine()) {
-      return standard_cosine_distance(codes_[a], norms_[a], codes_[b], norms_[b]);
-    }
-    return static_cast<double>(l1_distance(codes_[a], codes_[b]));
-  }
-
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
-  DirdExtractor extractor_;
-  DescriptorStore raw_;                  // written by describe (parallel), published
-  std::unique_ptr<Descriptor[]> codes_;  // match node only
-  std::vector<double> norms_;            // match node only
-  std::vector<std::uint8_t> coded_;      // match node only
-  std::optional<CausalStandardizer> standardizer_;
-  std::size_t observe_every_ = 1;
+  DirdDistances distances_;
   LogisticScale prior_;
   std::optional<OnlineScale> online_;
-  LogisticScale scale_;               // frozen for the current frame
-  std::vector<std::size_t> waiting_;  // frames described before the statistics were ready
-  std::vector<double> distances_;     // the current range's distances (NaN: not compared)
-  std::atomic<std::size_t> descriptors_computed_{0};
-  std::size_t similarities_computed_ = 0, frames_coded_ = 0, frames_before_statistics_ = 0;
+  LogisticScale scale_;             // frozen for the current frame
+  std::vector<DistanceEntry> row_;  // scratch: the current range's distances
   LoopMatching loops_;
 };
 

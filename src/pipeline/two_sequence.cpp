@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <exception>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -28,7 +29,10 @@
 #include "pipeline/run_resources.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/dird/dird_extractor.hpp"
+#include "stages/dird/dird_online_scale.hpp"
 #include "stages/dird/dird_similarity.hpp"
+#include "stages/dird/dird_standardize.hpp"
+#include "stages/match/contrast_search.hpp"
 #include "stages/match/match_outcome.hpp"
 #include "stages/match/sequence_matcher.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"
@@ -110,6 +114,85 @@ DescribedSequence describe_sequence(int threads, const Dataset& dataset, std::si
     }
   });
   out.described = static_cast<std::size_t>(std::count(out.valid.begin(), out.valid.end(), std::uint8_t{1}));
+  return out;
+}
+
+// The codes the distances are computed on (docs/standardize.md), each sequence with statistics of its own:
+// standardize.mode off: the raw descriptors; batch: the statistics of the whole sequence; causal: the
+// causal rule over the sequence's frames in order (every observe_every-th frame observed; frames before the
+// warm-up take the first snapshot). A sequence too short for the causal warm-up takes its batch statistics
+// (said in `note`). Frames without a descriptor stay uncoded.
+struct CodedSequence {
+  std::vector<Descriptor> codes;
+  std::vector<double> norms;  // standard_norm of the codes (cosine)
+  std::string statistics;     // "raw", "batch", "causal"
+  std::string note;
+};
+
+CodedSequence code_sequence(const DescribedSequence& sequence, const StandardizeConfig& config) {
+  CodedSequence out;
+  const std::size_t n = sequence.descriptors.size();
+  if (!config.enabled()) {
+    out.codes = sequence.descriptors;
+    out.statistics = "raw";
+    return out;
+  }
+  std::vector<Descriptor> valid;
+  for (std::size_t k = 0; k < n; ++k)
+    if (sequence.valid[k]) valid.push_back(sequence.descriptors[k]);
+  out.codes.resize(n);
+  out.norms.assign(n, 0.0);
+  if (valid.empty()) return out;
+  std::optional<CausalStandardizer> causal;
+  if (config.mode == "causal") {
+    causal.emplace(observations_config(config));
+    const auto every = static_cast<std::size_t>(config.observe_every);
+    for (std::size_t k = 0; k < n; k += every) {
+      if (sequence.valid[k]) causal->observe(static_cast<std::int64_t>(k), sequence.descriptors[k]);
+    }
+    if (!causal->ready()) {
+      out.note = fmt::format(
+          "{} observations are fewer than the causal warm-up of {}: the sequence's batch statistics are used",
+          causal->observations(), observations_config(config).warm_up);
+      causal.reset();
+    }
+  }
+  const Standardization batch = causal ? Standardization{} : standardization_of(valid, config);
+  out.statistics = causal ? "causal" : "batch";
+  for (std::size_t k = 0; k < n; ++k) {
+    if (!sequence.valid[k]) continue;
+    const Standardization& statistics = causal ? causal->statistics_for(static_cast<std::int64_t>(k)) : batch;
+    statistics.apply(sequence.descriptors[k], out.codes[k]);
+    out.norms[k] = standard_norm(out.codes[k]);
+  }
+  return out;
+}
+
+// Distance of query frame q to reference frame r on their codes: raw L1 (or L2 with dird.metric l2),
+// standardised cosine or L1 (standardize.distance).
+double coded_distance(const DirdConfig& dird, const StandardizeConfig& standardize,
+                      const CodedSequence& query, std::size_t q, const CodedSequence& reference,
+                      std::size_t r) {
+  if (!standardize.enabled()) {
+    return dird.l2_metric() ? l2_distance(query.codes[q], reference.codes[r])
+                            : static_cast<double>(l1_distance(query.codes[q], reference.codes[r]));
+  }
+  if (standardize.cosine()) {
+    return standard_cosine_distance(query.codes[q], query.norms[q], reference.codes[r], reference.norms[r]);
+  }
+  return static_cast<double>(l1_distance(query.codes[q], reference.codes[r]));
+}
+
+nlohmann::json standardize_json(const StandardizeConfig& standardize, const CodedSequence& reference,
+                                const CodedSequence& query) {
+  nlohmann::json out = {{"mode", standardize.mode},
+                        {"distance", standardize.distance},
+                        {"reference_statistics", reference.statistics},
+                        {"query_statistics", query.statistics}};
+  nlohmann::json notes = nlohmann::json::array();
+  if (!reference.note.empty()) notes.push_back("reference: " + reference.note);
+  if (!query.note.empty()) notes.push_back("query: " + query.note);
+  if (!notes.empty()) out["notes"] = notes;
   return out;
 }
 
@@ -218,18 +301,37 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
 
   // Similarity rows of every query against the whole reference (no margin), in parallel; frames
-  // without a descriptor take part in no pair.
+  // without a descriptor take part in no pair. Standardised: each sequence coded with its own statistics,
+  // the logistic of standard_default_scale() on their distances.
   t0 = Clock::now();
   const bool any_ref_missing = ref.described != ref_count;
   std::vector<std::vector<SimilarityEntry>> rows(query_count);
-  parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
-    if (!qry.valid[q]) return;
-    similarity.sparse_row(qry.descriptors[q], ref.descriptors.data(), ref_count, 0, rows[q]);
-    if (any_ref_missing) {
-      std::erase_if(rows[q],
-                    [&](const SimilarityEntry& e) { return !ref.valid[static_cast<std::size_t>(e.j)]; });
-    }
-  });
+  std::optional<nlohmann::json> standardized;
+  if (config.standardize.enabled()) {
+    const CodedSequence ref_codes = code_sequence(ref, config.standardize);
+    const CodedSequence qry_codes = code_sequence(qry, config.standardize);
+    standardized = standardize_json(config.standardize, ref_codes, qry_codes);
+    const LogisticScale scale = standard_default_scale(config.standardize, config.dird.tau1);
+    parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
+      if (!qry.valid[q]) return;
+      for (std::size_t r = 0; r < ref_count; ++r) {
+        if (!ref.valid[r]) continue;
+        const double d = coded_distance(config.dird, config.standardize, qry_codes, q, ref_codes, r);
+        if (d >= scale.cutoff_distance) continue;
+        const double sim = logistic_similarity(d, scale.mu, scale.sigma);
+        if (sim > config.dird.tau1) rows[q].push_back({static_cast<std::int64_t>(r), sim});
+      }
+    });
+  } else {
+    parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
+      if (!qry.valid[q]) return;
+      similarity.sparse_row(qry.descriptors[q], ref.descriptors.data(), ref_count, 0, rows[q]);
+      if (any_ref_missing) {
+        std::erase_if(rows[q],
+                      [&](const SimilarityEntry& e) { return !ref.valid[static_cast<std::size_t>(e.j)]; });
+      }
+    });
+  }
   const double similarity_s = seconds_since(t0);
   const std::size_t similarities = qry.described * ref.described;
 
@@ -320,6 +422,163 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
       {"wall_s", result.wall_s},
       {"peak_rss_mb", peak_rss_mb()},
   };
+  result.summary.update(sequences_json(setup));
+  if (standardized) result.summary["standardize"] = *standardized;
+  if (setup.tolerance() >= 0) {
+    result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
+                                 {"loops_within_tolerance", loops_aligned},
+                                 {"loops_beyond_tolerance", output.loops.size() - loops_aligned},
+                                 {"best_match_within_tolerance", best_aligned}};
+  }
+  return result;
+}
+
+// dird-seqslam (docs/illumination.md): describe both, code each with its own statistics, the distance of
+// every (query, reference) pair, then the contrast-enhanced sequence search query by query (two-sequence
+// mode: no margin). frames.csv gives every query's best line, accepted or not; loops.csv the accepted ones
+// (score = mean z, higher is better); the PR sweep runs over every query's best line.
+TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
+                                   Clock::time_point start) {
+  const PipelineConfig& config = setup.config;
+  const Dataset& reference = setup.reference;
+  const Dataset& query = setup.query;
+  const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
+  const std::size_t query_first = setup.ranges.query_first;
+  std::size_t query_count = setup.ranges.query_count;
+  const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
+  const StandardizeConfig standardize = config.dird_seqslam.standardization(config.standardize);
+  const DirdExtractor extractor(dird);
+
+  auto t0 = Clock::now();
+  const DescribedSequence ref = describe_sequence(config.run.threads, reference, ref_first,
+                                                  ref_first + ref_count, extractor, setup.stop);
+  const DescribedSequence qry = describe_sequence(config.run.threads, query, query_first,
+                                                  query_first + query_count, extractor, setup.stop);
+  query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
+  const CodedSequence ref_codes = code_sequence(ref, standardize);
+  const CodedSequence qry_codes = code_sequence(qry, standardize);
+  const double describe_s = seconds_since(t0);
+
+  // Distances in blocks of queries (in parallel), each block then searched in query order: memory for
+  // one block of rows, not the whole matrix.
+  constexpr std::size_t kBlock = 256;
+  double distance_s = 0.0, search_s = 0.0;
+  ContrastSequenceSearch search(config.dird_seqslam.search, config.match.sequence_length,
+                                ContrastSequenceSearch::Mode::kTwoSequence, 0, 0);
+  ContrastOutput output;
+  std::vector<std::vector<DistanceEntry>> rows(std::min(kBlock, query_count));
+  for (std::size_t first = 0; first < query_count; first += kBlock) {
+    const std::size_t count = std::min(kBlock, query_count - first);
+    t0 = Clock::now();
+    parallel_indices(config.run.threads, count, nullptr, [&](std::size_t k) {
+      const std::size_t q = first + k;
+      rows[k].clear();
+      if (!qry.valid[q]) return;
+      rows[k].reserve(ref_count);
+      for (std::size_t r = 0; r < ref_count; ++r) {
+        if (ref.valid[r])
+          rows[k].push_back(
+              {static_cast<std::int64_t>(r), coded_distance(dird, standardize, qry_codes, q, ref_codes, r)});
+      }
+    });
+    distance_s += seconds_since(t0);
+    t0 = Clock::now();
+    stop_request::check_abort("two-sequence run");  // a second stop signal aborts the search
+    for (std::size_t k = 0; k < count; ++k)
+      search.push(static_cast<std::int64_t>(first + k), rows[k], output);
+    search_s += seconds_since(t0);
+  }
+  t0 = Clock::now();
+  search.flush(output);
+  search_s += seconds_since(t0);
+
+  LoopsWriter loops_csv;
+  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
+  std::size_t loops_aligned = 0;
+  std::vector<Detection> loops;  // indices within the ranges, score = mean z
+  for (const LoopClosure& loop : output.loops) {
+    const auto q = static_cast<std::size_t>(loop.i);
+    const auto r = static_cast<std::size_t>(loop.j);
+    loops_csv.write(query_first + q, ref_first + r, query.frame_t_ns(query_first + q),
+                    reference.frame_t_ns(ref_first + r), loop.score);
+    if (setup.aligned(q, r)) ++loops_aligned;
+    loops.push_back(Detection{q, r, loop.score});
+  }
+  loops_csv.close();
+
+  CsvWriter frames_csv(out_dir / "frames.csv",
+                       {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
+                        "velocity", "line_end_frame", "status", "reason"});
+  std::vector<Detection> ranked;
+  std::array<std::size_t, 4> outcome_counts{};
+  std::size_t best_aligned = 0, frame_errors = 0;
+  for (const ContrastVerdict& verdict : output.frames) {
+    const auto q = static_cast<std::size_t>(verdict.i);
+    const std::size_t frame = query_first + q;
+    ++outcome_counts[static_cast<std::size_t>(verdict.outcome)];
+    ContrastOutcomeContext context;
+    context.two_sequence = true;
+    context.described = qry.valid[q] != 0;
+    context.min_score = config.dird_seqslam.search.min_score;
+    const FrameDetection detection = contrast_detection(verdict, context);
+    const bool has_best = verdict.best_j >= 0;
+    if (has_best) {
+      ranked.push_back(Detection{q, static_cast<std::size_t>(verdict.best_j), verdict.score});
+      if (setup.aligned(q, static_cast<std::size_t>(verdict.best_j))) ++best_aligned;
+    }
+    const bool error = !qry.errors[q].empty();
+    frame_errors += error ? 1 : 0;
+    frames_csv.write_row(
+        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
+         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
+         has_best
+             ? std::to_string(reference.source_index(ref_first + static_cast<std::size_t>(verdict.best_j)))
+             : "",
+         has_best ? format_fixed(verdict.score, 6) : "", has_best ? format_fixed(verdict.velocity, 4) : "",
+         has_best
+             ? std::to_string(query.source_index(query_first + static_cast<std::size_t>(verdict.line_end)))
+             : "",
+         error ? "error" : "ok", error ? qry.errors[q] + "; " + detection.reason : detection.reason});
+  }
+  frames_csv.close();
+
+  TwoSequenceResult result;
+  result.reference_frames = ref_count;
+  result.query_frames = query_count;
+  result.loops = output.loops.size();
+  const std::string score_order = "higher_is_better";
+  nlohmann::json evaluation = run_evaluation(setup, loops, ranked, score_order, out_dir);
+  result.wall_s = seconds_since(start);
+  result.summary = {
+      {"mode", "two-sequence"},
+      {"method", "dird-seqslam"},
+      {"score_order", score_order},
+      {"config", config_to_json(config)},
+      {"images_decoded", ref.described + qry.described},
+      {"descriptors_computed", ref.described + qry.described},
+      {"similarities_computed", ref.described * qry.described},  // distances
+      {"loops", output.loops.size()},
+      {"query_frames", query_count},
+      {"query_frames_with_error", frame_errors},
+      {"reference_errors", reference_errors_json(ref)},
+      {"detection",
+       {{"no_candidate", outcome_counts[static_cast<std::size_t>(FrameOutcome::kNoCandidate)]},
+        {"below_threshold", outcome_counts[static_cast<std::size_t>(FrameOutcome::kBelowThreshold)]},
+        {"suppressed", 0},
+        {"loop", outcome_counts[static_cast<std::size_t>(FrameOutcome::kLoop)]},
+        {"delay_frames", search.emission_delay()}}},
+      {"dird_seqslam",
+       {{"normalization", dird.normalization},
+        {"resize", dird.resize},
+        {"velocities", config.dird_seqslam.search.velocities()},
+        {"sequence_length", search.sequence_length()}}},
+      {"evaluation", std::move(evaluation)},
+      {"stages_s", {{"describe", describe_s}, {"distances", distance_s}, {"search", search_s}}},
+      {"wall_s", result.wall_s},
+      {"peak_rss_mb", peak_rss_mb()},
+  };
+  if (standardize.enabled())
+    result.summary["standardize"] = standardize_json(standardize, ref_codes, qry_codes);
   result.summary.update(sequences_json(setup));
   if (setup.tolerance() >= 0) {
     result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
@@ -475,8 +734,15 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
                query.root().string(), setup.ranges.query_count, config.run.threads);
   const auto start = Clock::now();
   std::filesystem::create_directories(out_dir);
-  TwoSequenceResult result =
-      config.run.seqslam() ? run_seqslam(setup, out_dir, start) : run_dird(setup, out_dir, start);
+  if (config.scale.online()) {
+    throw ConfigError(
+        "scale.mode: 'online' estimates the scale while a single sequence streams; two-sequence runs take "
+        "dird.mu / dird.sigma, the standardised scale (standardize.mode batch or causal) or run.method "
+        "dird-seqslam, which needs no scale");
+  }
+  TwoSequenceResult result = config.run.seqslam()        ? run_seqslam(setup, out_dir, start)
+                             : config.run.dird_seqslam() ? run_dird_seqslam(setup, out_dir, start)
+                                                         : run_dird(setup, out_dir, start);
   result.interrupted = stop && stop->load();
   result.summary["interrupted"] = result.interrupted;
   write_json_file(out_dir / "summary.json", result.summary);

@@ -10,6 +10,9 @@ void DirdConfig::validate() const {
   if (normalization != "libdird" && normalization != "l2") {
     throw ConfigError("dird.normalization: '" + normalization + "' is not one of libdird, l2");
   }
+  if (resize != "nearest" && resize != "area") {
+    throw ConfigError("dird.resize: '" + resize + "' is not one of nearest, area");
+  }
   if (metric != "l1" && metric != "l2") {
     throw ConfigError("dird.metric: '" + metric + "' is not one of l1, l2");
   }

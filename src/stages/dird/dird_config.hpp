@@ -21,6 +21,12 @@ struct DirdConfig {
   std::string normalization = "libdird";
   // Read the image bottom-up, as the reference command-line tool does.
   bool flip_vertical = false;
+  // How the image becomes the 192 x 192 working image: "nearest" (dird.md §1 step 2, bit-exact with the
+  // reference: one source pixel per working pixel, the others ignored) or "area" (each working pixel the
+  // rounded mean of the source pixels its footprint covers: a box filter before sampling, which averages
+  // sensor noise and aliasing away on images larger than 192 x 192; on smaller ones it is nearest
+  // neighbour with integer index arithmetic). docs/illumination.md measures it.
+  std::string resize = "nearest";
   // "l1" (sum of absolute byte differences, the reference) or "l2" (Euclidean).
   std::string metric = "l1";
   // Logistic similarity centre and scale, in distance units of `metric`.
@@ -34,16 +40,19 @@ struct DirdConfig {
   static void fields(Self& self, V&& v) {
     v("normalization", self.normalization);
     v("flip_vertical", self.flip_vertical);
+    v("resize", self.resize);
     v("metric", self.metric);
     v("mu", self.mu);
     v("sigma", self.sigma);
     v("tau1", self.tau1);
   }
-  // Throws ConfigError naming the key: normalization in {libdird, l2}, metric in {l1, l2}, sigma > 0,
+  // Throws ConfigError naming the key: normalization in {libdird, l2}, resize in {nearest, area}, metric in
+  // {l1, l2}, sigma > 0,
   // finite mu, 0 < tau1 < 1, and with metric l2 mu/sigma must not be the L1 reference values.
   void validate() const;
 
   bool l2_normalization() const { return normalization == "l2"; }
+  bool area_resize() const { return resize == "area"; }
   bool l2_metric() const { return metric == "l2"; }
 };
 

@@ -5,6 +5,8 @@
 #include <opencv2/core.hpp>
 #include <stdexcept>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 namespace loopgate {
@@ -85,6 +87,41 @@ void build_integral(const cv::Mat& image, const int* rows, const int* cols, std:
     std::int32_t row_sum = 0;
     for (int u = 0; u < kSide; ++u) {
       row_sum += grey_at<kCn>(src, cols[u]);
+      out[u] = above != nullptr ? row_sum + above[u] : row_sum;
+    }
+  }
+}
+
+// dird.resize area: the working image as block means of the grey image (integer arithmetic, rounded),
+// then its integral. Block of working row v: source rows [v H / 192, max(that + 1, (v + 1) H / 192)), the
+// same for columns.
+void build_area_integral(const cv::Mat& grey, bool flip_vertical, std::int32_t* integral) {
+  const auto block = [](int k, int n) {
+    const int lo = static_cast<int>(static_cast<std::int64_t>(k) * n / kSide);
+    const int hi = std::max(lo + 1, static_cast<int>(static_cast<std::int64_t>(k + 1) * n / kSide));
+    return std::pair{lo, std::min(hi, n)};
+  };
+  int c_lo[kSide], c_hi[kSide];
+  for (int u = 0; u < kSide; ++u) std::tie(c_lo[u], c_hi[u]) = block(u, grey.cols);
+  std::uint32_t sums[kSide];
+  for (int v = 0; v < kSide; ++v) {
+    const auto [r0, r1] = block(v, grey.rows);
+    std::fill(sums, sums + kSide, 0u);
+    for (int r = r0; r < r1; ++r) {
+      const std::uint8_t* src = grey.ptr<std::uint8_t>(flip_vertical ? grey.rows - 1 - r : r);
+      for (int u = 0; u < kSide; ++u) {
+        std::uint32_t sum = 0;
+        for (int c = c_lo[u]; c < c_hi[u]; ++c) sum += src[c];
+        sums[u] += sum;
+      }
+    }
+    std::int32_t* out = integral + v * kSide;
+    const std::int32_t* above = v > 0 ? out - kSide : nullptr;
+    std::int32_t row_sum = 0;
+    const auto rows = static_cast<std::uint32_t>(r1 - r0);
+    for (int u = 0; u < kSide; ++u) {
+      const std::uint32_t count = rows * static_cast<std::uint32_t>(c_hi[u] - c_lo[u]);
+      row_sum += static_cast<std::int32_t>((sums[u] + count / 2) / count);
       out[u] = above != nullptr ? row_sum + above[u] : row_sum;
     }
   }
@@ -220,6 +257,16 @@ Descriptor DirdExtractor::extract(const cv::Mat& image) const {
 
 void DirdExtractor::extract(const cv::Mat& image, Descriptor& out) const {
   check_input(image);
+  if (config_.area_resize()) {
+    std::int32_t* integral = thread_workspace().integral.data();
+    if (image.channels() == 1) {
+      build_area_integral(image, config_.flip_vertical, integral);
+    } else {
+      build_area_integral(to_grey_bt601(image), config_.flip_vertical, integral);
+    }
+    extract_from_integral(integral, l2_normalization_, out);
+    return;
+  }
   int rows[kSide];
   int cols[kSide];
   source_indices(image, config_.flip_vertical, rows, cols);
