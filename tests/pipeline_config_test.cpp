@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+#include <utility>
+#include <vector>
+
 #include "core/error.hpp"
 #include "io/config.hpp"
 
@@ -83,6 +87,34 @@ TEST(PipelineConfig, EveryParameterIsBounded) {
     EXPECT_NE(error.find(set.substr(set.find('.') + 1, set.find('=') - set.find('.') - 1)), std::string::npos)
         << error;
     EXPECT_NE(error.find("must be"), std::string::npos) << error;
+  }
+  // The sections main added with dird-seqslam, and the standardisation statistics it shares: each message
+  // names the full key and states the bound.
+  for (const auto& [set, bound] : std::vector<std::pair<std::string, std::string>>{
+           {"dird_seqslam.contrast_half_window_frames=2000000000", "in [1, 1000] frames"},
+           {"dird_seqslam.contrast_min_cells=2000000000", "in [2, 2 * contrast_half_window_frames + 1]"},
+           {"dird_seqslam.velocity_min=1e300", "in (0, 10] reference frames per query frame"},
+           {"dird_seqslam.velocity_max=1e300", "in [velocity_min, 10] reference frames per query frame"},
+           {"dird_seqslam.velocity_steps=2000000000", "in [1, 64]"},
+           {"dird_seqslam.min_score=1e300", "in [-100, 100] (a mean z"},
+           {"standardize.warm_up=2000000000", "in [2, 1000000] observations"},
+           {"standardize.window=2000000000", "or in [standardize.warm_up, 1000000] observations"},
+           {"standardize.refresh_every=2000000000", "in [1, 1000000] observations"},
+           {"standardize.observe_every=2000000000", "in [1, 1000000] frames"},
+           {"standardize.min_stddev=1e300", "in (0, 128] descriptor byte units"},
+           {"scale.min_distances=9000000000000000000", "in [1, 1000000000] distances"}}) {
+    SCOPED_TRACE(set);
+    const std::string error = error_of({set});
+    EXPECT_EQ(error.rfind(set.substr(0, set.find('=')) + ": must be", 0), 0u) << error;
+    EXPECT_NE(error.find(bound), std::string::npos) << error;
+  }
+  // Choices are bounded by their list, which the message gives.
+  for (const std::string set : {"dird.resize=cubic", "dird_seqslam.resize=cubic",
+                                "dird_seqslam.normalization=none", "dird_seqslam.standardize=always"}) {
+    SCOPED_TRACE(set);
+    const std::string error = error_of({set});
+    EXPECT_EQ(error.rfind(set.substr(0, set.find('=')) + ": '", 0), 0u) << error;
+    EXPECT_NE(error.find("is not one of"), std::string::npos) << error;
   }
 }
 
