@@ -294,15 +294,16 @@ TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
 // frames described before it (a prefix) are matched and every output is written for them; a stop before
 // the reference is complete gives complete, empty outputs.
 TEST(PipelineTwoSequence, StopRequestWritesOutputsForTheQueryFramesDescribed) {
-  for (const bool seqslam : {false, true}) {
-    SCOPED_TRACE(seqslam ? "seqslam" : "dird");
+  for (const Detector method : {Detector::kDird, Detector::kSeqSlam, Detector::kDirdSeqSlam}) {
+    SCOPED_TRACE(std::string(enum_name(method)));
     const RevisitDataset reference(kPeriod, 1, 0);
     RevisitDataset query(kPeriod, 1, 12345);
     std::atomic<bool> stop{false};
     query.on_load = [&](std::size_t frame) {
       if (frame >= 60) stop.store(true);
     };
-    PipelineConfig config = seqslam ? seqslam_config() : dird_config();
+    PipelineConfig config = method == Detector::kSeqSlam ? seqslam_config() : dird_config();
+    config.run.method = method;
     config.eval.aligned_tolerance_frames = 1;
     const auto out = testing::make_temp_dir("two-seq-stop");
     const TwoSequenceResult result = run_two_sequences(config, reference, query, out, &stop);

@@ -2,9 +2,10 @@
 // record them; long-running work reads them.
 //  - The first signal asks to stop: a run takes no new input, finishes the frames in flight and writes every
 //    output (the pipeline polls stop_flag()).
-//  - A second signal asks to abort: long loops (the sequence matcher's NMS, SeqSLAM's search, the
-//    two-sequence passes, calibrate's pairs, the simulator's rendering) throw Interrupted at their next
-//    check_abort(); whatever is already written stays written.
+//  - A second signal asks to abort: long loops (SeqSLAM's difference matrix and search, the two-sequence
+//    passes, dird-seqslam's two-sequence search among them) throw Interrupted at their next check_abort();
+//    whatever is already written stays written. The per-frame work of the DIRD and contrast matchers is
+//    bounded by the parameter bounds instead (docs/reliability.md, Limits).
 // Everything here is lock-free, so a signal handler may call record().
 #pragma once
 
