@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <fstream>
 #include <sstream>
@@ -167,6 +168,52 @@ TEST(IoConfig, FileErrorsNameTheFile) {
   EXPECT_EQ(config.alpha.seed, 9);
 }
 
+// Issue 15: a YAML key (or section) given twice is an error naming both lines; the last value no longer
+// wins silently.
+TEST(IoConfig, DuplicateKeysAreErrorsNamingBothLines) {
+  const auto error = [](const std::string& text) {
+    try {
+      RawConfig::from_yaml_string(text, "cfg.yaml");
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_EQ(error("alpha:\n  count: 4\n  gain: 2\n  count: 5\n"),
+            "alpha.count: key given twice, at cfg.yaml:2 and cfg.yaml:4 (each key once; the last value would "
+            "silently win)");
+  EXPECT_NE(error("alpha:\n  count: 4\nbeta:\n  sigma_m: 1\nalpha:\n  gain: 2\n")
+                .find("alpha: section given twice, at cfg.yaml:1 and cfg.yaml:5"),
+            std::string::npos);
+  EXPECT_EQ(error("alpha:\n  count: 4\nbeta:\n  count: 4\n"), "");  // same key, different sections
+}
+
+// Issue 15: a FIFO given as --config blocked open() forever.
+TEST(IoConfig, ConfigFileMustBeARegularFile) {
+  const auto dir = testing::make_temp_dir("config-fifo");
+  ASSERT_EQ(::mkfifo((dir / "config.yaml").c_str(), 0600), 0);
+  try {
+    RawConfig::from_yaml_file(dir / "config.yaml");
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("the configuration file is a FIFO (named pipe), expected a regular file"),
+        std::string::npos)
+        << e.what();
+  }
+}
+
+// Issue 15: a huge value is quoted capped in the error.
+TEST(IoConfig, HugeValuesAreQuotedCapped) {
+  try {
+    from_yaml("", {"alpha.count=" + std::string(1'000'000, '9') + "x"});
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_LT(std::string(e.what()).size(), 400u);
+    EXPECT_NE(std::string(e.what()).find("(1000001 bytes)"), std::string::npos) << e.what();
+  }
+}
+
 TEST(IoWriters, CsvQuotesAndChecksWidth) {
   const auto dir = testing::make_temp_dir("writers");
   {
@@ -174,6 +221,7 @@ TEST(IoWriters, CsvQuotesAndChecksWidth) {
     csv.write_row({"1", "a,b"});
     csv.write_row({"2", "say \"hi\""});
     EXPECT_THROW(csv.write_row({"3"}), DataError);
+    csv.close();
   }
   std::ifstream in(dir / "a.csv");
   std::stringstream buffer;
@@ -181,6 +229,49 @@ TEST(IoWriters, CsvQuotesAndChecksWidth) {
   const std::string content = buffer.str();
   EXPECT_EQ(content, "x,y\n1,\"a,b\"\n2,\"say \"\"hi\"\"\"\n");
   EXPECT_EQ(format_fixed(1.0 / 3.0, 3), "0.333");
+}
+
+// Issue 15: every output is whole or absent. While written it is FILE.partial; close() renames it; a writer
+// destroyed without close() (an exception on the way) leaves nothing; a failed write names the file and the
+// system's reason, and leaves nothing either.
+TEST(IoWriters, OutputsAreWholeOrAbsent) {
+  const auto dir = testing::make_temp_dir("writers-atomic");
+  {
+    CsvWriter csv(dir / "frames.csv", {"a", "b"});
+    csv.write_row({"1", "2"});
+    csv.flush();
+    EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv"));
+    EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv.partial"));
+    csv.close();
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv.partial"));
+  {
+    TumWriter tum(dir / "trajectory.tum");
+    tum.write(0, Eigen::Isometry3d::Identity());
+  }  // destroyed without close(): abandoned
+  EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum.partial"));
+
+  // A full disk: the temporary file is /dev/full, where every write fails with ENOSPC.
+  std::filesystem::create_symlink("/dev/full", dir / "loops.csv.partial");
+  CsvWriter full;
+  full.open(dir / "loops.csv", {"i", "j"});
+  std::string error;
+  try {
+    for (int k = 0; k < 100000; ++k) full.write_row({"1", "2"});  // beyond the stream's buffer
+    full.close();
+  } catch (const DataError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(error.find("loops.csv: write failed: No space left on device"), std::string::npos) << error;
+  full.abandon();
+  EXPECT_FALSE(std::filesystem::exists(dir / "loops.csv"));
+  EXPECT_FALSE(std::filesystem::is_symlink(dir / "loops.csv.partial"));
+
+  write_json_file(dir / "summary.json", {{"a", "\xff\xfe not utf-8"}});  // replaced, not a lost file
+  EXPECT_TRUE(std::filesystem::exists(dir / "summary.json"));
+  EXPECT_FALSE(std::filesystem::exists(dir / "summary.json.partial"));
 }
 
 }  // namespace

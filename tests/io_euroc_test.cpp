@@ -248,8 +248,8 @@ void damage(const fs::path& dir) {
   std::string imu = "#timestamp [ns],wx,wy,wz,ax,ay,az\n";
   imu += std::to_string(kT0) + ",0,0,0,0,0,9.8\n";
   imu += std::to_string(kT0 + 10) + ",0,0,0,0,0,9.8\n";
-  imu += std::to_string(kT0 + 5) + ",0,0,0,0,0,9.8\n";     // line 4: out of order (kept)
-  imu += std::to_string(kT0 + 10) + ",0,0,0,0,0,9.8\n";    // line 5: duplicate (kept)
+  imu += std::to_string(kT0 + 5) + ",0,0,0,0,0,9.8\n";     // line 4: 5 after 10...
+  imu += std::to_string(kT0 + 10) + ",0,0,0,0,0,9.8\n";    // line 5: ...so line 3 is the one out of order
   imu += std::to_string(kT0 + 20) + ",0,0,nan,0,0,9.8\n";  // line 6: NaN (skipped)
   imu += std::to_string(kT0 + 30) + ",0,0,0,0,0,9.8\n";
   imu += std::to_string(kT0 + 40) + ",0,0,0";  // line 8: truncated (recorded)
@@ -281,12 +281,12 @@ TEST(IoEuroc, LenientRecordsAndSkips) {
   const auto d = open_euroc(dir, options);
   EXPECT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));  // the two bad rows skipped
   for (std::size_t i = 0; i < d->frame_count(); ++i) EXPECT_EQ(d->frame_t_ns(i), kT0 + i * kFramePeriod);
-  // IMU: out-of-order and duplicate samples kept in file order; NaN and truncated rows skipped.
+  // IMU (issue 15): the longest run of increasing times is kept (0, 5, 10, 30: line 3 is the sample out of
+  // order with the samples around it, dropped like a row of any other table); NaN and truncated rows skipped.
   std::vector<Timestamp> imu_t;
   for (const ImuSample& s : d->imu_samples()) imu_t.push_back(s.t_ns - kT0);
-  EXPECT_EQ(imu_t, (std::vector<Timestamp>{0, 10, 5, 10, 30}));
-  // imu_between on unsorted samples follows the file order.
-  EXPECT_EQ(d->imu_between(kT0 + 6, kT0 + 30).size(), 3u);  // 10, 5, 10
+  EXPECT_EQ(imu_t, (std::vector<Timestamp>{0, 5, 10, 30}));
+  EXPECT_EQ(d->imu_between(kT0 + 6, kT0 + 30).size(), 1u);  // 10
   ASSERT_EQ(d->ground_truth().size(), 2u);
 
   struct Expected {
@@ -297,11 +297,11 @@ TEST(IoEuroc, LenientRecordsAndSkips) {
   const std::vector<Expected> expected = {
       {"cam0/data.csv", 6, "duplicate camera timestamp"},
       {"cam0/data.csv", 9, "column 1 (timestamp [ns]): expected an integer timestamp in ns, got 'garbage'"},
-      {"imu0/data.csv", 4, "non-increasing IMU timestamp"},
-      {"imu0/data.csv", 5, "duplicate IMU timestamp"},
+      {"imu0/data.csv", 3,
+       "IMU timestamp " + std::to_string(kT0 + 10) + " ns is after line 4 (" + std::to_string(kT0 + 5) + " ns)"},
       {"imu0/data.csv", 6, "column 4 (w_z): expected a finite number, got 'nan'"},
       {"imu0/data.csv", 8, "truncated last line"},
-      {"state_groundtruth_estimate0/data.csv", 4, "non-increasing ground-truth timestamp"},
+      {"state_groundtruth_estimate0/data.csv", 4, "ground-truth timestamp"},
       {"state_groundtruth_estimate0/data.csv", 5, "expected 8 columns like the first data row, got 7"},
   };
   ASSERT_EQ(d->issues().size(), expected.size());

@@ -203,7 +203,7 @@ TEST(IoKitti, BadInput) {
   EXPECT_EQ(e3.file().filename(), image_name(3));
   EXPECT_NE(e3.message().find("frame 3: image file missing"), std::string::npos);
   const DataError e4 = catch_data_error([&] { d2->load_image(5); });
-  EXPECT_NE(e4.message().find("frame 5: image is 96x16, expected 48x16 like frame 0 (000000.png)"),
+  EXPECT_NE(e4.message().find("frame 5: image is 96x16, expected 48x16 like most frames"),
             std::string::npos)
       << e4.what();
   EXPECT_EQ(d2->load_image(4).cols, kWidth);

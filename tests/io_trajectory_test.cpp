@@ -104,7 +104,8 @@ TEST(IoTrajectory, TumBadInput) {
   write_file(dir / "dup.txt", "1.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n");
   expect_data_error([&] { read_tum(dir / "dup.txt"); }, "dup.txt", 2, "duplicate timestamp");
   write_file(dir / "back.txt", "2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n");
-  expect_data_error([&] { read_tum(dir / "back.txt"); }, "back.txt", 2, "non-increasing");
+  expect_data_error([&] { read_tum(dir / "back.txt"); }, "back.txt", 2,
+                    "timestamp 1.000000000 s is before line 1 (2.000000000 s)");
   write_file(dir / "quat.txt", "1.0 0 0 0 0 0 0 0\n");
   expect_data_error([&] { read_tum(dir / "quat.txt"); }, "quat.txt", 1, "unit quaternion");
 }
@@ -143,7 +144,8 @@ TEST(IoTrajectory, EurocImuBadInput) {
   write_file(dir / "dup.csv", header + "100,0,0,0,0,0,9.8\n100,0,0,0,0,0,9.8\n");
   expect_data_error([&] { read_euroc_imu(dir / "dup.csv"); }, "dup.csv", 3, "duplicate IMU timestamp");
   write_file(dir / "back.csv", header + "200,0,0,0,0,0,9.8\n100,0,0,0,0,0,9.8\n");
-  expect_data_error([&] { read_euroc_imu(dir / "back.csv"); }, "back.csv", 3, "non-increasing IMU timestamp");
+  expect_data_error([&] { read_euroc_imu(dir / "back.csv"); }, "back.csv", 3,
+                    "IMU timestamp 100 ns is before line 2 (200 ns)");
   write_file(dir / "trunc.csv", header + "100,0,0,0,0,0,9.8\n200,0,0,0,0");
   expect_data_error([&] { read_euroc_imu(dir / "trunc.csv"); }, "trunc.csv", 3, "truncated last line");
   // A complete last line without a newline is fine; so are CRLF line ends and blanks around fields.
@@ -387,12 +389,20 @@ TEST(IoTrajectory, GarbageInputOnlyGivesDataErrors) {
     strict([&] { read_kitti_times(file); });
     std::vector<DataIssue> issues;
     io_detail::IssueLog lenient(false, &issues);
-    EXPECT_NO_THROW(io_detail::read_euroc_imu(file, lenient));
-    EXPECT_NO_THROW(io_detail::read_euroc_groundtruth(file, lenient));
-    EXPECT_NO_THROW(io_detail::read_euroc_camera_csv(file, lenient));
-    EXPECT_NO_THROW(io_detail::read_tum(file, lenient));
-    EXPECT_NO_THROW(io_detail::read_kitti_time_rows(file, lenient));
-    EXPECT_NO_THROW(io_detail::read_kitti_pose_rows(file, lenient));
+    // Lenient: bad rows are recorded; only a file mostly bad is an error (issue 15), and only a DataError.
+    const auto tolerant = [&](auto&& read) {
+      try {
+        read();
+      } catch (const DataError& e) {
+        EXPECT_NE(e.message().find("more than half of the file is rejected"), std::string::npos) << e.what();
+      }
+    };
+    tolerant([&] { io_detail::read_euroc_imu(file, lenient); });
+    tolerant([&] { io_detail::read_euroc_groundtruth(file, lenient); });
+    tolerant([&] { io_detail::read_euroc_camera_csv(file, lenient); });
+    tolerant([&] { io_detail::read_tum(file, lenient); });
+    tolerant([&] { io_detail::read_kitti_time_rows(file, lenient); });
+    tolerant([&] { io_detail::read_kitti_pose_rows(file, lenient); });
     for (const DataIssue& issue : issues) ASSERT_GT(issue.line, 0u) << issue.to_string();
   }
   EXPECT_GT(strict_errors, 200);  // the garbage is mostly rejected

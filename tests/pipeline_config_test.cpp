@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+#include <utility>
+#include <vector>
+
 #include "core/error.hpp"
 #include "io/config.hpp"
 
@@ -64,6 +68,77 @@ TEST(PipelineConfig, BadValuesNameTheKey) {
   EXPECT_NE(error_of({"odometry.sorce=drift"}).find("unknown key 'odometry.sorce'"), std::string::npos);
   EXPECT_NE(error_of({"bogus.radius=1"}).find("unknown section 'bogus'"), std::string::npos);
   EXPECT_NE(error_of({"output.progress=maybe"}).find("output.progress"), std::string::npos);
+}
+
+// Issue 15: parameters that could hang a run or exhaust memory are bounded, and the error says the bound.
+TEST(PipelineConfig, EveryParameterIsBounded) {
+  EXPECT_NE(error_of({"match.nms_half_window=2000000000"})
+                .find("match.nms_half_window: must be in [0, 1000] frames (got 2000000000)"),
+            std::string::npos);
+  for (const std::string set :
+       {"match.sequence_length=100000", "match.max_step=1000000", "match.tau3=5", "gate.kdtree_leaf_size=0",
+        "gate.area_margin_query_frames=1000000", "seqslam.image_width_px=100000",
+        "seqslam.velocity_max=1e300", "seqslam.sequence_length_frames=200000", "run.max_in_flight=100000000",
+        "run.image_cache_frames=2000000000", "output.flush_every=2000000000", "ekf.image_blur_sigma_px=1e6",
+        "ekf.max_features=2000000000", "sync.max_gap_ms=1e300", "eval.truth_radius_m=1e300",
+        "odometry.initial_sigma_m=1e300"}) {
+    SCOPED_TRACE(set);
+    const std::string error = error_of({set});
+    EXPECT_NE(error.find(set.substr(set.find('.') + 1, set.find('=') - set.find('.') - 1)), std::string::npos)
+        << error;
+    EXPECT_NE(error.find("must be"), std::string::npos) << error;
+  }
+  // The sections main added with dird-seqslam, and the standardisation statistics it shares: each message
+  // names the full key and states the bound.
+  for (const auto& [set, bound] : std::vector<std::pair<std::string, std::string>>{
+           {"dird_seqslam.contrast_half_window_frames=2000000000", "in [1, 1000] frames"},
+           {"dird_seqslam.contrast_min_cells=2000000000", "in [2, 2 * contrast_half_window_frames + 1]"},
+           {"dird_seqslam.velocity_min=1e300", "in (0, 10] reference frames per query frame"},
+           {"dird_seqslam.velocity_max=1e300", "in [velocity_min, 10] reference frames per query frame"},
+           {"dird_seqslam.velocity_steps=2000000000", "in [1, 64]"},
+           {"dird_seqslam.min_score=1e300", "in [-100, 100] (a mean z"},
+           {"standardize.warm_up=2000000000", "in [2, 1000000] observations"},
+           {"standardize.window=2000000000", "or in [standardize.warm_up, 1000000] observations"},
+           {"standardize.refresh_every=2000000000", "in [1, 1000000] observations"},
+           {"standardize.observe_every=2000000000", "in [1, 1000000] frames"},
+           {"standardize.min_stddev=1e300", "in (0, 128] descriptor byte units"},
+           {"scale.min_distances=9000000000000000000", "in [1, 1000000000] distances"}}) {
+    SCOPED_TRACE(set);
+    const std::string error = error_of({set});
+    EXPECT_EQ(error.rfind(set.substr(0, set.find('=')) + ": must be", 0), 0u) << error;
+    EXPECT_NE(error.find(bound), std::string::npos) << error;
+  }
+  // Choices are bounded by their list, which the message gives.
+  for (const std::string set : {"dird.resize=cubic", "dird_seqslam.resize=cubic",
+                                "dird_seqslam.normalization=none", "dird_seqslam.standardize=always"}) {
+    SCOPED_TRACE(set);
+    const std::string error = error_of({set});
+    EXPECT_EQ(error.rfind(set.substr(0, set.find('=')) + ": '", 0), 0u) << error;
+    EXPECT_NE(error.find("is not one of"), std::string::npos) << error;
+  }
+}
+
+// Issue 15: --rate 1e-300 overflowed (t - t0) / rate in int64; --frames 500:100 said "no frame of the
+// 18446744073709551615 in the dataset".
+TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
+  EXPECT_NE(
+      error_of({"run.rate=1e-300"}).find("run.rate: '1e-300' is out of range: 'max' or a rate in [0.001, "),
+      std::string::npos);
+  EXPECT_NE(error_of({"run.rate=1e300"}).find("out of range"), std::string::npos);
+  EXPECT_EQ(error_of({"run.rate=0.5"}), "");
+  EXPECT_EQ(error_of({"run.frames=500:100"}),
+            "run.frames: '500:100' is empty: A (500) must be below B (100); B is exclusive");
+  RunConfig run;
+  run.frames = "5000:";
+  try {
+    run.frame_range(4540);
+    FAIL() << "no ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_STREQ(e.what(),
+                 "run.frames: '5000:' starts at frame 5000, and the dataset has 4540 frames (0..4539)");
+  }
+  run.frames = "10:20";
+  EXPECT_EQ(run.frame_range(15), (std::pair<std::size_t, std::size_t>{10, 15}));
 }
 
 TEST(PipelineConfig, EchoHasEverySection) {

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <set>
@@ -38,6 +39,8 @@ class FakeDataset : public Dataset {
     issues_.push_back(DataIssue{root_ / "imu0/data.csv", 42, message});
   }
 
+  // Called first by load_image with the frame: a test's event (a stop request once frame N is read).
+  std::function<void(std::size_t)> on_load;
   std::set<std::size_t> corrupt_frames;   // load_image throws DataError
   std::set<std::size_t> crashing_frames;  // load_image throws std::runtime_error (escapes: cancels the graph)
   int decode_delay_ms = 0;
@@ -52,6 +55,7 @@ class FakeDataset : public Dataset {
     return root_ / ("image_" + std::to_string(frame) + ".png");
   }
   cv::Mat load_image(std::size_t frame) const override {
+    if (on_load) on_load(frame);
     if (decode_delay_ms > 0) std::this_thread::sleep_for(std::chrono::milliseconds(decode_delay_ms));
     if (corrupt_frames.count(frame))
       throw DataError(image_path(frame), "frame " + std::to_string(frame) + ": corrupt PNG");
@@ -97,6 +101,7 @@ class RevisitDataset : public FakeDataset {
       : FakeDataset(period * laps), period_(period), noise_seed_(noise_seed) {}
 
   cv::Mat load_image(std::size_t frame) const override {
+    if (on_load) on_load(frame);
     if (corrupt_frames.count(frame))
       throw DataError(image_path(frame), "frame " + std::to_string(frame) + ": corrupt PNG");
     const std::size_t place = frame % period_;

@@ -2,6 +2,7 @@
 // beyond the margin, streaming sequence match and NMS (the two-sequence mode: pipeline_two_sequence_test).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -187,6 +188,40 @@ TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
   EXPECT_FALSE(fs::exists(out / "loops.csv"));
   EXPECT_EQ(result.summary["descriptors_computed"].get<std::size_t>(), 0u);
   EXPECT_EQ(result.summary["images_decoded"].get<std::size_t>(), 0u);  // lazy decode: nobody needs pixels
+}
+
+// Issue 15: an interrupted run's evaluation counted the ground-truth positives of frames it never processed.
+// Now it covers the frames it got to: the same evaluation as a run over exactly that range, and fewer
+// positives than the whole dataset's.
+TEST(PipelineFullMode, InterruptedRunIsEvaluatedOnlyOverTheFramesItGotTo) {
+  RevisitDataset dataset(kPeriod, 3);
+  std::atomic<bool> stop{false};
+  dataset.on_load = [&](std::size_t frame) {
+    if (frame >= 200) stop.store(true);
+  };
+  const RunResult stopped = run_pipeline(full_config(), dataset, testing::make_temp_dir("full-stop"), &stop);
+  ASSERT_TRUE(stopped.interrupted);
+  ASSERT_FALSE(stopped.failed) << stopped.error;
+  const nlohmann::json& evaluation = stopped.summary.at("evaluation");
+  ASSERT_TRUE(evaluation.contains("frames_evaluated")) << evaluation.dump();
+  const auto end = evaluation["frames_evaluated"]["end_frame"].get<std::size_t>();
+  EXPECT_GT(end, 200u);
+  EXPECT_LT(end, 3 * kPeriod);
+  EXPECT_EQ(evaluation["frames_evaluated"]["requested_end_frame"].get<std::size_t>(), 3 * kPeriod);
+
+  dataset.on_load = nullptr;
+  PipelineConfig range = full_config();
+  range.run.frames = "0:" + std::to_string(end);
+  const RunResult limited = run_pipeline(range, dataset, testing::make_temp_dir("full-range"));
+  const nlohmann::json& expected = limited.summary.at("evaluation");
+  EXPECT_EQ(evaluation["precision_recall"]["positives"], expected["precision_recall"]["positives"]);
+  EXPECT_EQ(evaluation["precision_recall"]["average_precision"],
+            expected["precision_recall"]["average_precision"]);
+  EXPECT_EQ(evaluation["loop_truth"], expected["loop_truth"]);
+  const RunResult whole = run_pipeline(full_config(), dataset, testing::make_temp_dir("full-whole"));
+  EXPECT_LT(evaluation["precision_recall"]["positives"].get<int>(),
+            whole.summary["evaluation"]["precision_recall"]["positives"].get<int>());
+  EXPECT_FALSE(whole.summary["evaluation"].contains("frames_evaluated"));
 }
 
 }  // namespace

@@ -152,20 +152,21 @@ TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
   for (std::size_t i = 0; i < rows.size(); ++i) EXPECT_EQ(rows[i][0], std::to_string(i));  // contiguous seq
 }
 
+// The stop request comes on an event, not a timer (issue 15: a fixed 150 ms timer failed under TSan, where
+// no frame was through by then): when frame 50 is read. At most run.max_in_flight frames are in the graph,
+// so every frame up to 50 - max_in_flight has left it, and the producer stops within max_in_flight frames.
 TEST(PipelineGraph, StopRequestDrainsAndWritesOutputs) {
   FakeDataset dataset(400);
-  dataset.decode_delay_ms = 2;
   std::atomic<bool> stop{false};
-  std::thread stopper([&] {
-    std::this_thread::sleep_for(std::chrono::milliseconds(150));
-    stop.store(true);
-  });
+  dataset.on_load = [&](std::size_t frame) {
+    if (frame >= 50) stop.store(true);
+  };
   const auto out = testing::make_temp_dir("pipeline-stop");
-  const RunResult result = run_pipeline(base_config(), dataset, out, &stop);
-  stopper.join();
+  const PipelineConfig config = base_config();
+  const RunResult result = run_pipeline(config, dataset, out, &stop);
   EXPECT_TRUE(result.interrupted);
   EXPECT_FALSE(result.failed);
-  EXPECT_GT(result.frames_processed, 0u);
+  EXPECT_GE(result.frames_processed, 50u - static_cast<std::size_t>(config.run.max_in_flight));
   EXPECT_LT(result.frames_processed, 400u);
   EXPECT_EQ(result.frames_processed, result.frames_in);
   EXPECT_EQ(read_csv(out / "frames.csv").size(), result.frames_processed);
@@ -186,6 +187,30 @@ TEST(PipelineGraph, EscapingExceptionCancelsAndNamesTheFrame) {
   EXPECT_EQ(read_csv(out / "frames.csv").size(), result.frames_processed);
   const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
   EXPECT_TRUE(summary["failed"].get<bool>());
+}
+
+// Issue 15: odometry.file pointing at this run's own output (a previous run's trajectory.tum) was read,
+// then overwritten. Refused before anything is written; the file is left as it was.
+TEST(PipelineGraph, AnInputThatIsAnOutputIsRefused) {
+  const FakeDataset dataset(20);
+  const auto out = testing::make_temp_dir("pipeline-overlap");
+  {
+    std::ofstream previous(out / "trajectory.tum");
+    for (std::size_t i = 0; i < 20; ++i) previous << ns_to_s(dataset.frame_t_ns(i)) << " 0 0 0 0 0 0 1\n";
+  }
+  const std::string before = read_file(out / "trajectory.tum");
+  PipelineConfig config = base_config();
+  config.odometry.source = "file";
+  config.odometry.file = (out / "trajectory.tum").string();
+  try {
+    run_pipeline(config, dataset, out);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("trajectory.tum is also odometry.file"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_EQ(read_file(out / "trajectory.tum"), before);
+  EXPECT_FALSE(std::filesystem::exists(out / "frames.csv"));
 }
 
 }  // namespace

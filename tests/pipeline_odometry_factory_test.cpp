@@ -154,5 +154,37 @@ TEST(PipelineOdometryFactory, FileSourceReadsTheTrajectory) {
   }
 }
 
+// Issue 15: a trajectory that does not overlap the dataset made every frame "odometry lost" with exit 0;
+// now it is an error naming the file and both time spans.
+TEST(PipelineOdometryFactory, FileSourceMustOverlapTheDataset) {
+  const testing::FakeDataset dataset(10);  // frames at 1.0 .. 1.9 s
+  const fs::path dir = testing::make_temp_dir("odometry-factory-overlap");
+  std::vector<StampedPose> poses;
+  for (int i = 0; i < 10; ++i)
+    poses.push_back(StampedPose{s_to_ns(500.0 + i), Eigen::Isometry3d::Identity()});
+  write_tum(dir / "other.tum", poses);
+  OdometryConfig config = source("file");
+  config.file = (dir / "other.tum").string();
+  try {
+    make_odometry_source(config, dataset);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_EQ(e.file(), dir / "other.tum");
+    EXPECT_NE(
+        std::string(e.what()).find("its poses cover t = 500.000 .. 509.000 s, and the dataset's 10 frames "
+                                   "are at t = 1.000 .. 1.900 s"),
+        std::string::npos)
+        << e.what();
+  }
+  // Half of the frames covered: accepted (the others are reported lost, frame by frame).
+  poses.clear();
+  for (int i = 0; i < 5; ++i)
+    poses.push_back(
+        StampedPose{dataset.frame_t_ns(static_cast<std::size_t>(i)), Eigen::Isometry3d::Identity()});
+  write_tum(dir / "half.tum", poses);
+  config.file = (dir / "half.tum").string();
+  EXPECT_NO_THROW(make_odometry_source(config, dataset));
+}
+
 }  // namespace
 }  // namespace loopgate

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -346,6 +347,44 @@ TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
 // ride (3576 x 3576). Measured when written (docs/nordland.md): DIRD AP 0.104, R@P100 0, 1361 query
 // frames with a loop, the best one within +-2 frames for 743; SeqSLAM AP 0.483, R@P100 0.355, 1535
 // accepted of which 1494 within +-2, every query's match within +-2 for 1782.
+// Issue 15: a stop request (SIGINT, SIGTERM, SIGHUP in the app) left an empty output folder. Now the query
+// frames described before it (a prefix) are matched and every output is written for them; a stop before
+// the reference is complete gives complete, empty outputs.
+TEST(PipelineTwoSequence, StopRequestWritesOutputsForTheQueryFramesDescribed) {
+  for (const Detector method : {Detector::kDird, Detector::kSeqSlam, Detector::kDirdSeqSlam}) {
+    SCOPED_TRACE(std::string(enum_name(method)));
+    const RevisitDataset reference(kPeriod, 1, 0);
+    RevisitDataset query(kPeriod, 1, 12345);
+    std::atomic<bool> stop{false};
+    query.on_load = [&](std::size_t frame) {
+      if (frame >= 60) stop.store(true);
+    };
+    PipelineConfig config = method == Detector::kSeqSlam ? seqslam_config() : dird_config();
+    config.run.method = method;
+    config.eval.aligned_tolerance_frames = 1;
+    const auto out = testing::make_temp_dir("two-seq-stop");
+    const TwoSequenceResult result = run_two_sequences(config, reference, query, out, &stop);
+    EXPECT_TRUE(result.interrupted);
+    EXPECT_GT(result.query_frames, 60u);
+    EXPECT_LT(result.query_frames, kPeriod);
+    const auto rows = read_csv(out / "frames.csv");
+    ASSERT_EQ(rows.size(), result.query_frames);
+    for (std::size_t q = 0; q < rows.size(); ++q) EXPECT_EQ(rows[q][0], std::to_string(q));
+    const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+    EXPECT_TRUE(summary["interrupted"].get<bool>());
+    EXPECT_EQ(summary["query"]["last_frame"].get<std::size_t>(), result.query_frames);
+    EXPECT_TRUE(std::filesystem::exists(out / "loops.csv"));
+
+    std::atomic<bool> early{true};  // before anything was described
+    const auto empty_out = testing::make_temp_dir("two-seq-stop-early");
+    const TwoSequenceResult none = run_two_sequences(config, reference, query, empty_out, &early);
+    EXPECT_TRUE(none.interrupted);
+    EXPECT_EQ(none.query_frames, 0u);
+    EXPECT_TRUE(read_csv(empty_out / "frames.csv").empty());
+    EXPECT_TRUE(nlohmann::json::parse(read_file(empty_out / "summary.json"))["interrupted"].get<bool>());
+  }
+}
+
 TEST(PipelineTwoSequence, NordlandSummerWinterDirdVsSeqSlam) {
   LOOPGATE_REQUIRE_SHARED_DATA("nordland-64x32/winter");
   const auto data = testing::shared_data_dir() / "nordland-64x32";

@@ -1,5 +1,8 @@
 #include "test_support.hpp"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -102,6 +105,69 @@ std::size_t column_index(const std::vector<std::string>& header, const std::stri
   const auto it = std::find(header.begin(), header.end(), name);
   if (it == header.end()) throw std::runtime_error("no column " + name);
   return static_cast<std::size_t>(it - header.begin());
+}
+
+Child::Child(const std::vector<std::string>& args, long file_size_limit_bytes) {
+  int fds[2];
+  if (::pipe2(fds, O_CLOEXEC) != 0) throw std::runtime_error("pipe failed");
+  std::vector<std::string> copy = args;
+  std::vector<char*> argv;
+  for (auto& a : copy) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  pid_ = ::fork();
+  if (pid_ < 0) throw std::runtime_error("fork failed");
+  if (pid_ == 0) {
+    ::dup2(fds[1], STDOUT_FILENO);
+    ::dup2(fds[1], STDERR_FILENO);
+    if (file_size_limit_bytes > 0) {
+      const rlimit limit{static_cast<rlim_t>(file_size_limit_bytes),
+                         static_cast<rlim_t>(file_size_limit_bytes)};
+      ::setrlimit(RLIMIT_FSIZE, &limit);
+    }
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  ::close(fds[1]);
+  fd_ = fds[0];
+}
+
+Child::~Child() {
+  if (!reaped_ && pid_ > 0) {
+    ::kill(pid_, SIGKILL);
+    int status = 0;
+    ::waitpid(pid_, &status, 0);
+  }
+  if (fd_ >= 0) ::close(fd_);
+}
+
+bool Child::read_more() {
+  char buffer[4096];
+  const ssize_t n = ::read(fd_, buffer, sizeof(buffer));
+  if (n <= 0) return false;
+  output_.append(buffer, static_cast<std::size_t>(n));
+  return true;
+}
+
+bool Child::wait_for_output(const std::string& needle) {
+  while (output_.find(needle) == std::string::npos) {
+    if (!read_more()) return false;
+  }
+  return true;
+}
+
+void Child::send(int signal_number) {
+  if (!reaped_) ::kill(pid_, signal_number);
+}
+
+int Child::wait() {
+  while (read_more()) {
+  }
+  int status = 0;
+  if (!reaped_) ::waitpid(pid_, &status, 0);
+  reaped_ = true;
+  if (WIFEXITED(status)) return WEXITSTATUS(status);
+  if (WIFSIGNALED(status)) return 128 + WTERMSIG(status);
+  return -1;
 }
 
 }  // namespace loopgate::testing

@@ -25,6 +25,33 @@ std::vector<std::vector<std::string>> read_csv(const std::filesystem::path& file
 // Index of column `name` in a CSV header; throws std::runtime_error naming it when absent.
 std::size_t column_index(const std::vector<std::string>& header, const std::string& name);
 
+// A command started in the background (fork + exec, no shell), for tests that signal it or run two at once:
+// its stderr and stdout are read through a pipe, and tests wait on what it writes (an event), never on a
+// timer. The destructor kills it (SIGKILL) if it still runs.
+class Child {
+ public:
+  // `file_size_limit_bytes` > 0: RLIMIT_FSIZE of the child (every file it writes is cut there: a full disk).
+  explicit Child(const std::vector<std::string>& args, long file_size_limit_bytes = 0);
+  ~Child();
+  Child(const Child&) = delete;
+  Child& operator=(const Child&) = delete;
+
+  // Reads the child's output until it holds `needle`; false when the child closed it (ended) first.
+  bool wait_for_output(const std::string& needle);
+  void send(int signal_number);
+  // Reads the rest of the output and reaps the child: its exit status, or 128 + the signal that ended it.
+  int wait();
+  const std::string& output() const { return output_; }
+  int pid() const { return pid_; }
+
+ private:
+  bool read_more();
+  int pid_ = -1;
+  int fd_ = -1;
+  bool reaped_ = false;
+  std::string output_;
+};
+
 }  // namespace loopgate::testing
 
 #define LOOPGATE_REQUIRE_SHARED_DATA(rel)                                                    \

@@ -19,6 +19,8 @@
 #include "app/commands.hpp"
 #include "core/error.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
+#include "io/writers.hpp"
 #include "stages/dird/dird_calibration.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_similarity.hpp"
@@ -45,6 +47,12 @@ struct CalibrateOptions {
 };
 
 int run_calibrate(const CalibrateOptions& opt) {
+  std::error_code ec;
+  if (!opt.out_file.empty() && std::filesystem::exists(opt.out_file, ec) &&
+      path_inside(opt.out_file, opt.dataset)) {
+    throw ConfigError("--out " + opt.out_file + " is a file of the dataset " + opt.dataset +
+                      ", whose files are inputs: it would be overwritten; choose another --out");
+  }
   OpenOptions open_options;
   open_options.camera_index = opt.camera;
   const std::unique_ptr<Dataset> dataset = open_dataset(opt.dataset, open_options);
@@ -123,11 +131,18 @@ int run_calibrate(const CalibrateOptions& opt) {
   yaml << "  sigma: " << c.sigma << "\n";
   yaml << "  tau1: " << opt.tau1 << "\n";
   std::cout << yaml.str();
-  if (!opt.out_file.empty()) {
-    std::ofstream out(opt.out_file, std::ios::out | std::ios::trunc);
+  if (!opt.out_file.empty()) {  // whole or absent: a temporary name, renamed when complete
+    const std::filesystem::path partial = partial_path(opt.out_file);
+    std::ofstream out(partial, std::ios::out | std::ios::trunc);
     if (!out) throw DataError(opt.out_file, "cannot open the output file for writing");
     out << yaml.str();
-    if (!out) throw DataError(opt.out_file, "write failed");
+    out.close();
+    ec.clear();
+    if (out) std::filesystem::rename(partial, opt.out_file, ec);
+    if (!out || ec) {
+      std::filesystem::remove(partial, ec);
+      throw DataError(opt.out_file, "write failed");
+    }
   }
   spdlog::debug("calibrate: mu {:.1f}, sigma {:.1f} ({})", c.mu, c.sigma, c.rule);
   return kExitOk;

@@ -7,8 +7,6 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
-#include <atomic>
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -20,9 +18,11 @@
 #include <vector>
 
 #include "app/commands.hpp"
+#include "app/stop_signals.hpp"
 #include "core/error.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/writers.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
@@ -47,12 +47,6 @@ struct CompareOptions {
   std::string plot_script;
   std::vector<std::string> overrides;
 };
-
-std::atomic<bool> g_compare_stop{false};
-extern "C" void on_compare_sigint(int) {
-  g_compare_stop.store(true);
-  std::signal(SIGINT, SIG_DFL);
-}
 
 // The methods compare runs, by name: detector, mode and the DIRD DP's descriptor standardisation
 // (standardize.mode; dird-seqslam takes its own descriptors from section dird_seqslam). Everything else is
@@ -293,10 +287,17 @@ int compare_two_sequences(const CompareOptions& options) {
   OpenOptions open_options;
   open_options.strict = base.run.strict;
   open_options.camera_index = base.run.camera_index;
+  const fs::path out_dir = options.out_dir;
+  // Before anything is written: no output over an input, one command at a time in the folder; SIGINT,
+  // SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is written
+  // (issue 15, as for the single-sequence compare).
+  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
+  for (const std::string& method : methods)
+    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
+  const OutputLock lock(out_dir, "loopgate compare --reference --query");
+  const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
-  const fs::path out_dir = options.out_dir;
-  fs::create_directories(out_dir);
 
   std::map<std::string, json> summaries;
   json compare = json::object();
@@ -304,10 +305,12 @@ int compare_two_sequences(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
-    const TwoSequenceResult result = run_two_sequences(config, *reference, *query, out_dir / method);
+    const TwoSequenceResult result =
+        run_two_sequences(config, *reference, *query, out_dir / method, signals.flag());
     summaries[method] = result.summary;
     compare[method] = result.summary;
     ran.push_back(method);
+    if (result.interrupted) break;
   }
   compare["comparison"] = json::object();
   compare["methods"] = ran;
@@ -324,6 +327,7 @@ int compare_two_sequences(const CompareOptions& options) {
   std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
               fmt::format("{}", fmt::join(ran, "/, ")).c_str());
   std::fflush(stdout);
+  if (signals.stopped()) return signals.exit_code();
   return kExitOk;
 }
 
@@ -340,25 +344,23 @@ int compare_command(const CompareOptions& options) {
   OpenOptions open_options;
   open_options.strict = base.run.strict;
   open_options.camera_index = base.run.camera_index;
-  const auto dataset = open_dataset(base.run.dataset, open_options);
   const fs::path out_dir = options.out_dir;
-  fs::create_directories(out_dir);
+  // Before anything is written: no output over an input (compare.json, each method's run files), and one
+  // command at a time in the folder (issue 15).
+  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
+  for (const std::string& method : methods)
+    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
+  const OutputLock lock(out_dir, "loopgate compare");
+  const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
+  const auto dataset = open_dataset(base.run.dataset, open_options);
 
   std::map<std::string, json> summaries;
   json compare = json::object();
-  g_compare_stop.store(false);
-  auto* previous = std::signal(SIGINT, on_compare_sigint);
   bool failed = false;
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
-    RunResult result;
-    try {
-      result = run_pipeline(config, *dataset, out_dir / method, &g_compare_stop);
-    } catch (...) {
-      std::signal(SIGINT, previous);
-      throw;
-    }
+    const RunResult result = run_pipeline(config, *dataset, out_dir / method, signals.flag());
     std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);
     summaries[method] = result.summary;
     compare[method] = result.summary;
@@ -370,7 +372,6 @@ int compare_command(const CompareOptions& options) {
     if (result.interrupted) break;
     if (method == "gated" || method == "std-gated") write_descriptor_example(result, out_dir / method);
   }
-  std::signal(SIGINT, previous);
 
   std::vector<std::string> ran;
   for (const auto& m : methods)
@@ -432,7 +433,7 @@ int compare_command(const CompareOptions& options) {
               fmt::format("{}", fmt::join(ran, "/, ")).c_str());
   std::fflush(stdout);
   if (failed) return kExitFailure;
-  if (g_compare_stop.load()) return kExitInterrupted;
+  if (signals.stopped()) return signals.exit_code();
   return kExitOk;
 }
 

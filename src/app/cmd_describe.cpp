@@ -15,6 +15,8 @@
 
 #include "app/commands.hpp"
 #include "core/error.hpp"
+#include "io/file_guard.hpp"
+#include "io/writers.hpp"
 #include "stages/dird/dird_extractor.hpp"
 
 namespace loopgate::app {
@@ -41,15 +43,23 @@ std::string csv_field(const std::string& text) {
   return quoted + "\"";
 }
 
-// Decodes an image for DIRD: 8-bit grey/BGR/BGRA as stored; other depths or layouts through OpenCV's
-// 8-bit BGR conversion. Throws DataError naming the file.
+// Decodes an image for DIRD: 8-bit grey/BGR/BGRA as stored. Other sample depths or channel layouts are
+// refused with the same words as `loopgate run` (io/dataset.cpp), so that an image describe accepts is one a
+// run accepts (issue 15: a 16-bit PNG was converted here and rejected there). Throws DataError naming the
+// file.
 cv::Mat read_image(const std::filesystem::path& path) {
-  if (!std::filesystem::is_regular_file(path)) throw DataError(path, "no such image file");
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) throw DataError(path, "no such image file");
+  require_regular_file(path, "the image");  // a directory, a FIFO: say what it is
   cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
-  if (image.empty()) throw DataError(path, "cannot be decoded as an image");
-  if (image.depth() != CV_8U || (image.channels() != 1 && image.channels() != 3 && image.channels() != 4)) {
-    image = cv::imread(path.string(), cv::IMREAD_COLOR);
-    if (image.empty()) throw DataError(path, "cannot be decoded as an 8-bit image");
+  if (image.empty()) throw DataError(path, "cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
+  if (image.depth() != CV_8U) {
+    throw DataError(path,
+                    "image has " + std::to_string(image.elemSize1() * 8) + "-bit samples, expected 8-bit");
+  }
+  if (image.channels() != 1 && image.channels() != 3 && image.channels() != 4) {
+    throw DataError(
+        path, "image has " + std::to_string(image.channels()) + " channels, expected grey, RGB or RGBA");
   }
   return image;
 }
@@ -70,18 +80,39 @@ int run_describe(const DescribeOptions& opt) {
   config.flip_vertical = opt.flip_vertical;
   const DirdExtractor extractor(config);
 
+  // Every output path is known before anything is written: none may be an input (issue 15: `--out IMAGE`
+  // truncated the image before reading it; `--picture DIR` replaced the input PNGs when DIR was their
+  // folder).
+  std::set<std::string> used_names;
+  std::vector<std::filesystem::path> pictures;
+  std::vector<NamedPath> inputs, outputs;
+  for (const std::string& image_path : opt.images) {
+    inputs.push_back({"an input image", image_path});
+    if (!opt.picture_dir.empty()) {
+      pictures.push_back(picture_path(opt.picture_dir, image_path, used_names));
+      outputs.push_back({"--picture's file", pictures.back()});
+    }
+  }
+  if (!opt.out_file.empty()) outputs.push_back({"--out", opt.out_file});
+  refuse_outputs_over_inputs(outputs, inputs);
+
+  // The CSV is whole or absent: written under a temporary name, renamed when complete.
   std::ofstream file;
+  const std::filesystem::path partial =
+      opt.out_file.empty() ? std::filesystem::path() : partial_path(opt.out_file);
   if (!opt.out_file.empty()) {
-    file.open(opt.out_file, std::ios::out | std::ios::trunc);
+    if (const auto parent = std::filesystem::path(opt.out_file).parent_path(); !parent.empty())
+      std::filesystem::create_directories(parent);
+    file.open(partial, std::ios::out | std::ios::trunc);
     if (!file) throw DataError(opt.out_file, "cannot open the output file for writing");
   }
   std::ostream& out = opt.out_file.empty() ? std::cout : file;
   if (!opt.picture_dir.empty()) std::filesystem::create_directories(opt.picture_dir);
 
-  std::set<std::string> used_names;
   std::size_t failures = 0;
   std::string line;
-  for (const std::string& image_path : opt.images) {
+  for (std::size_t index = 0; index < opt.images.size(); ++index) {
+    const std::string& image_path = opt.images[index];
     try {
       const cv::Mat image = read_image(image_path);
       const Descriptor descriptor = extractor.extract(image);
@@ -97,7 +128,7 @@ int run_describe(const DescribeOptions& opt) {
         if (opt.picture_scale > 1) {
           cv::resize(picture, picture, cv::Size(), opt.picture_scale, opt.picture_scale, cv::INTER_NEAREST);
         }
-        const auto png = picture_path(opt.picture_dir, image_path, used_names);
+        const std::filesystem::path& png = pictures[index];
         if (!cv::imwrite(png.string(), picture)) throw DataError(png, "cannot write the descriptor picture");
       }
     } catch (const DataError& e) {
@@ -109,7 +140,20 @@ int run_describe(const DescribeOptions& opt) {
     }
   }
   out.flush();
-  if (!out) throw DataError(opt.out_file.empty() ? "<stdout>" : opt.out_file, "write failed");
+  if (!out) {
+    std::error_code ec;
+    if (!partial.empty()) std::filesystem::remove(partial, ec);
+    throw DataError(opt.out_file.empty() ? "<stdout>" : opt.out_file, "write failed");
+  }
+  if (!opt.out_file.empty()) {
+    file.close();
+    std::error_code ec;
+    if (file) std::filesystem::rename(partial, opt.out_file, ec);
+    if (!file || ec) {
+      std::filesystem::remove(partial, ec);
+      throw DataError(opt.out_file, "write failed");
+    }
+  }
   if (failures > 0) {
     spdlog::error("describe: {} of {} images failed", failures, opt.images.size());
     return kExitFailure;

@@ -3,17 +3,18 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
-#include <atomic>
-#include <csignal>
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <string>
 #include <vector>
 
 #include "app/commands.hpp"
+#include "app/stop_signals.hpp"
 #include "core/error.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
 
@@ -36,12 +37,26 @@ struct RunOptions {
   std::vector<std::string> overrides;
 };
 
-std::atomic<bool> g_stop_requested{false};
-static_assert(std::atomic<bool>::is_always_lock_free, "the SIGINT handler needs a lock-free flag");
+// The problems lenient opening collected: when the run stops before summary.json (which lists them) is
+// written, they are the likely cause and must be seen (issue 15).
+void log_dataset_problems(const Dataset& dataset) {
+  constexpr std::size_t kShown = 20;
+  const auto& issues = dataset.issues();
+  if (issues.empty()) return;
+  spdlog::error(
+      "the run stopped before summary.json; the {} problem(s) found while opening {} (lenient mode):",
+      issues.size(), dataset.root().string());
+  for (std::size_t i = 0; i < std::min(issues.size(), kShown); ++i)
+    spdlog::error("  {}", issues[i].to_string());
+  if (issues.size() > kShown) spdlog::error("  ... and {} more", issues.size() - kShown);
+}
 
-extern "C" void on_sigint(int) {
-  g_stop_requested.store(true);
-  std::signal(SIGINT, SIG_DFL);  // a second Ctrl-C ends the process at once
+// The outputs a failed write left out (each file is whole or absent).
+void log_missing_outputs(const std::vector<std::string>& missing, const std::vector<std::string>& errors,
+                         const std::string& out_dir) {
+  if (missing.empty()) return;
+  spdlog::error("outputs missing from {}: {}", out_dir, fmt::format("{}", fmt::join(missing, ", ")));
+  for (const std::string& error : errors) spdlog::error("  {}", error);
 }
 
 // --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
@@ -53,16 +68,31 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
     throw ConfigError("--dataset and --reference/--query exclude each other");
   }
   log_config_lines(config_to_lines(config));
+  refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
+  const OutputLock lock(options.out_dir, "loopgate run --reference --query");
   OpenOptions open_options;
   open_options.strict = config.run.strict;
   open_options.camera_index = config.run.camera_index;
+  const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
-  const TwoSequenceResult result = run_two_sequences(config, *reference, *query, options.out_dir);
+  TwoSequenceResult result;
+  try {
+    result = run_two_sequences(config, *reference, *query, options.out_dir, signals.flag());
+  } catch (...) {
+    log_dataset_problems(*reference);
+    log_dataset_problems(*query);
+    throw;
+  }
   std::printf(
       "two-sequence run: %zu reference x %zu query frames, %zu loop closures in %.2f s; outputs in %s\n",
       result.reference_frames, result.query_frames, result.loops, result.wall_s, options.out_dir.c_str());
   std::fflush(stdout);
+  if (result.interrupted) {
+    spdlog::warn("interrupted ({}): outputs written for the {} query frames processed", signals.signal_name(),
+                 result.query_frames);
+    return signals.exit_code();
+  }
   return kExitOk;
 }
 
@@ -80,7 +110,12 @@ int run_command(const RunOptions& options) {
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
   if (config.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(config));
+  // Before anything is written: no output over an input, and one command at a time in the folder.
+  refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
+  const OutputLock lock(options.out_dir, "loopgate run");
 
+  // From here a stop signal (SIGINT, SIGTERM, SIGHUP) drains the run and writes every output.
+  const StopSignals signals;
   OpenOptions open_options;
   open_options.strict = config.run.strict;
   open_options.camera_index = config.run.camera_index;
@@ -90,16 +125,13 @@ int run_command(const RunOptions& options) {
                  config.run.dataset, dataset->issues().size());
   }
 
-  g_stop_requested.store(false);
-  auto* previous = std::signal(SIGINT, on_sigint);
   RunResult result;
   try {
-    result = run_pipeline(config, *dataset, options.out_dir, &g_stop_requested);
+    result = run_pipeline(config, *dataset, options.out_dir, signals.flag());
   } catch (...) {
-    std::signal(SIGINT, previous);
+    log_dataset_problems(*dataset);
     throw;
   }
-  std::signal(SIGINT, previous);
 
   std::fputs(result.profile_table.c_str(), stderr);
   std::printf(
@@ -109,10 +141,12 @@ int run_command(const RunOptions& options) {
       result.frames_ok, result.frames_warning, result.frames_error, result.wall_s, result.realtime_factor,
       options.out_dir.c_str());
   std::fflush(stdout);
+  log_missing_outputs(result.missing_outputs, result.output_errors, options.out_dir);
   if (result.failed) return kExitFailure;
   if (result.interrupted) {
-    spdlog::warn("interrupted: outputs written for the {} frames processed", result.frames_processed);
-    return kExitInterrupted;
+    spdlog::warn("interrupted ({}): outputs written for the {} frames processed", signals.signal_name(),
+                 result.frames_processed);
+    return signals.exit_code() != 0 ? signals.exit_code() : kExitInterrupted;
   }
   return kExitOk;
 }

@@ -14,6 +14,7 @@
 #include "app/commands.hpp"
 #include "core/error.hpp"
 #include "io/config.hpp"
+#include "io/file_guard.hpp"
 #include "sim/simulator.hpp"
 
 namespace loopgate::app {
@@ -60,7 +61,7 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
   sim::SimulationSettings& s = config.simulation;
   if (!opt.trajectory.empty()) {
     const std::filesystem::path file = opt.trajectory;
-    if (!std::filesystem::is_regular_file(file)) throw DataError(file, "trajectory file not found");
+    require_regular_file(file, "the trajectory file");  // missing, a directory, a FIFO: say which
     s.trajectory_format =
         opt.trajectory_format.empty() ? detect_trajectory_format(file) : opt.trajectory_format;
     s.trajectory_file = file.string();
@@ -87,7 +88,7 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
     throw ConfigError("--trajectory-format needs --trajectory");
   }
   if (!opt.imu.empty()) {
-    if (!std::filesystem::is_regular_file(opt.imu)) throw DataError(opt.imu, "IMU file not found");
+    require_regular_file(opt.imu, "the IMU file");
     s.imu_source = "file";
     s.imu_file = opt.imu;
   }
@@ -101,6 +102,26 @@ int run_simulate(const SimulateOptions& opt) {
   if (opt.seed_given) config.simulation.seed = opt.seed;
   if (opt.frames > 0) config.simulation.max_frames = opt.frames;
   apply_input_overrides(opt, config);
+
+  // --force clears OUT/mav0 and OUT/simulation.json before the inputs are read: none of them may be there
+  // (issue 15: outputs never over inputs).
+  const std::filesystem::path out_dir = opt.out_dir;
+  const sim::SimulationSettings& s = config.simulation;
+  for (const auto& [what, file] : std::vector<std::pair<std::string, std::string>>{
+           {"--trajectory / simulation.trajectory_file", s.trajectory_file},
+           {"simulation.times_file", s.times_file},
+           {"simulation.frame_times_file", s.frame_times_file},
+           {"--imu / simulation.imu_file", s.imu_file},
+           {"--config", opt.config_file},
+           {"--preset", opt.preset}}) {
+    if (file.empty()) continue;
+    if (path_inside(file, out_dir / "mav0") || same_file(file, out_dir / "simulation.json")) {
+      throw ConfigError(
+          what + " " + file + " lies inside the output " + opt.out_dir +
+          " (its mav0/ and simulation.json are replaced): copy it elsewhere or choose another --out");
+    }
+  }
+  const OutputLock lock(out_dir, "loopgate simulate");
 
   spdlog::info("simulate: preset '{}', seed {}, output {}", opt.preset, config.simulation.seed, opt.out_dir);
   sim::SimulationRunOptions run_options;
@@ -140,7 +161,7 @@ void add_simulate_command(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--frames", opt->frames, "Render only the first N frames (0 = all)")
       ->capture_default_str()
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(std::int64_t{0}, std::int64_t{10'000'000}));
   cmd->add_option("--trajectory", opt->trajectory,
                   "Trajectory file replacing the preset's (KITTI poses.txt with times.txt beside it, EuRoC "
                   "ground-truth .csv, or TUM)");

@@ -9,6 +9,7 @@ namespace loopgate::app {
 constexpr int kExitOk = 0;
 constexpr int kExitFailure = 1;        // the job failed (bad input, error during the run)
 constexpr int kExitInterrupted = 130;  // SIGINT: outputs written for the frames processed
+// SIGTERM and SIGHUP are handled like SIGINT and exit with 128 + signal: 143 and 129 (app/stop_signals.hpp).
 
 // Each add_*_command adds its subcommand to `app`; its callback stores the exit code in `exit_code`.
 void add_simulate_command(CLI::App& app, int& exit_code);

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
+#include <csignal>
 #include <exception>
 #include <iostream>
 
@@ -11,6 +12,9 @@
 int main(int argc, char** argv) {
   // Logs go to stderr: stdout carries results (CSV lines, tables) that users pipe into files.
   spdlog::set_default_logger(spdlog::stderr_color_mt("loopgate"));
+  // A file-size limit reached (ulimit -f) becomes a write error, reported like a full disk, instead of
+  // killing the process with outputs cut mid-line.
+  std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"loopgate: pose-gated, illumination-robust visual loop-closure detection (DIRD)"};
   app.set_version_flag("--version", std::string("loopgate ") + LOOPGATE_VERSION);
   app.require_subcommand(1);

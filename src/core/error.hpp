@@ -5,8 +5,14 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 
 namespace loopgate {
+
+// `text` quoted for an error message, capped: at most `max_chars` characters of it (control characters shown
+// as '?'), and when cut, "...' (N bytes)" instead of the rest, so that a huge field never makes a huge
+// message (or a huge summary.json).
+std::string quote_excerpt(std::string_view text, std::size_t max_chars = 64);
 
 // Thrown for bad input. what() reads "FILE:LINE: MESSAGE" (or "FILE: MESSAGE" without a line).
 class DataError : public std::runtime_error {

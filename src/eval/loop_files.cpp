@@ -15,6 +15,10 @@ namespace {
 // Reads rows of exactly `columns` comma-separated numbers ("nan" allowed); calls row(values, line_no).
 template <class RowFn>
 void read_numeric_csv(const std::filesystem::path& file, std::size_t columns, RowFn&& row) {
+  // A FIFO or a device would block open() or never end (issue 15).
+  std::error_code ec;
+  if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
+    throw DataError(file, "not a regular file (a FIFO, socket, device or directory), expected a csv file");
   std::ifstream in(file);
   if (!in) throw DataError(file, "cannot open file");
   std::string line;
@@ -34,7 +38,7 @@ void read_numeric_csv(const std::filesystem::path& file, std::size_t columns, Ro
       if (end == p || errno == ERANGE) {
         throw DataError(
             file, line_no,
-            "expected " + std::to_string(columns) + " comma-separated numbers, got '" + line + "'");
+            "expected " + std::to_string(columns) + " comma-separated numbers, got " + quote_excerpt(line));
       }
       values.push_back(v);
       p = end;

@@ -10,6 +10,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "io/file_guard.hpp"
+
 namespace loopgate {
 
 namespace {
@@ -33,7 +35,7 @@ std::string where(const std::string& origin) {
 }
 
 [[noreturn]] void throw_type(const std::string& name, const RawConfigValue& value, const char* type) {
-  throw ConfigError(name + ": expected " + type + ", got '" + value.text + "'" + where(value.origin));
+  throw ConfigError(name + ": expected " + type + ", got " + quote_excerpt(value.text) + where(value.origin));
 }
 
 std::string mark_origin(const std::string& origin, const YAML::Mark& mark) {
@@ -52,9 +54,18 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
   if (!root.IsMap()) {
     throw ConfigError(origin + ": expected a mapping of sections (section: {key: value})");
   }
+  // yaml-cpp keeps both entries of a key given twice, and the last one would silently win: an error, naming
+  // both lines (issue 15).
+  std::map<std::string, std::string> section_origin;
+  std::map<std::string, std::string> key_origin;
   for (const auto& section : root) {
     const std::string section_name = section.first.as<std::string>();
     const YAML::Node& body = section.second;
+    const std::string section_at = mark_origin(origin, section.first.Mark());
+    if (const auto [it, fresh] = section_origin.emplace(section_name, section_at); !fresh) {
+      throw ConfigError(section_name + ": section given twice, at " + it->second + " and " + section_at +
+                        " (each section once; a later one would silently replace keys of the first)");
+    }
     if (body.IsNull()) continue;
     if (!body.IsMap()) {
       throw ConfigError(section_name + ": expected a mapping of key: value" +
@@ -64,6 +75,11 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
       const std::string key = entry.first.as<std::string>();
       const YAML::Node& value = entry.second;
       const std::string value_origin = mark_origin(origin, value.Mark());
+      const std::string key_at = mark_origin(origin, entry.first.Mark());
+      if (const auto [it, fresh] = key_origin.emplace(section_name + "." + key, key_at); !fresh) {
+        throw ConfigError(section_name + "." + key + ": key given twice, at " + it->second + " and " +
+                          key_at + " (each key once; the last value would silently win)");
+      }
       if (value.IsNull()) {
         raw.set(section_name, key, "", value_origin);
       } else if (value.IsScalar()) {
@@ -79,6 +95,13 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
 }  // namespace
 
 RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
+  std::error_code ec;
+  if (!std::filesystem::exists(file, ec)) throw ConfigError(file.string() + ": configuration file not found");
+  try {
+    require_regular_file(file, "the configuration file");  // a FIFO would block open() forever
+  } catch (const DataError& e) {
+    throw ConfigError(e.what());
+  }
   std::ifstream in(file);
   if (!in) throw ConfigError(file.string() + ": cannot read the configuration file");
   std::stringstream buffer;
@@ -100,9 +123,12 @@ void RawConfig::apply_override(const std::string& assignment) {
   const std::string name = trim(assignment.substr(0, equals));
   const auto dot = name.find('.');
   if (equals == std::string::npos || dot == std::string::npos || dot == 0 || dot + 1 == name.size()) {
-    throw ConfigError("--set '" + assignment + "': expected section.key=value");
+    throw ConfigError("--set " + quote_excerpt(assignment) + ": expected section.key=value");
   }
-  set(name.substr(0, dot), name.substr(dot + 1), trim(assignment.substr(equals + 1)), "--set " + assignment);
+  constexpr std::size_t kMaxOriginChars = 80;  // the origin is quoted in every error about this value
+  const std::string shown =
+      assignment.size() > kMaxOriginChars ? assignment.substr(0, kMaxOriginChars) + "..." : assignment;
+  set(name.substr(0, dot), name.substr(dot + 1), trim(assignment.substr(equals + 1)), "--set " + shown);
 }
 
 namespace config_detail {
@@ -156,7 +182,8 @@ void throw_unknown(const std::string& what, const std::string& name, const std::
 }
 
 void throw_bad_word(const std::string& name, const RawConfigValue& value, const std::string& choices) {
-  throw ConfigError(name + ": '" + value.text + "' is not one of " + choices + where(value.origin));
+  throw ConfigError(name + ": " + quote_excerpt(value.text) + " is not one of " + choices +
+                    where(value.origin));
 }
 
 std::string format_value(bool value) {

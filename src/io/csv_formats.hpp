@@ -13,18 +13,21 @@
 
 namespace loopgate::io_detail {
 
-// Rows with a time that does not strictly increase are reported and skipped (lenient).
+// Time order: the rows kept are the longest run whose times strictly increase (a single outlier is the row
+// dropped, judged against the rows on both sides of it); every other row is reported and skipped (lenient)
+// or is the error (strict). A file with more than half of its rows bad is an error in lenient mode too.
 std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& log);
 std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log);
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log);
-// Out-of-order or duplicated samples are reported and KEPT in file order (lenient).
+// Out-of-order or duplicated samples are reported and dropped like the rows of the other tables: kept in file
+// order, one outlier (a typo) made every later sample look out of order and left the frames without IMU.
 std::vector<ImuSample> read_euroc_imu(const std::filesystem::path& csv_file, IssueLog& log);
 
 // T_BS of an EuRoC sensor.yaml (e.g. state_groundtruth_estimate0/sensor.yaml, which has nothing else).
 Eigen::Isometry3d read_yaml_T_BS(const std::filesystem::path& yaml_file);
 
 // KITTI files are indexed by row (row i belongs to image i), so bad rows are kept as nullopt (lenient)
-// instead of being removed. A time that does not strictly increase over the last good one is bad.
+// instead of being removed. Times: the rows outside the longest strictly increasing run are bad.
 std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem::path& times_file,
                                                            IssueLog& log);
 std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,

@@ -1,11 +1,14 @@
 #include "io/csv_text.hpp"
 
+#include <algorithm>
 #include <array>
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <limits>
 #include <system_error>
+
+#include "io/file_guard.hpp"
 
 namespace loopgate::io_detail {
 
@@ -14,8 +17,9 @@ namespace {
 constexpr int kNsDigits = 9;  // decimals of a second in a nanosecond timestamp
 constexpr std::int64_t kNsPerSecond = 1'000'000'000;
 
+// A field in an error message: capped, so that a 20 MB field does not end up whole in summary.json.
 std::string quoted(std::string_view field) {
-  return "'" + std::string(field) + "'";
+  return quote_excerpt(field);
 }
 
 std::string column_label(std::size_t column, std::string_view name) {
@@ -47,8 +51,34 @@ bool all_digits(std::string_view text) {
 }  // namespace
 
 void IssueLog::report(const std::filesystem::path& file, std::size_t line, const std::string& message) {
+  if (in_table_) {
+    held_.push_back(DataIssue{file, line, message});
+    return;
+  }
   if (strict_) throw DataError(file, line, message);
   if (sink_) sink_->push_back(DataIssue{file, line, message});
+}
+
+void IssueLog::begin_table() {
+  in_table_ = true;
+  held_.clear();
+}
+
+void IssueLog::end_table(const std::filesystem::path& file, std::size_t rows) {
+  in_table_ = false;
+  std::vector<DataIssue> issues = std::move(held_);
+  held_.clear();
+  std::stable_sort(issues.begin(), issues.end(),
+                   [](const DataIssue& a, const DataIssue& b) { return a.line < b.line; });
+  if (issues.empty()) return;
+  if (strict_) throw DataError(issues.front().file, issues.front().line, issues.front().message);
+  const std::size_t rejected = issues.size();
+  if (rows > 0 && 2 * rejected > rows) {
+    throw DataError(file, std::to_string(rejected) + " of its " + std::to_string(rows) +
+                              " rows are bad (first: " + issues.front().to_string() +
+                              "); more than half of the file is rejected, so the rest is not trusted either");
+  }
+  if (sink_) sink_->insert(sink_->end(), issues.begin(), issues.end());
 }
 
 double Row::number(std::size_t column, std::string_view name) const {
@@ -93,6 +123,7 @@ TextFile::TextFile(const std::filesystem::path& file) : path_(file) {
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw DataError(file, "file not found");
   if (std::filesystem::is_directory(file, ec)) throw DataError(file, "expected a file, found a directory");
+  require_regular_file(file);  // a FIFO or a device would block open() or never end
   std::ifstream in(file, std::ios::binary);
   if (!in) throw DataError(file, "cannot open file for reading");
   in.seekg(0, std::ios::end);
@@ -196,11 +227,22 @@ void write_text_file(const std::filesystem::path& file, const std::string& text)
     std::filesystem::create_directories(file.parent_path(), ec);
     if (ec) throw DataError(file.parent_path(), "cannot create directory: " + ec.message());
   }
-  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  // Whole or absent: written under a temporary name, renamed when complete.
+  std::filesystem::path partial = file;
+  partial += ".partial";
+  std::ofstream out(partial, std::ios::binary | std::ios::trunc);
   if (!out) throw DataError(file, "cannot open file for writing");
   out.write(text.data(), static_cast<std::streamsize>(text.size()));
   out.close();
-  if (!out) throw DataError(file, "write failed");
+  if (!out) {
+    std::filesystem::remove(partial, ec);
+    throw DataError(file, "write failed (disk full?)");
+  }
+  std::filesystem::rename(partial, file, ec);
+  if (ec) {
+    std::filesystem::remove(partial, ec);
+    throw DataError(file, "cannot rename " + partial.string() + ": " + ec.message());
+  }
 }
 
 }  // namespace loopgate::io_detail

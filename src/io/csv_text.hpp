@@ -22,10 +22,19 @@ class IssueLog {
   IssueLog(bool strict, std::vector<DataIssue>* sink) : strict_(strict), sink_(sink) {}
   void report(const std::filesystem::path& file, std::size_t line, const std::string& message);
   bool strict() const { return strict_; }
+  // A table read in two passes (its rows, then their time order): between begin_table() and end_table()
+  // the problems are held, so that they come out in line order. end_table() then throws the problem of the
+  // earliest line (strict), or records them in line order (lenient) and refuses the file when more than
+  // half of its `rows` data rows are bad: lenient reading keeps the good rows of a damaged file, not the
+  // rest of a bad one (DataError naming the count and the first problem).
+  void begin_table();
+  void end_table(const std::filesystem::path& file, std::size_t rows);
 
  private:
   bool strict_ = true;
   std::vector<DataIssue>* sink_ = nullptr;
+  bool in_table_ = false;
+  std::vector<DataIssue> held_;  // the current table's problems
 };
 
 // Thrown by the field parsers of a Row; for_each_row() turns it into a report with the line number.
@@ -63,9 +72,9 @@ class TextFile {
 
 // Calls on_row(const Row&) for every non-empty line that is not a '#' comment. A RowError thrown by
 // on_row is reported to `log` with the file and line (the row is then skipped in lenient mode); a
-// malformed last line without a final newline is reported as truncated.
+// malformed last line without a final newline is reported as truncated. Returns the number of data rows.
 template <class OnRow>
-void for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRow&& on_row);
+std::size_t for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRow&& on_row);
 
 // Splits `line` into fields (comma: fields are trimmed; whitespace: runs of blanks separate).
 void split_fields(std::string_view line, Delimiter delimiter, std::vector<std::string_view>& fields);
@@ -86,11 +95,12 @@ void write_text_file(const std::filesystem::path& file, const std::string& text)
 // ---- implementation of the template ----
 
 template <class OnRow>
-void for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRow&& on_row) {
+std::size_t for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRow&& on_row) {
   const std::string_view text = file.text();
   Row row;
   std::size_t pos = 0;
   std::size_t line_no = 0;
+  std::size_t rows = 0;
   while (pos < text.size()) {
     ++line_no;
     const std::size_t end = text.find('\n', pos);
@@ -101,6 +111,7 @@ void for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRo
     const std::size_t first = line.find_first_not_of(" \t");
     if (first == std::string_view::npos || line[first] == '#') continue;
     row.line = line_no;
+    ++rows;
     split_fields(line, delimiter, row.fields);
     try {
       on_row(static_cast<const Row&>(row));
@@ -109,6 +120,7 @@ void for_each_row(const TextFile& file, Delimiter delimiter, IssueLog& log, OnRo
                  terminated ? e.message : e.message + " (truncated last line: no newline at end of file)");
     }
   }
+  return rows;
 }
 
 }  // namespace loopgate::io_detail

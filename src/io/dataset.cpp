@@ -4,9 +4,12 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstdint>
 #include <fstream>
+#include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <string_view>
 
 #include "core/error.hpp"
 #include "core/geometry.hpp"
@@ -38,9 +41,28 @@ namespace io_detail {
 
 namespace {
 
-// Frames probed for the reference image size when the calibration does not give it: enough to step
-// over a few damaged leading images without decoding a whole sequence.
-constexpr std::size_t kSizeProbeFrames = 16;
+// Frames probed for the reference image size when the calibration does not give it, spread evenly over the
+// sequence: the majority size wins, so that one odd frame (frame 0 of another size) does not make every
+// other frame "the wrong size" (issue 15).
+constexpr std::size_t kSizeProbeFrames = 15;
+
+// Width and height from a PNG's IHDR chunk (no decoding); nullopt when `file` is not a PNG.
+std::optional<std::pair<int, int>> png_size(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  unsigned char header[24] = {};
+  if (!in.read(reinterpret_cast<char*>(header), sizeof(header))) return std::nullopt;
+  static constexpr unsigned char kSignature[12] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13};
+  if (!std::equal(std::begin(kSignature), std::end(kSignature), header) ||
+      std::string_view(reinterpret_cast<const char*>(header + 12), 4) != "IHDR")
+    return std::nullopt;
+  const auto be32 = [&](int at) {
+    return (std::uint32_t{header[at]} << 24) | (std::uint32_t{header[at + 1]} << 16) |
+           (std::uint32_t{header[at + 2]} << 8) | std::uint32_t{header[at + 3]};
+  };
+  const std::uint32_t width = be32(16), height = be32(20);
+  if (width == 0 || height == 0 || width > 1u << 20 || height > 1u << 20) return std::nullopt;
+  return std::pair{static_cast<int>(width), static_cast<int>(height)};
+}
 
 bool natural_less(const std::string& a, const std::string& b) {
   std::size_t i = 0;
@@ -113,17 +135,52 @@ void LoadedDataset::finish() {
     expected_width_px_ = camera_calibration->width_px;
     expected_height_px_ = camera_calibration->height_px;
     expected_size_source_ = calibration_size_source;
-  } else if (images_present) {
-    for (std::size_t i = 0; i < std::min(frames.size(), kSizeProbeFrames); ++i) {
+  } else if (images_present && !frames.empty()) {
+    // The majority size of frames spread over the sequence (PNG headers are read, other files decoded).
+    struct Probe {
+      std::size_t frame;
+      std::pair<int, int> size;
+    };
+    std::vector<Probe> probes;
+    const std::size_t count = std::min(frames.size(), kSizeProbeFrames);
+    for (std::size_t k = 0; k < count; ++k) {
+      const std::size_t i = count == 1 ? 0 : k * (frames.size() - 1) / (count - 1);
+      std::error_code ec;
+      if (!std::filesystem::is_regular_file(frames[i].image, ec)) continue;
+      if (auto size = png_size(frames[i].image)) {
+        probes.push_back({i, *size});
+        continue;
+      }
       try {
         const cv::Mat image = decode(i);
-        expected_width_px_ = image.cols;
-        expected_height_px_ = image.rows;
-        expected_size_source_ =
-            "frame " + std::to_string(i) + " (" + frames[i].image.filename().string() + ")";
-        break;
+        probes.push_back({i, {image.cols, image.rows}});
       } catch (const DataError& e) {
         spdlog::warn("{}", e.what());
+      }
+    }
+    std::map<std::pair<int, int>, std::size_t> votes;
+    for (const Probe& p : probes) ++votes[p.size];
+    const Probe* chosen = nullptr;
+    for (const Probe& p : probes) {  // most votes; on a tie, the size of the earliest frame
+      if (!chosen || votes[p.size] > votes[chosen->size]) chosen = &p;
+    }
+    if (chosen) {
+      expected_width_px_ = chosen->size.first;
+      expected_height_px_ = chosen->size.second;
+      expected_size_source_ = "most frames (" + std::to_string(votes[chosen->size]) + " of " +
+                              std::to_string(probes.size()) + " probed, e.g. frame " +
+                              std::to_string(chosen->frame) + " (" +
+                              frames[chosen->frame].image.filename().string() + "))";
+      std::string odd;
+      for (const Probe& p : probes) {
+        if (p.size == chosen->size) continue;
+        odd += (odd.empty() ? "" : ", ") + std::string("frame ") + std::to_string(p.frame) + " (" +
+               frames[p.frame].image.filename().string() + ") is " + std::to_string(p.size.first) + "x" +
+               std::to_string(p.size.second);
+      }
+      if (!odd.empty()) {
+        spdlog::warn("{}: images are {}x{} like {}; {}: frames of another size fail to load",
+                     root_dir.string(), expected_width_px_, expected_height_px_, expected_size_source_, odd);
       }
     }
     if (camera_calibration && camera_calibration->width_px == 0) {
@@ -137,7 +194,7 @@ void LoadedDataset::finish() {
 
 cv::Mat LoadedDataset::decode(std::size_t frame) const {
   const FrameEntry& entry = frames.at(frame);
-  const std::string where = "frame " + std::to_string(frame);
+  const std::string where = "frame " + std::to_string(entry.source_index);  // its number, as in frames.csv
   if (!images_present)
     throw DataError(entry.image, where + ": image absent (this dataset has no image files)");
   std::error_code ec;
@@ -181,9 +238,10 @@ cv::Mat LoadedDataset::load_image(std::size_t frame) const {
   cv::Mat image = decode(frame);
   if (expected_width_px_ > 0 && (image.cols != expected_width_px_ || image.rows != expected_height_px_)) {
     throw DataError(frames[frame].image,
-                    "frame " + std::to_string(frame) + ": image is " + std::to_string(image.cols) + "x" +
-                        std::to_string(image.rows) + ", expected " + std::to_string(expected_width_px_) +
-                        "x" + std::to_string(expected_height_px_) + " like " + expected_size_source_);
+                    "frame " + std::to_string(frames[frame].source_index) + ": image is " +
+                        std::to_string(image.cols) + "x" + std::to_string(image.rows) + ", expected " +
+                        std::to_string(expected_width_px_) + "x" + std::to_string(expected_height_px_) +
+                        " like " + expected_size_source_);
   }
   return image;
 }

@@ -27,7 +27,9 @@ struct DataIssue {
 
 struct OpenOptions {
   // strict: the first bad row throws DataError. lenient: bad rows are skipped and recorded in
-  // Dataset::issues(); IMU samples stay in file order (the sync stage reports anomalies per frame).
+  // Dataset::issues(); out-of-order or duplicate samples and rows are among them (the rows kept are the
+  // longest run of strictly increasing times). A file with more than half of its rows bad fails in both
+  // modes.
   bool strict = true;
   // Which camera of a stereo layout: 0 (EuRoC cam0 / KITTI image_0) or 1.
   int camera_index = 0;
@@ -53,7 +55,7 @@ class Dataset {
   virtual cv::Mat load_image(std::size_t frame) const = 0;
 
   virtual bool has_imu() const = 0;
-  // All samples in file order (strictly increasing time when opened in strict mode).
+  // All samples in file order (strictly increasing time: out-of-order rows are rejected when opening).
   virtual const std::vector<ImuSample>& imu_samples() const = 0;
 
   virtual bool has_ground_truth() const = 0;

@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 #include "io/trajectory_io.hpp"
 
@@ -25,6 +26,7 @@ template <class Read>
 auto read_optional_yaml(const fs::path& file, io_detail::IssueLog& log, Read&& read)
     -> std::optional<decltype(read(file))> {
   std::error_code ec;
+  if (fs::exists(file, ec)) require_regular_file(file);  // a FIFO would block open() forever
   if (!fs::is_regular_file(file, ec)) {
     spdlog::debug("{}: absent", file.string());
     return std::nullopt;
@@ -72,7 +74,9 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   std::size_t missing = 0;
   d->frames.reserve(entries.size());
   for (std::size_t i = 0; i < entries.size(); ++i) {
-    d->frames.push_back(io_detail::FrameEntry{entries[i].t_ns, data_dir / entries[i].filename, i});
+    // The frame's number is its data row (rows rejected before it keep their numbers: a gap, not a shift).
+    d->frames.push_back(
+        io_detail::FrameEntry{entries[i].t_ns, data_dir / entries[i].filename, entries[i].index});
     if (data_dir_present && !fs::is_regular_file(d->frames.back().image, ec)) ++missing;
   }
   d->images_present = data_dir_present && missing < entries.size();
@@ -114,6 +118,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
     }
   } else {
     for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
+      if (fs::exists(tum, ec)) require_regular_file(tum);
       if (!fs::is_regular_file(tum, ec)) continue;
       for (const StampedPose& pose : io_detail::read_tum(tum, log)) {
         GroundTruthState s;

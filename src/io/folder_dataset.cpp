@@ -9,6 +9,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 
 namespace loopgate {
@@ -31,6 +32,7 @@ std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, con
   d->images_present = true;
 
   const fs::path times_file = dir / "times.txt";
+  if (fs::exists(times_file, ec)) require_regular_file(times_file);  // a FIFO would block open() forever
   if (fs::is_regular_file(times_file, ec)) {
     const std::vector<std::optional<Timestamp>> times = io_detail::read_kitti_time_rows(times_file, log);
     if (times.size() != files.size()) {
@@ -39,8 +41,19 @@ std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, con
                      std::to_string(files.size()) + " images)" +
                      (times.size() < files.size() ? "; images without a time ignored" : ""));
     }
+    std::size_t rejected = 0;
     for (std::size_t i = 0; i < std::min(times.size(), files.size()); ++i) {
-      if (times[i]) d->frames.push_back(io_detail::FrameEntry{*times[i], files[i], i});
+      if (times[i]) {
+        d->frames.push_back(io_detail::FrameEntry{*times[i], files[i], i});
+      } else {
+        ++rejected;
+      }
+    }
+    if (rejected > 0) {
+      spdlog::warn(
+          "{}: {} row(s) rejected, so those images are skipped; every other image keeps its number (its "
+          "position in the folder) in frames.csv and loops.csv, which shows the gap",
+          times_file.string(), rejected);
     }
   } else {
     for (std::size_t i = 0; i < files.size(); ++i) {

@@ -21,6 +21,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
 #include "io/trajectory_io.hpp"
 
@@ -50,6 +51,7 @@ fs::path default_image_name(const fs::path& image_dir, std::size_t index) {
 std::optional<fs::path> first_existing(const std::vector<fs::path>& candidates) {
   std::error_code ec;
   for (const fs::path& p : candidates) {
+    if (fs::exists(p, ec)) require_regular_file(p);  // a FIFO would block open() forever
     if (fs::is_regular_file(p, ec)) return p;
   }
   return std::nullopt;
@@ -68,6 +70,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
   // Where times.txt (and the sequence metadata) live.
   fs::path meta_dir = dir;
   bool subset = false;
+  if (fs::exists(dir / "times.txt", ec)) require_regular_file(dir / "times.txt");
   if (!fs::is_regular_file(dir / "times.txt", ec)) {
     const fs::path parent = fs::absolute(dir, ec).parent_path();
     if (fs::is_directory(image_dir, ec) && fs::is_regular_file(parent / "times.txt", ec)) {
@@ -116,12 +119,23 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
                  d->frames.size(), times_file.string());
   } else {
     std::size_t missing = 0;
+    std::string rejected;  // the frames whose times.txt row was rejected: a gap in the numbering
+    std::size_t rejected_count = 0;
     for (std::size_t i = 0; i < times.size(); ++i) {
-      if (!times[i]) continue;
+      if (!times[i]) {
+        if (++rejected_count <= 10) rejected += (rejected.empty() ? "" : ", ") + std::to_string(i);
+        continue;
+      }
       const auto it = images.find(i);
       d->frames.push_back(io_detail::FrameEntry{
           *times[i], it != images.end() ? it->second : default_image_name(image_dir, i), i});
       if (d->images_present && it == images.end()) ++missing;
+    }
+    if (rejected_count > 0) {
+      spdlog::warn(
+          "{}: {} row(s) rejected, so frame(s) {}{} are skipped; every other frame keeps its KITTI number "
+          "(its image 000123.png is frame 123 in frames.csv and loops.csv), which shows the gap",
+          times_file.string(), rejected_count, rejected, rejected_count > 10 ? ", ..." : "");
     }
     if (!d->images_present) {
       spdlog::info("{}: no images in {}: frames have timestamps only", dir.string(), image_dir.string());

@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <string>
@@ -50,10 +51,83 @@ bool is_rotation(const Eigen::Matrix3d& R) {
          R.determinant() > 0;
 }
 
-std::string time_order_message(Timestamp t_ns, Timestamp previous_t_ns, const char* what) {
-  return std::string(t_ns == previous_t_ns ? "duplicate " : "non-increasing ") + what + " " +
-         std::to_string(t_ns) + " ns after " + std::to_string(previous_t_ns) +
-         " ns, expected strictly increasing";
+// A time for a message: seconds with 9 decimals (the tables in seconds) or integer ns.
+std::string time_text(Timestamp t_ns, bool seconds) {
+  if (!seconds) return std::to_string(t_ns) + " ns";
+  std::string out;
+  io_detail::append_seconds(out, t_ns);
+  return out + " s";
+}
+
+// A row of a time-ordered table, parsed, before the order is judged.
+template <class T>
+struct TimedRow {
+  std::size_t line = 0;
+  Timestamp t_ns = 0;
+  T value;
+};
+
+// The rows whose times strictly increase, keeping as many as possible: the longest strictly increasing
+// subsequence (earliest rows preferred among equal times). Every other row is reported, judged against the
+// kept rows on both sides of it, so that a single outlier (a typo of 10^5 s at row 10) is the one row
+// dropped whichever way it jumps, not the 1 990 good rows after it (issue 15). Called between
+// IssueLog::begin_table() and end_table(): in strict mode the earliest problem of the table is the error.
+template <class T>
+std::vector<TimedRow<T>> keep_increasing(const std::filesystem::path& file, IssueLog& log,
+                                         std::vector<TimedRow<T>> rows, const char* what, bool seconds) {
+  const std::size_t n = rows.size();
+  // Patience sorting on the reversed sequence of negated times (strictly increasing), so that among equal
+  // times the earliest row is the one kept.
+  std::vector<std::size_t> tails;           // tails[k]: position (in reversed order) ending a run of k + 1
+  std::vector<std::ptrdiff_t> previous(n);  // link to the run's element before, -1 at its start
+  const auto key = [&](std::size_t k) { return -rows[n - 1 - k].t_ns; };
+  for (std::size_t k = 0; k < n; ++k) {
+    const auto it = std::lower_bound(tails.begin(), tails.end(), key(k),
+                                     [&](std::size_t a, Timestamp value) { return key(a) < value; });
+    previous[k] = it == tails.begin() ? -1 : static_cast<std::ptrdiff_t>(*(it - 1));
+    if (it == tails.end()) {
+      tails.push_back(k);
+    } else {
+      *it = k;
+    }
+  }
+  std::vector<char> keep(n, 0);
+  for (std::ptrdiff_t k = tails.empty() ? -1 : static_cast<std::ptrdiff_t>(tails.back()); k >= 0;
+       k = previous[static_cast<std::size_t>(k)]) {
+    keep[n - 1 - static_cast<std::size_t>(k)] = 1;
+  }
+  if (tails.size() == n) return rows;
+  std::vector<std::ptrdiff_t> next_kept(n, -1);
+  for (std::ptrdiff_t i = static_cast<std::ptrdiff_t>(n) - 1, next = -1; i >= 0; --i) {
+    next_kept[static_cast<std::size_t>(i)] = next;
+    if (keep[static_cast<std::size_t>(i)]) next = i;
+  }
+  std::vector<TimedRow<T>> kept;
+  kept.reserve(tails.size());
+  std::ptrdiff_t last_kept = -1;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (keep[i]) {
+      kept.push_back(std::move(rows[i]));
+      last_kept = static_cast<std::ptrdiff_t>(i);
+      continue;
+    }
+    const Timestamp t = rows[i].t_ns;
+    std::string message = std::string(what) + " " + time_text(t, seconds);
+    const TimedRow<T>* before = last_kept >= 0 ? &kept.back() : nullptr;
+    const TimedRow<T>* after = next_kept[i] >= 0 ? &rows[static_cast<std::size_t>(next_kept[i])] : nullptr;
+    if (before && t == before->t_ns) {
+      message = "duplicate " + message + " (line " + std::to_string(before->line) + " has it)";
+    } else if (before && t < before->t_ns) {
+      message +=
+          " is before line " + std::to_string(before->line) + " (" + time_text(before->t_ns, seconds) + ")";
+    } else {
+      message +=
+          " is after line " + std::to_string(after->line) + " (" + time_text(after->t_ns, seconds) + ")";
+    }
+    message += ", expected strictly increasing times: this row is out of order with the rows around it";
+    log.report(file, rows[i].line, message);
+  }
+  return kept;
 }
 
 // ---------- YAML ----------
@@ -105,7 +179,8 @@ double yaml_number(const std::filesystem::path& file, const YAML::Node& node, co
   double value = 0;
   const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
   if (text.empty() || ec != std::errc{} || ptr != text.data() + text.size() || !std::isfinite(value)) {
-    throw DataError(file, yaml_line(node), what + ": expected a finite number, got '" + node.Scalar() + "'");
+    throw DataError(file, yaml_line(node),
+                    what + ": expected a finite number, got " + quote_excerpt(node.Scalar()));
   }
   return value;
 }
@@ -202,30 +277,32 @@ Eigen::Isometry3d read_yaml_T_BS(const std::filesystem::path& yaml_file) {
 
 std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& log) {
   const TextFile text(file);
-  std::vector<StampedPose> poses;
-  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+  std::vector<TimedRow<StampedPose>> rows;
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
     row.expect_columns(kTumColumns, "t_s tx ty tz qx qy qz qw");
     StampedPose pose;
     pose.t_ns = row.seconds_ns(0, "t_s");
     const Eigen::Vector3d p(row.number(1, "tx"), row.number(2, "ty"), row.number(3, "tz"));
     const Eigen::Quaterniond q = checked_quaternion(row.number(7, "qw"), row.number(4, "qx"),
                                                     row.number(5, "qy"), row.number(6, "qz"));
-    if (!poses.empty() && pose.t_ns <= poses.back().t_ns) {
-      throw RowError{time_order_message(pose.t_ns, poses.back().t_ns, "timestamp")};
-    }
     pose.T_w_b.linear() = q.toRotationMatrix();
     pose.T_w_b.translation() = p;
-    poses.push_back(pose);
+    rows.push_back({row.line, pose.t_ns, pose});
   });
+  std::vector<StampedPose> poses;
+  for (auto& row : keep_increasing(file, log, std::move(rows), "timestamp", true)) poses.push_back(row.value);
+  log.end_table(file, lines);
   return poses;
 }
 
 std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
   const TextFile text(csv_file);
-  std::vector<GroundTruthState> states;
-  states.reserve(text.text().size() / 160);
+  std::vector<TimedRow<GroundTruthState>> rows;
+  rows.reserve(text.text().size() / 160);
   std::size_t columns = 0;  // fixed by the first good row
-  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
     const std::size_t n = row.size();
     if (columns == 0) {
       if (n != 8 && n != 11 && n != 14 && n != 17) {
@@ -252,21 +329,26 @@ std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path
       s.accel_bias_mps2 =
           Eigen::Vector3d(row.number(14, "b_a_x"), row.number(15, "b_a_y"), row.number(16, "b_a_z"));
     }
-    if (!states.empty() && s.t_ns <= states.back().t_ns) {
-      throw RowError{time_order_message(s.t_ns, states.back().t_ns, "ground-truth timestamp")};
-    }
     s.T_w_b.linear() = q.toRotationMatrix();
     s.T_w_b.translation() = p;
-    states.push_back(s);
+    rows.push_back({row.line, s.t_ns, s});
     columns = n;
   });
+  std::vector<GroundTruthState> states;
+  states.reserve(rows.size());
+  for (auto& row : keep_increasing(csv_file, log, std::move(rows), "ground-truth timestamp", false))
+    states.push_back(row.value);
+  log.end_table(csv_file, lines);
   return states;
 }
 
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log) {
   const TextFile text(csv_file);
-  std::vector<EurocImageEntry> images;
-  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+  std::vector<TimedRow<EurocImageEntry>> rows;
+  std::size_t data_rows = 0;
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+    const std::size_t index = data_rows++;  // the frame's number, kept through rejected rows
     row.expect_columns(2, "timestamp [ns], filename");
     EurocImageEntry entry;
     entry.t_ns = row.integer_ns(0, "timestamp [ns]");
@@ -275,37 +357,36 @@ std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& 
       throw RowError{"column 2 (filename): expected a plain file name inside data/, got '" +
                      std::string(row.fields[1]) + "'"};
     }
-    if (!images.empty() && entry.t_ns <= images.back().t_ns) {
-      throw RowError{time_order_message(entry.t_ns, images.back().t_ns, "camera timestamp")};
-    }
     entry.filename = std::string(row.fields[1]);
-    images.push_back(std::move(entry));
+    entry.index = index;
+    rows.push_back({row.line, entry.t_ns, std::move(entry)});
   });
+  std::vector<EurocImageEntry> images;
+  images.reserve(rows.size());
+  for (auto& row : keep_increasing(csv_file, log, std::move(rows), "camera timestamp", false))
+    images.push_back(std::move(row.value));
+  log.end_table(csv_file, lines);
   return images;
 }
 
 std::vector<ImuSample> read_euroc_imu(const std::filesystem::path& csv_file, IssueLog& log) {
   const TextFile text(csv_file);
-  std::vector<ImuSample> samples;
-  samples.reserve(text.text().size() / 100);
-  Timestamp last_t_ns = 0;
-  for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
+  std::vector<TimedRow<ImuSample>> rows;
+  rows.reserve(text.text().size() / 100);
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
     row.expect_columns(kImuColumns, "timestamp [ns], w_xyz [rad/s], a_xyz [m/s^2]");
     ImuSample s;
     s.t_ns = row.integer_ns(0, "timestamp [ns]");
     s.gyro_radps = Eigen::Vector3d(row.number(1, "w_x"), row.number(2, "w_y"), row.number(3, "w_z"));
     s.accel_mps2 = Eigen::Vector3d(row.number(4, "a_x"), row.number(5, "a_y"), row.number(6, "a_z"));
-    if (!samples.empty() && s.t_ns <= last_t_ns) {
-      const std::string message = time_order_message(s.t_ns, last_t_ns, "IMU timestamp");
-      if (log.strict()) throw RowError{message};
-      // Lenient: the sample stays where the file has it (the sync stage judges it per frame); the
-      // RowError only records the issue.
-      samples.push_back(s);
-      throw RowError{message + " (sample kept in file order)"};
-    }
-    samples.push_back(s);
-    last_t_ns = s.t_ns;
+    rows.push_back({row.line, s.t_ns, s});
   });
+  std::vector<ImuSample> samples;
+  samples.reserve(rows.size());
+  for (auto& row : keep_increasing(csv_file, log, std::move(rows), "IMU timestamp", false))
+    samples.push_back(row.value);
+  log.end_table(csv_file, lines);
   return samples;
 }
 
@@ -313,15 +394,17 @@ std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem
                                                            IssueLog& log) {
   const TextFile text(times_file);
   std::vector<std::optional<Timestamp>> rows;
-  std::optional<Timestamp> last_t_ns;
-  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+  std::vector<TimedRow<std::size_t>> parsed;  // value: the row's index
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
     rows.emplace_back();  // the row keeps its index even when bad
     row.expect_columns(1, "time in seconds");
     const Timestamp t_ns = row.seconds_ns(0, "t_s");
-    if (last_t_ns && t_ns <= *last_t_ns) throw RowError{time_order_message(t_ns, *last_t_ns, "time")};
-    rows.back() = t_ns;
-    last_t_ns = t_ns;
+    parsed.push_back({row.line, t_ns, rows.size() - 1});
   });
+  for (const auto& row : keep_increasing(times_file, log, std::move(parsed), "time", true))
+    rows[row.value] = row.t_ns;
+  log.end_table(times_file, lines);
   return rows;
 }
 
@@ -329,7 +412,8 @@ std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::fi
                                                                    IssueLog& log) {
   const TextFile text(poses_file);
   std::vector<std::optional<Eigen::Isometry3d>> rows;
-  for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
+  log.begin_table();
+  const std::size_t lines = for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
     rows.emplace_back();
     row.expect_columns(kKittiPoseColumns, "row-major 3x4 T_w_cam0");
     const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, 0, "pose");
@@ -339,6 +423,7 @@ std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::fi
     T.translation() = M.col(3);
     rows.back() = T;
   });
+  log.end_table(poses_file, lines);
   return rows;
 }
 
@@ -563,9 +648,9 @@ CameraCalibration read_euroc_camera_yaml(const std::filesystem::path& yaml_file)
   } else if (model_name == "none") {
     camera.distortion_model = DistortionModel::kNone;
   } else {
-    throw DataError(
-        yaml_file, model ? yaml_line(model) : 0,
-        "distortion_model: '" + model_name + "', expected radial-tangential, equidistant or none");
+    throw DataError(yaml_file, model ? yaml_line(model) : 0,
+                    "distortion_model: " + quote_excerpt(model_name) +
+                        ", expected radial-tangential, equidistant or none");
   }
   if (camera.distortion_model != DistortionModel::kNone) {
     const YAML::Node coefficients = require_key(yaml_file, root, "distortion_coefficients");

@@ -52,6 +52,7 @@ void write_kitti_times(const std::filesystem::path& times_file, const std::vecto
 struct EurocImageEntry {
   Timestamp t_ns = 0;
   std::string filename;
+  std::size_t index = 0;  // the frame's number: its data row in the file, counting rows rejected before it
 };
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file);
 void write_euroc_camera_csv(const std::filesystem::path& csv_file,

@@ -2,7 +2,9 @@
 
 #include <spdlog/fmt/fmt.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 
 #include "core/error.hpp"
 
@@ -21,20 +23,61 @@ std::string csv_escape(const std::string& cell) {
   return out;
 }
 
+// The system's reason of the last failed call, e.g. "No space left on device".
+std::string reason() {
+  return errno != 0 ? std::string(std::strerror(errno)) : std::string("unknown error");
+}
+
+// Opens FILE.partial for `file`.
 void open_stream(std::ofstream& out, const std::filesystem::path& file) {
   if (file.has_parent_path()) {
     std::error_code ec;
     std::filesystem::create_directories(file.parent_path(), ec);
   }
-  out.open(file, std::ios::out | std::ios::trunc);
-  if (!out) throw DataError(file, "cannot open for writing");
+  errno = 0;
+  out.open(partial_path(file), std::ios::out | std::ios::trunc);
+  if (!out) throw DataError(file, "cannot open " + partial_path(file).string() + " for writing: " + reason());
 }
 
 void check_stream(const std::ofstream& out, const std::filesystem::path& file) {
-  if (!out) throw DataError(file, "write failed (disk full or file removed?)");
+  if (!out) throw DataError(file, "write failed: " + reason());
+}
+
+void remove_partial(std::ofstream& out, const std::filesystem::path& file) {
+  if (file.empty()) return;
+  if (out.is_open()) out.close();
+  std::error_code ec;
+  std::filesystem::remove(partial_path(file), ec);
+}
+
+// flush, close, rename FILE.partial -> FILE; on failure the temporary file is removed and DataError thrown.
+void commit(std::ofstream& out, const std::filesystem::path& file) {
+  if (!out.is_open()) return;
+  errno = 0;
+  out.flush();
+  const bool flushed = static_cast<bool>(out);
+  const std::string flush_reason = flushed ? std::string() : reason();
+  out.close();
+  if (!flushed || !out) {
+    const std::string why = flushed ? reason() : flush_reason;
+    remove_partial(out, file);
+    throw DataError(file, "write failed: " + why);
+  }
+  std::error_code ec;
+  std::filesystem::rename(partial_path(file), file, ec);
+  if (ec) {
+    remove_partial(out, file);
+    throw DataError(file, "cannot rename " + partial_path(file).string() + ": " + ec.message());
+  }
 }
 
 }  // namespace
+
+std::filesystem::path partial_path(const std::filesystem::path& file) {
+  std::filesystem::path partial = file;
+  partial += ".partial";
+  return partial;
+}
 
 std::string format_fixed(double value, int decimals) {
   if (std::isnan(value)) return "nan";
@@ -47,7 +90,16 @@ CsvWriter::CsvWriter(const std::filesystem::path& file, const std::vector<std::s
   open(file, columns);
 }
 
+CsvWriter::~CsvWriter() {
+  remove_partial(out_, out_.is_open() ? file_ : std::filesystem::path());
+}
+
+void CsvWriter::abandon() {
+  remove_partial(out_, out_.is_open() ? file_ : std::filesystem::path());
+}
+
 void CsvWriter::open(const std::filesystem::path& file, const std::vector<std::string>& columns) {
+  abandon();
   file_ = file;
   columns_ = columns.size();
   open_stream(out_, file);
@@ -68,22 +120,29 @@ void CsvWriter::write_row(const std::vector<std::string>& cells) {
 }
 
 void CsvWriter::flush() {
+  errno = 0;
   out_.flush();
   check_stream(out_, file_);
 }
 
 void CsvWriter::close() {
-  if (out_.is_open()) {
-    out_.close();
-    check_stream(out_, file_);
-  }
+  commit(out_, file_);
 }
 
 TumWriter::TumWriter(const std::filesystem::path& file) {
   open(file);
 }
 
+TumWriter::~TumWriter() {
+  remove_partial(out_, out_.is_open() ? file_ : std::filesystem::path());
+}
+
+void TumWriter::abandon() {
+  remove_partial(out_, out_.is_open() ? file_ : std::filesystem::path());
+}
+
 void TumWriter::open(const std::filesystem::path& file) {
+  abandon();
   file_ = file;
   open_stream(out_, file);
 }
@@ -97,30 +156,26 @@ void TumWriter::write(Timestamp t_ns, const Eigen::Isometry3d& T_w_b) {
 }
 
 void TumWriter::flush() {
+  errno = 0;
   out_.flush();
   check_stream(out_, file_);
 }
 
 void TumWriter::close() {
-  if (out_.is_open()) {
-    out_.close();
-    check_stream(out_, file_);
-  }
+  commit(out_, file_);
 }
 
 void write_json_file(const std::filesystem::path& file, const nlohmann::json& json) {
-  std::filesystem::path tmp = file;
-  tmp += ".tmp";
-  {
-    std::ofstream out;
-    open_stream(out, tmp);
-    out << json.dump(2) << '\n';
-    out.close();
-    check_stream(out, tmp);
+  std::ofstream out;
+  open_stream(out, file);
+  // Invalid UTF-8 in a string (a file name, a quoted field) is replaced, not a reason to lose the file.
+  out << json.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << '\n';
+  if (!out) {
+    const std::string why = reason();
+    remove_partial(out, file);
+    throw DataError(file, "write failed: " + why);
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, file, ec);
-  if (ec) throw DataError(file, "cannot rename " + tmp.string() + ": " + ec.message());
+  commit(out, file);
 }
 
 void TraceWriter::name_thread(int thread_id, const std::string& name) {

@@ -1,6 +1,9 @@
 // Streaming writers for run outputs: CSV tables, TUM trajectories, JSON documents and Chrome trace-event
-// files (which Perfetto and chrome://tracing open). Rows are written as they come so that the outputs of
-// an interrupted run stay readable; every writer throws DataError naming the file when it cannot write.
+// files (which Perfetto and chrome://tracing open). Every file is whole or absent (issue 15): it is written
+// under a temporary name (FILE.partial, rows streamed as they come, flushed now and then, so that a killed
+// process leaves what it had under that name) and renamed to FILE by close() once complete; a writer
+// destroyed without close(), or whose close() fails, removes its temporary file. Every writer throws
+// DataError naming the file and the system's reason when it cannot write (a full disk).
 #pragma once
 
 #include <cstdint>
@@ -25,11 +28,20 @@ class CsvWriter {
   void open(const std::filesystem::path& file, const std::vector<std::string>& columns);
   bool is_open() const { return out_.is_open(); }
 
+  ~CsvWriter();
+  CsvWriter(const CsvWriter&) = delete;
+  CsvWriter& operator=(const CsvWriter&) = delete;
+
   // Throws DataError when the number of cells differs from the number of columns.
   void write_row(const std::vector<std::string>& cells);
   void flush();
+  // Completes the file: flush, close, rename FILE.partial to FILE. Throws DataError (the temporary file then
+  // removed) when that fails.
   void close();
+  // Gives the file up: FILE.partial removed, FILE not written.
+  void abandon();
   std::size_t columns() const { return columns_; }
+  const std::filesystem::path& file() const { return file_; }
 
  private:
   std::filesystem::path file_;
@@ -42,10 +54,14 @@ class TumWriter {
  public:
   TumWriter() = default;
   explicit TumWriter(const std::filesystem::path& file);
+  ~TumWriter();
+  TumWriter(const TumWriter&) = delete;
+  TumWriter& operator=(const TumWriter&) = delete;
   void open(const std::filesystem::path& file);
   void write(Timestamp t_ns, const Eigen::Isometry3d& T_w_b);
   void flush();
-  void close();
+  void close();    // as CsvWriter::close()
+  void abandon();  // as CsvWriter::abandon()
 
  private:
   std::filesystem::path file_;
@@ -53,7 +69,11 @@ class TumWriter {
 };
 
 // Writes `json` (indented) to `file` through a temporary file and a rename, so readers never see half.
+// Throws DataError naming the file (the temporary file removed) when it cannot.
 void write_json_file(const std::filesystem::path& file, const nlohmann::json& json);
+
+// The temporary name of an output being written: FILE.partial.
+std::filesystem::path partial_path(const std::filesystem::path& file);
 
 // One complete ("X") event of the Chrome trace-event format: a span on a thread track.
 struct TraceEvent {

@@ -29,6 +29,7 @@ struct StageStamp {
 struct FrameRecord {
   std::uint64_t seq = 0;  // contiguous over the released frames
   std::size_t frame = 0;  // dataset frame index
+  std::size_t label = 0;  // the frame's number in the outputs (SeqIndex::label)
   Timestamp t_ns = 0;
   std::int64_t release_ns = 0;   // run clock
   std::int64_t deadline_ns = 0;  // 0: no deadline (rate max)
@@ -63,19 +64,27 @@ struct FrameMsg {
 
 // Where each sequence number's frame is: written by the producer before the frame is released
 // (preallocated for every frame the run may release), read by any stage after that.
+// frame(): the dataset frame index (what the dataset is asked for); label(): the frame's number in the
+// outputs, its identity in the dataset (Dataset::source_index: the KITTI image number, the EuRoC data row),
+// which a rejected input row does not shift (issue 15). Both are equal unless rows were rejected or the
+// dataset is a subset folder.
 class SeqIndex {
  public:
-  explicit SeqIndex(std::size_t capacity) : frame_(capacity), t_ns_(capacity) {}
-  void set(std::size_t seq, std::size_t frame, Timestamp t_ns) {
+  explicit SeqIndex(std::size_t capacity) : frame_(capacity), label_(capacity), t_ns_(capacity) {}
+  void set(std::size_t seq, std::size_t frame, Timestamp t_ns, std::size_t label) {
     frame_.at(seq) = frame;
+    label_.at(seq) = label;
     t_ns_.at(seq) = t_ns;
   }
+  void set(std::size_t seq, std::size_t frame, Timestamp t_ns) { set(seq, frame, t_ns, frame); }
   std::size_t frame(std::int64_t seq) const { return frame_.at(static_cast<std::size_t>(seq)); }
+  std::size_t label(std::int64_t seq) const { return label_.at(static_cast<std::size_t>(seq)); }
   Timestamp t_ns(std::int64_t seq) const { return t_ns_.at(static_cast<std::size_t>(seq)); }
   std::size_t capacity() const { return frame_.size(); }
 
  private:
   std::vector<std::size_t> frame_;
+  std::vector<std::size_t> label_;
   std::vector<Timestamp> t_ns_;
 };
 

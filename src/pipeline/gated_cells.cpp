@@ -74,7 +74,7 @@ std::vector<CellSpan> PoseGatedCells::take_cells(std::size_t seq) {
 void PoseGatedCells::add_frame_cells(const FrameRecord& r, CsvRow& row) const {
   const GateFrame& g = frames_[r.seq];
   const bool has_nearest = g.ran && g.decision.has_nearest;
-  row.add("nearest_frame", has_nearest ? std::to_string(context_.seqs.frame(g.decision.nearest_frame)) : "");
+  row.add("nearest_frame", has_nearest ? std::to_string(context_.seqs.label(g.decision.nearest_frame)) : "");
   row.add("gate_d_m", has_nearest ? format_fixed(g.decision.distance_m, 6) : "");
   row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
   row.add("gated", g.decision.gated ? "y" : "n");
@@ -84,13 +84,13 @@ void PoseGatedCells::add_frame_cells(const FrameRecord& r, CsvRow& row) const {
 // candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
 // columns = reference frames j, inclusive); candidate_cells.csv: the cells actually compared, per row as
 // disjoint column intervals; descriptors.csv: every frame described, with the frame whose gate update asked
-// for it. Dataset frame indices.
+// for it. Frames by their numbers (SeqIndex::label).
 void PoseGatedCells::write_files(const std::filesystem::path& out_dir, std::size_t end_seq,
                                  const std::function<bool(std::int64_t)>& computed) const {
   if (end_seq == 0) return;
   const auto last_seq = static_cast<std::int64_t>(end_seq) - 1;
   const auto frame = [&](std::int64_t seq) {
-    return std::to_string(context_.seqs.frame(std::min(seq, last_seq)));
+    return std::to_string(context_.seqs.label(std::min(seq, last_seq)));
   };
   CsvWriter areas(out_dir / "candidate_areas.csv", {"id", "row_begin", "row_end", "col_begin", "col_end",
                                                     "i_first", "i_last", "j_min", "j_max", "gated_frames"});

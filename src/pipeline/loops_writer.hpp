@@ -1,10 +1,13 @@
 // loops.csv, the same file for every run (single sequence, two sequences, every method): one loop closure per
-// row, i (current / query frame), j (earlier / reference frame), their times in s and the method's score,
-// dataset frame indices. It also keeps the loops written, for the evaluation.
+// row, i (current / query frame), j (earlier / reference frame), their times in s and the method's score.
+// write() takes dataset frame indices; the file shows the frames' numbers (Dataset::source_index, through the
+// labels given to open(): a rejected input row leaves a gap, it does not renumber the later frames). It also
+// keeps the loops written (dataset frame indices), for the evaluation.
 #pragma once
 
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <vector>
 
 #include "core/types.hpp"
@@ -15,7 +18,9 @@ namespace loopgate {
 
 class LoopsWriter {
  public:
-  void open(const std::filesystem::path& file);
+  using Label = std::function<std::size_t(std::size_t)>;  // dataset frame index -> the frame's number
+  // Without labels the file shows dataset frame indices.
+  void open(const std::filesystem::path& file, Label label_i = {}, Label label_j = {});
   bool is_open() const { return csv_.is_open(); }
   void write(std::size_t frame_i, std::size_t frame_j, Timestamp t_i_ns, Timestamp t_j_ns, double score);
   void flush() { csv_.flush(); }
@@ -27,6 +32,7 @@ class LoopsWriter {
 
  private:
   CsvWriter csv_;
+  Label label_i_, label_j_;
   std::vector<Detection> loops_;
 };
 

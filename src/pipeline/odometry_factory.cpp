@@ -1,5 +1,6 @@
 #include "pipeline/odometry_factory.hpp"
 
+#include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
 #include <vector>
@@ -89,6 +90,28 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
   if (source == "file") {
     auto poses = read_tum(config.file);
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
+    // A trajectory that does not overlap the dataset would make every frame "odometry lost" (issue 15).
+    const auto gap_ns = static_cast<Timestamp>(config.file_max_gap_s * 1e9);
+    std::size_t covered = 0;
+    for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
+      const Timestamp t = dataset.frame_t_ns(i);
+      if (t >= poses.front().t_ns - gap_ns && t <= poses.back().t_ns + gap_ns) ++covered;
+    }
+    const auto seconds = [](Timestamp t) { return fmt::format("{:.3f}", ns_to_s(t)); };
+    if (covered == 0) {
+      throw DataError(
+          config.file,
+          "its poses cover t = " + seconds(poses.front().t_ns) + " .. " + seconds(poses.back().t_ns) +
+              " s, and the dataset's " + std::to_string(dataset.frame_count()) +
+              " frames are at t = " + seconds(dataset.frame_t_ns(0)) + " .. " +
+              seconds(dataset.frame_t_ns(dataset.frame_count() - 1)) +
+              " s: no frame within odometry.file_max_gap_s of the trajectory (another sequence, or "
+              "times in another unit?)");
+    }
+    if (covered < dataset.frame_count()) {
+      spdlog::warn("odometry: {} covers {} of the dataset's {} frames; the others are 'odometry lost'",
+                   config.file, covered, dataset.frame_count());
+    }
     spdlog::info("odometry: file source, {} poses from {}", poses.size(), config.file);
     return std::make_unique<FileOdometry>(config, std::move(poses));
   }

@@ -6,7 +6,8 @@
 // synchronises with every task).
 //
 // The only access not covered is a task's read of the body object itself (two pointers TBB copied on the
-// spawning thread); the TSan suppressions (tsan_suppressions.cpp) name this file for exactly that (race_top).
+// spawning thread); the TSan suppressions (sanitizer_suppressions.cpp) name this file for exactly that
+// (race_top).
 #pragma once
 
 #include <tbb/parallel_for.h>
@@ -16,9 +17,9 @@
 
 namespace loopgate {
 
-// Does nothing; calling it links src/pipeline/tsan_suppressions.cpp (the oneTBB suppressions of TSan builds)
-// into the program.
-void tsan_suppressions_anchor();
+// Does nothing; calling it links src/pipeline/sanitizer_suppressions.cpp (the oneTBB suppressions of
+// sanitizer builds) into the program.
+void sanitizer_suppressions_anchor();
 
 template <class Work>
 struct HandoffBody {
@@ -34,7 +35,7 @@ struct HandoffBody {
 // Calls work(i) for i in [0, count), in parallel.
 template <class Work>
 void parallel_for_with_handoff(std::size_t count, const Work& work) {
-  tsan_suppressions_anchor();
+  sanitizer_suppressions_anchor();
   std::atomic<int> handoff{0};
   handoff.store(1, std::memory_order_release);
   tbb::parallel_for(std::size_t{0}, count, HandoffBody<Work>{&work, &handoff});

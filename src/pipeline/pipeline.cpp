@@ -6,11 +6,14 @@
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <mutex>
 #include <unordered_map>
 
 #include "core/error.hpp"
+#include "core/stop_request.hpp"
 #include "io/dataset.hpp"
+#include "io/file_guard.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/loops_writer.hpp"
@@ -64,7 +67,7 @@ class PipelineRun {
         call(r);
       } catch (const std::exception& e) {
         fail(fmt::format("stage '{}' failed on seq {} (frame {}, t = {:.6f} s): {}", kStageNames[stage],
-                         r.seq, r.frame, ns_to_s(r.t_ns), e.what()));
+                         r.seq, r.label, ns_to_s(r.t_ns), e.what()));
         r.release();
         throw;
       }
@@ -83,7 +86,19 @@ class PipelineRun {
   }
   bool stop_requested() const { return (stop_ && stop_->load()) || failed_.load(); }
   void produce(tbb::flow::queue_node<FrameMsg>& queue);
+  std::vector<std::string> missing_outputs() const;
   void finish_stream(tbb::task_arena& arena, RunResult& result, double cpu_start_s);
+  // Runs `write`, one output step after the drain: a failure (a full disk) is recorded, naming the file, and
+  // the next outputs are still written.
+  template <class Write>
+  void write_output(const char* what, Write&& write) {
+    try {
+      write();
+    } catch (const std::exception& e) {
+      output_errors_.push_back(std::string(what) + ": " + e.what());
+      spdlog::error("run: {}: {}", what, e.what());
+    }
+  }
 
   const PipelineConfig& config_;
   const Dataset& dataset_;
@@ -104,13 +119,17 @@ class PipelineRun {
   std::mutex failure_mutex_;  // the first failure wins
   std::atomic<bool> failed_{false};
   std::string failure_;
+  std::size_t presented_end_ = 0;           // the dataset frame after the last one presented (producer)
+  std::vector<std::string> output_errors_;  // outputs that could not be written, and why
 };
 
 void PipelineRun::produce(tbb::flow::queue_node<FrameMsg>& queue) {
   std::uint64_t next_seq = 0;
+  presented_end_ = range_.first;
   for (std::size_t frame = range_.first; frame < range_.second; ++frame) {
     const auto release = replay_.wait_for(frame, [this] { return stop_requested(); });
     if (!release) break;
+    presented_end_ = frame + 1;
     if (!release->go) continue;  // dropped (rate mode)
     auto owned = std::make_unique<FrameRecord>();
     FrameRecord* record = owned.get();
@@ -118,9 +137,11 @@ void PipelineRun::produce(tbb::flow::queue_node<FrameMsg>& queue) {
       std::lock_guard lock(live_mutex_);
       live_.emplace(next_seq, std::move(owned));
     }
-    seqs_.set(next_seq, frame, dataset_.frame_t_ns(frame));
+    const std::size_t label = dataset_.source_index(frame);
+    seqs_.set(next_seq, frame, dataset_.frame_t_ns(frame), label);
     record->seq = next_seq++;
     record->frame = frame;
+    record->label = label;
     record->t_ns = dataset_.frame_t_ns(frame);
     record->release_ns = clock_.now_ns();
     record->deadline_ns = release->deadline_ns;
@@ -131,8 +152,17 @@ void PipelineRun::produce(tbb::flow::queue_node<FrameMsg>& queue) {
 }
 
 RunResult PipelineRun::run() {
+  // A previous run's outputs in the folder go first: an output this run fails to write must be absent, not
+  // an older one beside the new others (the folder is locked by the command; inputs were checked not to be
+  // among these names).
+  std::error_code ec;
+  for (const std::string& name : run_output_file_names()) {
+    std::filesystem::remove(out_dir_ / name, ec);
+    std::filesystem::remove(partial_path(out_dir_ / name), ec);
+  }
   outputs_.open();
-  if (method_->detects()) loops_.open(out_dir_ / "loops.csv");
+  const auto label = [this](std::size_t frame) { return dataset_.source_index(frame); };
+  if (method_->detects()) loops_.open(out_dir_ / "loops.csv", label, label);
   const int threads = config_.run.threads;
   spdlog::info("run: {} frames [{}, {}) of {} ({}), rate {}, {} worker threads, at most {} in flight",
                range_.second - range_.first, range_.first, range_.second, dataset_.root().string(),
@@ -200,7 +230,7 @@ RunResult PipelineRun::run() {
     make_edge(*sink, limiter->decrementer());
   });
 
-  tsan_suppressions_anchor();  // TSan builds: links the oneTBB suppressions (parallel_handoff.hpp)
+  sanitizer_suppressions_anchor();  // sanitizer builds: links the oneTBB suppressions (parallel_handoff.hpp)
   RunResult result;
   const double cpu_start_s = cpu_seconds();
   clock_.restart();
@@ -225,26 +255,33 @@ RunResult PipelineRun::run() {
 void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, double cpu_start_s) {
   std::scoped_lock lock(stage_mutex_[kGate], stage_mutex_[kMatch], stage_mutex_[kSink]);
   const std::int64_t start_ns = clock_.now_ns();
+  std::string aborted;
   if (method_->detects()) {
     try {
       arena.execute([&] { method_->finish(); });
+    } catch (const Interrupted& e) {
+      // A second stop signal during the end-of-stream work (SeqSLAM's search): no detections from it; every
+      // output is still written, and the run is interrupted, not failed.
+      result.interrupted = true;
+      aborted = std::string("end-of-stream work not done: ") + e.what();
+      spdlog::warn("run: {}", aborted);
     } catch (const std::exception& e) {
       fail(std::string("match flush at the end of the stream: ") + e.what());
     }
-    loops_.close();
+    write_output("loops.csv", [&] { loops_.close(); });
   }
   const double end_of_stream_ms = 1e-6 * static_cast<double>(clock_.now_ns() - start_ns);
   {
     std::lock_guard failure_lock(failure_mutex_);
     result.failed = failed_.load();
-    result.error = failure_;
+    result.error = failed_.load() ? failure_ : aborted;
   }
   // The end-of-stream work is part of the run (SeqSLAM's search happens there).
   result.wall_s = 1e-9 * static_cast<double>(clock_.now_ns());
   result.cpu_s = cpu_seconds() - cpu_start_s;
   result.peak_rss_mb = peak_rss_mb();
-  outputs_.finish(true);
-  method_->write_files(out_dir_);
+  for (std::string& error : outputs_.finish(true)) output_errors_.push_back(std::move(error));
+  write_output("the method's files", [&] { method_->write_files(out_dir_); });
   const RunCounters& counters = outputs_.counters();
   result.frames_in = replay_.frames_in();
   result.frames_dropped = replay_.frames_dropped();
@@ -263,24 +300,84 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
           result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
           result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
           result.realtime_factor);
-  const RunParts parts{config_, dataset_, range_.first,          range_.second, *method_,        outputs_,
-                       loops_,  images_,  steps_.synchronizer(), seqs_,         end_of_stream_ms};
+  RunParts parts{config_, dataset_, range_.first,          range_.second, *method_,         outputs_,
+                 loops_,  images_,  steps_.synchronizer(), seqs_,         end_of_stream_ms, std::nullopt};
+  // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
+  // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
+  const std::size_t processed = outputs_.frames_through();
+  parts.evaluated_end_frame =
+      result.failed
+          ? (processed > 0 ? seqs_.frame(static_cast<std::int64_t>(processed) - 1) + 1 : range_.first)
+          : presented_end_;
   try {
     result.example_descriptor = method_->example_descriptor();
   } catch (const DataError& e) {
     spdlog::warn("run: no example descriptor for the plots: {}", e.what());
   }
-  result.summary = make_run_summary(parts, result, evaluate_run(parts, out_dir_));
-  write_json_file(out_dir_ / "summary.json", result.summary);
-  if (config_.output.trace) outputs_.write_trace(out_dir_ / "trace.json", config_.run.threads);
-  if (result.failed) spdlog::error("run failed: {}", result.error);
+  nlohmann::json evaluation = {{"available", false}};
+  write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
+               [&] { evaluation = evaluate_run(parts, out_dir_); });
+  result.summary = make_run_summary(parts, result, std::move(evaluation));
+  if (config_.output.trace) {
+    write_output("trace.json", [&] { outputs_.write_trace(out_dir_ / "trace.json", config_.run.threads); });
+  }
+  // Last: summary.json says which outputs are missing (when it can itself be written).
+  result.output_errors = output_errors_;
+  result.missing_outputs = missing_outputs();
+  std::erase(result.missing_outputs, std::string("summary.json"));  // being written now
+  result.summary["outputs_missing"] = result.missing_outputs;
+  result.summary["output_errors"] = result.output_errors;
+  write_output("summary.json", [&] { write_json_file(out_dir_ / "summary.json", result.summary); });
+  result.output_errors = output_errors_;
+  result.missing_outputs = missing_outputs();
+  if (!result.missing_outputs.empty()) result.failed = true;
+  if (result.failed) {
+    if (result.error.empty())
+      result.error = "outputs missing: " + fmt::format("{}", fmt::join(result.missing_outputs, ", "));
+    spdlog::error("run failed: {}", result.error);
+  }
+}
+
+std::vector<std::string> PipelineRun::missing_outputs() const {
+  std::vector<std::string> expected = {"frames.csv", "timing.csv", "trajectory.tum", "summary.json"};
+  if (method_->detects()) expected.emplace_back("loops.csv");
+  if (config_.output.trace) expected.emplace_back("trace.json");
+  std::vector<std::string> missing;
+  std::error_code ec;
+  for (const std::string& name : expected)
+    if (!std::filesystem::is_regular_file(out_dir_ / name, ec)) missing.push_back(name);
+  // Files of the method and of the evaluation are named by their errors.
+  for (const std::string& error : output_errors_) {
+    const std::string what = error.substr(0, error.find(':'));
+    if (std::find(expected.begin(), expected.end(), what) == expected.end()) missing.push_back(error);
+  }
+  return missing;
 }
 
 }  // namespace
 
+const std::vector<std::string>& run_output_file_names() {
+  static const std::vector<std::string> names = {
+      "frames.csv",          "loops.csv",           "trajectory.tum",   "timing.csv",
+      "summary.json",        "trace.json",          "ground_truth.tum", "truth_loops.csv",
+      "candidate_areas.csv", "candidate_cells.csv", "descriptors.csv",  "descriptor.csv"};
+  return names;
+}
+
+void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
+                                const std::vector<std::filesystem::path>& extra_inputs) {
+  std::vector<NamedPath> inputs;
+  if (config.odometry.source == "file") inputs.push_back({"odometry.file", config.odometry.file});
+  for (const auto& input : extra_inputs) inputs.push_back({"an input of this command", input});
+  std::vector<NamedPath> outputs;
+  for (const std::string& name : run_output_file_names()) outputs.push_back({"the output", out_dir / name});
+  refuse_outputs_over_inputs(outputs, inputs);
+}
+
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
   if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
+  refuse_outputs_over_inputs(config, out_dir);
   PipelineRun run(config, dataset, out_dir, stop);
   return run.run();
 }

@@ -32,7 +32,11 @@
 //   recorded in that frame's status and in the summary; the run goes on. Any other exception escaping a node
 //   cancels the graph; it is reported once with its stage and frame, the outputs of the frames already
 //   through the sink are written, and the result is `failed`.
-// - A stop request (SIGINT) stops the producer; the graph drains and every output is written.
+// - A stop request (SIGINT, SIGTERM, SIGHUP) stops the producer; the graph drains and every output is
+//   written; the evaluation covers only the frames presented.
+// - Every output is whole or absent (written under a temporary name, renamed when complete); after the drain
+//   each one is attempted even when another failed (a full disk), and the missing ones are listed in
+//   RunResult::missing_outputs (and in summary.json when it could be written).
 #pragma once
 
 #include <atomic>
@@ -42,6 +46,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "pipeline/pipeline_config.hpp"
 #include "stages/dird/dird_extractor.hpp"
@@ -59,13 +64,26 @@ struct RunResult {
   double wall_s = 0, data_s = 0, realtime_factor = 0, cpu_s = 0, peak_rss_mb = 0;
   bool interrupted = false;
   bool failed = false;
-  std::string error;          // the failure, naming stage, seq and frame
-  std::string profile_table;  // the profiler table (also in summary.json as numbers)
-  nlohmann::json summary;     // what summary.json holds
+  std::string error;  // the failure, naming stage, seq and frame
+  // Outputs that could not be written (a full disk): each file is whole or absent; these are absent. A run
+  // with a missing output is `failed`.
+  std::vector<std::string> missing_outputs;
+  std::vector<std::string> output_errors;  // why, naming the files
+  std::string profile_table;               // the profiler table (also in summary.json as numbers)
+  nlohmann::json summary;                  // what summary.json holds
   // A descriptor for the plots' picture (DIRD methods: the first loop's query frame, else the middle
   // frame), with its dataset frame index.
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor;
 };
+
+// Every file a run may write into its output folder (frames.csv, ..., summary.json).
+const std::vector<std::string>& run_output_file_names();
+
+// Throws ConfigError when an input the run reads (odometry.file with source file; `extra` inputs of the
+// command, e.g. its --config file) is one of the files it writes into `out_dir`: a previous run's
+// trajectory.tum given as odometry.file would be read, then overwritten (issue 15).
+void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
+                                const std::vector<std::filesystem::path>& extra_inputs = {});
 
 // Runs the graph over `dataset` and writes frames.csv, trajectory.tum, timing.csv, summary.json (and
 // trace.json when output.trace; loops.csv when detecting loops; candidate_areas.csv, candidate_cells.csv and
@@ -74,7 +92,7 @@ struct RunResult {
 // detection (frames per outcome), gate counts, and with ground truth an "evaluation" block (loops true /
 // false, PR curve, AP, recall at 100/99/95% precision, gate coverage). `config` must be valid (load_config /
 // apply_config validate it, once). `stop` (may be null) is polled by the producer. Throws
-// ConfigError/DataError for problems found before the graph starts.
+// ConfigError/DataError for problems found before the graph starts (refuse_outputs_over_inputs among them).
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop = nullptr);
 

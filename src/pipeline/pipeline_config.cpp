@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
 
 #include "core/error.hpp"
 #include "io/config.hpp"
@@ -9,6 +10,11 @@
 namespace loopgate {
 
 namespace {
+
+// Replay rates beyond these make no sense (a thousandth of real time; a million times real time is as fast
+// as the graph drains), and (t - t_first) / R must stay far inside int64 ns.
+constexpr double kMinRate = 1e-3;
+constexpr double kMaxRate = 1e6;
 
 std::optional<std::size_t> parse_index(const std::string& text, const std::string& frames) {
   if (text.empty()) return std::nullopt;
@@ -29,7 +35,11 @@ std::optional<double> RunConfig::rate_factor() const {
   const auto [ptr, ec] = std::from_chars(rate.data(), rate.data() + rate.size(), value);
   if (rate.empty() || ec != std::errc{} || ptr != rate.data() + rate.size() || !std::isfinite(value) ||
       !(value > 0)) {
-    throw ConfigError("run.rate: '" + rate + "' is not 'max' or a positive number");
+    throw ConfigError("run.rate: " + quote_excerpt(rate) + " is not 'max' or a positive number");
+  }
+  if (value < kMinRate || value > kMaxRate) {
+    throw ConfigError("run.rate: " + quote_excerpt(rate) + " is out of range: 'max' or a rate in [0.001, " +
+                      "1000000] times real time");
   }
   return value;
 }
@@ -40,15 +50,26 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
   if (!frames.empty()) {
     const auto colon = frames.find(':');
     if (colon == std::string::npos) {
-      throw ConfigError("run.frames: '" + frames +
-                        "' is not A:B with frame indices A < B (A or B may be omitted)");
+      throw ConfigError("run.frames: " + quote_excerpt(frames) +
+                        " is not A:B with frame indices A < B (A or B may be omitted)");
     }
-    if (auto a = parse_index(frames.substr(0, colon), frames)) first = *a;
-    if (auto b = parse_index(frames.substr(colon + 1), frames)) last = std::min(*b, frame_count);
+    const auto a = parse_index(frames.substr(0, colon), frames);
+    const auto b = parse_index(frames.substr(colon + 1), frames);
+    if (a && b && *a >= *b) {
+      throw ConfigError("run.frames: " + quote_excerpt(frames) + " is empty: A (" + std::to_string(*a) +
+                        ") must be below B (" + std::to_string(*b) + "); B is exclusive");
+    }
+    if (a) first = *a;
+    if (b) last = std::min(*b, frame_count);
+  }
+  if (first >= frame_count) {
+    throw ConfigError("run.frames: " + quote_excerpt(frames) + " starts at frame " + std::to_string(first) +
+                      ", and the dataset has " + std::to_string(frame_count) + " frames (0.." +
+                      std::to_string(frame_count == 0 ? 0 : frame_count - 1) + ")");
   }
   if (first >= last) {
-    throw ConfigError("run.frames: '" + frames + "' selects no frame of the " + std::to_string(frame_count) +
-                      " in the dataset");
+    throw ConfigError("run.frames: " + quote_excerpt(frames) + " selects no frame of the " +
+                      std::to_string(frame_count) + " in the dataset");
   }
   return {first, last};
 }
@@ -60,11 +81,12 @@ void RunConfig::validate() const {
   }
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
-  require(max_in_flight >= 1, "run.max_in_flight", ">= 1", std::to_string(max_in_flight));
+  require_in("run.max_in_flight", max_in_flight, 1, 1024, "frames");
   require(camera_index == 0 || camera_index == 1, "run.camera_index", "0 or 1", std::to_string(camera_index));
-  require(deadline_ms >= 0, "run.deadline_ms", ">= 0", std::to_string(deadline_ms));
-  require(image_cache_frames >= 0, "run.image_cache_frames", ">= 0", std::to_string(image_cache_frames));
-  if (!frames.empty()) frame_range(static_cast<std::size_t>(-1));
+  require_in("run.deadline_ms", deadline_ms, 0.0, 3.6e6, "ms (0 = the frame period)");
+  require_in("run.image_cache_frames", image_cache_frames, 0, 100'000, "images");
+  // The form of A:B and A < B (the dataset's size is checked when the run opens it).
+  if (!frames.empty()) frame_range(std::numeric_limits<std::size_t>::max());
 }
 
 void DirdSeqSlamConfig::validate() const {
@@ -75,19 +97,18 @@ void DirdSeqSlamConfig::validate() const {
 }
 
 void EvalConfig::validate() const {
-  require(std::isfinite(truth_radius_m) && truth_radius_m > 0, "eval.truth_radius_m", "> 0",
-          std::to_string(truth_radius_m));
-  require(truth_gap_frames >= 0, "eval.truth_gap_frames", ">= 0", std::to_string(truth_gap_frames));
+  require(std::isfinite(truth_radius_m) && truth_radius_m > 0 && truth_radius_m <= 1e4, "eval.truth_radius_m",
+          "in (0, 10000] m", std::to_string(truth_radius_m));
+  require_in("eval.truth_gap_frames", truth_gap_frames, 0, 1'000'000, "frames");
   require_one_of("eval.plane", plane, {"auto", "xz", "xy", "xyz"});
-  require(std::isfinite(accept_radius_m) && accept_radius_m >= 0, "eval.accept_radius_m",
-          ">= 0 (0 = eval.truth_radius_m)", std::to_string(accept_radius_m));
-  require(aligned_tolerance_frames >= -1, "eval.aligned_tolerance_frames", ">= 0, or -1 (not aligned)",
-          std::to_string(aligned_tolerance_frames));
+  require_in("eval.accept_radius_m", accept_radius_m, 0.0, 1e4, "m (0 = eval.truth_radius_m)");
+  require_in("eval.aligned_tolerance_frames", aligned_tolerance_frames, -1, 1'000'000,
+             "frames (-1 = not aligned)");
 }
 
 void OutputConfig::validate() const {
   require_one_of("output.progress", progress, {"auto", "on", "off"});
-  require(flush_every >= 1, "output.flush_every", ">= 1", std::to_string(flush_every));
+  require_in("output.flush_every", flush_every, 1, 1'000'000, "frames");
 }
 
 }  // namespace loopgate

@@ -9,7 +9,15 @@ namespace loopgate {
 
 namespace {
 constexpr auto kPollPeriod = std::chrono::milliseconds(20);
+
+// dt / rate in ns, clamped to a century: run.rate is bounded, but a dataset may span any time, and a cast
+// of a double beyond int64 would be undefined behaviour.
+std::int64_t scaled_ns(std::int64_t dt_ns, double rate) {
+  constexpr double kMaxNs = 100.0 * 365.25 * 86400.0 * 1e9;
+  const double scaled = static_cast<double>(dt_ns) / rate;
+  return static_cast<std::int64_t>(std::clamp(scaled, -kMaxNs, kMaxNs));
 }
+}  // namespace
 
 ReplayClock::ReplayClock(const RunConfig& run, const Dataset& dataset, std::size_t first_frame,
                          const RunClock& clock)
@@ -37,8 +45,7 @@ std::optional<ReplayClock::Release> ReplayClock::wait_for(std::size_t frame,
     return release;
   }
   // Release on the replay clock; sleep in short slices so that a stop request is seen quickly.
-  const auto release_ns =
-      start_ns_ + static_cast<std::int64_t>(static_cast<double>(t_ns - t_first_ns_) / *rate_);
+  const std::int64_t release_ns = start_ns_ + scaled_ns(t_ns - t_first_ns_, *rate_);
   while (!stop() && clock_.now_ns() < release_ns) {
     std::this_thread::sleep_for(std::min<std::chrono::nanoseconds>(
         std::chrono::nanoseconds(release_ns - clock_.now_ns()), kPollPeriod));
@@ -57,7 +64,7 @@ std::optional<ReplayClock::Release> ReplayClock::wait_for(std::size_t frame,
     const Timestamp next_t_ns = frame + 1 < dataset_.frame_count() ? dataset_.frame_t_ns(frame + 1) : t_ns;
     const Timestamp prev_t_ns = frame > 0 ? dataset_.frame_t_ns(frame - 1) : t_ns;
     const Timestamp period_ns = next_t_ns > t_ns ? next_t_ns - t_ns : t_ns - prev_t_ns;
-    budget_ns = static_cast<double>(period_ns) / *rate_;
+    budget_ns = static_cast<double>(scaled_ns(period_ns, *rate_));
   }
   release.go = true;
   release.deadline_ns = clock_.now_ns() + static_cast<std::int64_t>(budget_ns);

@@ -19,7 +19,7 @@ void RunCounters::count(const FrameRecord& r, const std::string& status, const s
   last_t_ns = r.t_ns;
   if (status != "ok") {
     if (problem_frames.size() < kMaxListedProblems) {
-      problem_frames.push_back({{"seq", r.seq}, {"frame", r.frame}, {"status", status}, {"reason", reason}});
+      problem_frames.push_back({{"seq", r.seq}, {"frame", r.label}, {"status", status}, {"reason", reason}});
     }
     ++problem_frame_count;
   }

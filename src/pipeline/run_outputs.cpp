@@ -47,7 +47,7 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
 void RunOutputs::add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
                                  CsvRow& row) const {
   row.add("seq", std::to_string(r.seq));
-  row.add("frame", std::to_string(r.frame));
+  row.add("frame", std::to_string(r.label));
   row.add("t_ns", std::to_string(r.t_ns));
   row.add("t_s", format_fixed(ns_to_s(r.t_ns), 9));
   const PoseEstimate& pose = r.odometry.pose;
@@ -83,7 +83,7 @@ void RunOutputs::add_detection_cells(const std::optional<FrameVerdict>& verdict,
   const bool has_match = d && d->match >= 0;
   row.add("descriptor", verdict ? (verdict->described ? "y" : "n") : "");
   row.add("detection", d ? d->label : "");
-  row.add("match_frame", has_match ? std::to_string(seqs_.frame(d->match)) : "");
+  row.add("match_frame", has_match ? std::to_string(seqs_.label(d->match)) : "");
   row.add("match_score", has_match ? format_fixed(d->score, 6) : "");
   row.add("detection_reason", d ? d->reason : "");
 }
@@ -145,7 +145,7 @@ void RunOutputs::sink(FrameRecord& r) {
 
 // timing.csv (service time per stage, end-to-end latency, their sum), the profiler and the trace.
 void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
-  std::vector<std::string> cells = {std::to_string(r.seq), std::to_string(r.frame)};
+  std::vector<std::string> cells = {std::to_string(r.seq), std::to_string(r.label)};
   double total_ms = 0;
   std::int64_t previous_exit_ns = r.release_ns;
   for (std::size_t s = 0; s < kStageCount; ++s) {
@@ -159,7 +159,7 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
     if (config_.output.trace) {
       trace_.add(TraceEvent{kStageNames[s], "stage", 1e-3 * static_cast<double>(stamp.enter_ns),
                             1e-3 * static_cast<double>(stamp.exit_ns - stamp.enter_ns), stamp.thread,
-                            static_cast<std::int64_t>(r.seq), static_cast<std::int64_t>(r.frame)});
+                            static_cast<std::int64_t>(r.seq), static_cast<std::int64_t>(r.label)});
     }
   }
   const double latency_ms = 1e-6 * static_cast<double>(exit_ns - r.release_ns);
@@ -183,12 +183,28 @@ void RunOutputs::write_ready_rows(bool end_of_stream) {
   }
 }
 
-void RunOutputs::finish(bool show_final_progress) {
-  if (method_.detects()) write_ready_rows(true);
+std::vector<std::string> RunOutputs::finish(bool show_final_progress) {
+  std::vector<std::string> errors;
+  const auto attempt = [&](const char* name, auto&& step) {
+    try {
+      step();
+    } catch (const std::exception& e) {
+      errors.push_back(std::string(name) + ": " + e.what());
+    }
+  };
+  attempt("frames.csv", [&] {
+    try {
+      if (method_.detects()) write_ready_rows(true);
+      frames_csv_.close();
+    } catch (...) {
+      frames_csv_.abandon();
+      throw;
+    }
+  });
   if (show_progress_ && show_final_progress) show_progress(true);
-  frames_csv_.close();
-  timing_csv_.close();
-  trajectory_.close();
+  attempt("timing.csv", [&] { timing_csv_.close(); });
+  attempt("trajectory.tum", [&] { trajectory_.close(); });
+  return errors;
 }
 
 void RunOutputs::write_trace(const std::filesystem::path& file, int threads) {

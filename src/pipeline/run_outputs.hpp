@@ -30,8 +30,9 @@ class RunOutputs {
   // The frame leaving the graph: its frames.csv row (or held), trajectory, counters, timing, trace.
   void sink(FrameRecord& r);
   // After the drain (and the method's finish()): every held row, with empty detection cells when the method
-  // gave none (a failed run); closes the files.
-  void finish(bool show_final_progress);
+  // gave none (a failed run); closes (completes) the files. Returns the files that could not be written,
+  // "NAME: why" (each of the three is attempted).
+  std::vector<std::string> finish(bool show_final_progress);
   void write_trace(const std::filesystem::path& file, int threads);
 
   const RunCounters& counters() const { return counters_; }

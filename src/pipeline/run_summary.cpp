@@ -1,5 +1,6 @@
 #include "pipeline/run_summary.hpp"
 
+#include <algorithm>
 #include <limits>
 
 #include "eval/run_evaluation.hpp"
@@ -17,7 +18,8 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   const Dataset& dataset = parts.dataset;
   if (!parts.method.detects() || !dataset.has_ground_truth()) return {{"available", false}};
   const std::size_t first = parts.first_frame;
-  const std::size_t n = parts.last_frame - first;
+  const std::size_t end = std::min(parts.evaluated_end_frame.value_or(parts.last_frame), parts.last_frame);
+  const std::size_t n = end - std::min(end, first);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   SequenceEvaluationInput input;
   input.p_w.assign(n, Eigen::Vector3d::Constant(nan));
@@ -46,15 +48,25 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   input.score_order = method.score_order;
   SequenceEvaluation evaluation = evaluate_sequence(input);
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
-  for (const auto& [q, r] : evaluation.truth_pairs)
-    truth_loops.write_row({std::to_string(first + q), std::to_string(first + r)});
+  for (const auto& [q, r] : evaluation.truth_pairs) {
+    truth_loops.write_row(
+        {std::to_string(dataset.source_index(first + q)), std::to_string(dataset.source_index(first + r))});
+  }
   truth_loops.close();
+  if (end < parts.last_frame) {  // the run stopped early: say over which frames it was evaluated
+    evaluation.json["frames_evaluated"] = {{"first_frame", first},
+                                           {"end_frame", end},
+                                           {"requested_end_frame", parts.last_frame},
+                                           {"why", "the run stopped before the end of the range"}};
+  }
 
   if (method.covers) {
     const std::size_t processed = parts.outputs.frames_through();
     std::vector<std::int64_t> seq_of_index(n, -1);
-    for (std::size_t seq = 0; seq < processed; ++seq)
-      seq_of_index[parts.seqs.frame(static_cast<std::int64_t>(seq)) - first] = static_cast<std::int64_t>(seq);
+    for (std::size_t seq = 0; seq < processed; ++seq) {
+      const std::size_t k = parts.seqs.frame(static_cast<std::int64_t>(seq)) - first;
+      if (k < n) seq_of_index[k] = static_cast<std::int64_t>(seq);
+    }
     evaluation.json["gate_coverage"] = gate_coverage_json(
         input.p_w, input.truth, parts.config.match.margin,
         [&](std::size_t q) { return seq_of_index[q] >= 0; },
@@ -69,8 +81,7 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
   nlohmann::json issues = nlohmann::json::array();
   for (const auto& issue : dataset.issues()) {
     if (issues.size() >= RunCounters::kMaxListedProblems) break;
-    issues.push_back(issue.file.string() + (issue.line ? ":" + std::to_string(issue.line) : "") + ": " +
-                     issue.message);
+    issues.push_back(issue.to_string());
   }
   const std::size_t reads = parts.images.reads_for_description();
   nlohmann::json summary = {

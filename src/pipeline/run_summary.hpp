@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "pipeline/detection_method.hpp"
 #include "pipeline/pipeline.hpp"
@@ -29,6 +30,9 @@ struct RunParts {
   const ImuSynchronizer* synchronizer = nullptr;
   const SeqIndex& seqs;
   double end_of_stream_ms = 0;
+  // The evaluation's frames are [first_frame, evaluated_end_frame): those the run got to (an interrupted
+  // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
+  std::optional<std::size_t> evaluated_end_frame;
 };
 
 // Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/stop_request.hpp"
 #include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
@@ -50,16 +51,25 @@ double seconds_since(Clock::time_point start) {
 // order everything the caller prepared and the bodies wrote, visibly for ThreadSanitizer too). Indices are
 // handed out in small blocks; each body writes only its own outputs, so the result does not depend on
 // the thread count. The first exception of a body is rethrown after the join.
+// Stop requests (issue 15): once `stop` is set no block is handed out; the blocks handed out are finished, so
+// the indices done are a prefix [0, returned). A second stop signal aborts (stop_request::check_abort).
 template <class Body>
-void parallel_indices(int threads, std::size_t count, Body body) {
+std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<bool>* stop, Body body) {
   constexpr std::size_t kBlock = 16;
   std::atomic<std::size_t> next{0};
+  std::mutex handout_mutex;  // a block is handed out only while no stop is requested
   std::exception_ptr error;
   std::mutex error_mutex;
   const auto worker = [&] {
     for (;;) {
-      const std::size_t begin = next.fetch_add(kBlock, std::memory_order_relaxed);
+      std::size_t begin = 0;
+      {
+        std::lock_guard lock(handout_mutex);
+        if (stop && stop->load()) return;
+        begin = next.fetch_add(kBlock, std::memory_order_relaxed);
+      }
       if (begin >= count) return;
+      stop_request::check_abort("two-sequence run");
       try {
         for (std::size_t k = begin; k < std::min(count, begin + kBlock); ++k) body(k);
       } catch (...) {
@@ -75,6 +85,7 @@ void parallel_indices(int threads, std::size_t count, Body body) {
   worker();
   for (auto& thread : pool) thread.join();
   if (error) std::rethrow_exception(error);
+  return std::min(count, next.load());
 }
 
 struct DescribedSequence {
@@ -82,16 +93,17 @@ struct DescribedSequence {
   std::vector<std::uint8_t> valid;
   std::vector<std::string> errors;  // per frame, empty when fine
   std::size_t described = 0;
+  std::size_t taken = 0;  // frames [0, taken) were read: all of them unless a stop request came
 };
 
 DescribedSequence describe_sequence(int threads, const Dataset& dataset, std::size_t first, std::size_t last,
-                                    const DirdExtractor& extractor) {
+                                    const DirdExtractor& extractor, const std::atomic<bool>* stop) {
   DescribedSequence out;
   const std::size_t count = last - first;
   out.descriptors.resize(count);
   out.valid.assign(count, 0);
   out.errors.resize(count);
-  parallel_indices(threads, count, [&](std::size_t k) {
+  out.taken = parallel_indices(threads, count, stop, [&](std::size_t k) {
     try {
       const cv::Mat image = dataset.load_image(first + k);
       extractor.extract(image, out.descriptors[k]);
@@ -187,11 +199,12 @@ nlohmann::json standardize_json(const StandardizeConfig& standardize, const Code
 // Frames [first, first + count) of a dataset through SeqSLAM step 1 into `batch` at seq offset + k;
 // a frame that does not decode or preprocess takes part as an all-zero image (SeqSlamBatch::add_missing).
 DescribedSequence preprocess_sequence(int threads, const Dataset& dataset, std::size_t first,
-                                      std::size_t count, std::size_t offset, SeqSlamBatch& batch) {
+                                      std::size_t count, std::size_t offset, SeqSlamBatch& batch,
+                                      const std::atomic<bool>* stop) {
   DescribedSequence out;
   out.valid.assign(count, 0);
   out.errors.resize(count);
-  parallel_indices(threads, count, [&](std::size_t k) {
+  out.taken = parallel_indices(threads, count, stop, [&](std::size_t k) {
     try {
       batch.add(offset + k, dataset.load_image(first + k));
       out.valid[k] = 1;
@@ -213,6 +226,19 @@ struct TwoSequenceSetup {
   const Dataset& reference;
   const Dataset& query;
   AlignedSequences ranges;
+  const std::atomic<bool>* stop = nullptr;
+
+  // Frames in loops.csv by their numbers (Dataset::source_index): i query, j reference.
+  LoopsWriter::Label query_label() const {
+    return [&q = query](std::size_t frame) { return q.source_index(frame); };
+  }
+  LoopsWriter::Label reference_label() const {
+    return [&r = reference](std::size_t frame) { return r.source_index(frame); };
+  }
+  // A stop request: the query range ends after the frames taken (none when the reference was incomplete).
+  std::size_t query_taken(const DescribedSequence& ref, const DescribedSequence& qry) const {
+    return ref.taken < ranges.reference_count ? 0 : qry.taken;
+  }
 
   int tolerance() const { return config.eval.aligned_tolerance_frames; }
   bool aligned(std::size_t q, std::size_t r) const { return tolerance() >= 0 && ranges.aligned(q, r); }
@@ -236,8 +262,8 @@ nlohmann::json run_evaluation(const TwoSequenceSetup& setup, const std::vector<D
   }
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : setup.ranges.pairs()) {
-    truth_loops.write_row(
-        {std::to_string(setup.ranges.query_first + q), std::to_string(setup.ranges.reference_first + r)});
+    truth_loops.write_row({std::to_string(setup.query.source_index(setup.ranges.query_first + q)),
+                           std::to_string(setup.reference.source_index(setup.ranges.reference_first + r))});
   }
   truth_loops.close();
   return evaluate_aligned(setup.ranges, loops, ranked, score_order);
@@ -255,22 +281,24 @@ nlohmann::json sequences_json(const TwoSequenceSetup& setup) {
 }
 
 // DIRD (dird.md §5): describe both, S for every (reference, query) pair, the streaming matcher.
-TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem::path& out_dir,
+TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                            Clock::time_point start) {
   const PipelineConfig& config = setup.config;
   const Dataset& reference = setup.reference;
   const Dataset& query = setup.query;
   const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
-  const std::size_t query_first = setup.ranges.query_first, query_count = setup.ranges.query_count;
+  const std::size_t query_first = setup.ranges.query_first;
+  std::size_t query_count = setup.ranges.query_count;
   const DirdExtractor extractor(config.dird);
   const DirdSimilarity similarity(config.dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref =
-      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor);
-  const DescribedSequence qry =
-      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor);
+  const DescribedSequence ref = describe_sequence(config.run.threads, reference, ref_first,
+                                                  ref_first + ref_count, extractor, setup.stop);
+  const DescribedSequence qry = describe_sequence(config.run.threads, query, query_first,
+                                                  query_first + query_count, extractor, setup.stop);
   const double describe_s = seconds_since(t0);
+  query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
 
   // Similarity rows of every query against the whole reference (no margin), in parallel; frames
   // without a descriptor take part in no pair. Standardised: each sequence coded with its own statistics,
@@ -300,7 +328,7 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   if (config.scale.online()) {
     OnlineScale online(config.scale, config.dird.tau1, scale);
     std::mutex online_mutex;
-    parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
+    parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
       if (!qry.valid[q]) return;
       std::vector<double> distances;
       distances.reserve(ref_count);
@@ -322,7 +350,7 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
                  scale.sigma, scale.cutoff_distance, scale.estimated ? "estimated" : "prior", online.count());
   }
   if (qry_codes || config.scale.online()) {
-    parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
+    parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
       if (!qry.valid[q]) return;
       for (std::size_t r = 0; r < ref_count; ++r) {
         if (!ref.valid[r]) continue;
@@ -333,7 +361,7 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
       }
     });
   } else {
-    parallel_indices(config.run.threads, query_count, [&](std::size_t q) {
+    parallel_indices(config.run.threads, query_count, nullptr, [&](std::size_t q) {
       if (!qry.valid[q]) return;
       similarity.sparse_row(qry.descriptors[q], ref.descriptors.data(), ref_count, 0, rows[q]);
       if (any_ref_missing) {
@@ -357,7 +385,7 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
   const double match_s = seconds_since(t0);
 
   LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv");
+  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   std::size_t loops_aligned = 0;
   std::vector<Detection> detections;  // indices within the ranges, score = DP
   for (const LoopClosure& loop : output.loops) {
@@ -390,13 +418,15 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
     if (has_best && setup.aligned(q, static_cast<std::size_t>(status.best_j))) ++best_aligned;
     const bool error = !qry.errors[q].empty();
     frame_errors += error ? 1 : 0;
-    frames_csv.write_row({std::to_string(frame), std::to_string(query.frame_t_ns(frame)),
-                          format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n",
-                          detection.label,
-                          has_best ? std::to_string(ref_first + static_cast<std::size_t>(status.best_j)) : "",
-                          has_best ? format_fixed(status.best_score, 6) : "",
-                          format_fixed(status.best_similarity, 6), std::to_string(status.candidates),
-                          error ? "error" : "ok", error ? qry.errors[q] + "; " + reason : reason});
+    frames_csv.write_row(
+        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
+         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
+         has_best
+             ? std::to_string(reference.source_index(ref_first + static_cast<std::size_t>(status.best_j)))
+             : "",
+         has_best ? format_fixed(status.best_score, 6) : "", format_fixed(status.best_similarity, 6),
+         std::to_string(status.candidates), error ? "error" : "ok",
+         error ? qry.errors[q] + "; " + reason : reason});
   }
   frames_csv.close();
 
@@ -448,22 +478,24 @@ TwoSequenceResult run_dird(const TwoSequenceSetup& setup, const std::filesystem:
 // every (query, reference) pair, then the contrast-enhanced sequence search query by query (two-sequence
 // mode: no margin). frames.csv gives every query's best line, accepted or not; loops.csv the accepted ones
 // (score = mean z, higher is better); the PR sweep runs over every query's best line.
-TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::filesystem::path& out_dir,
+TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                                    Clock::time_point start) {
   const PipelineConfig& config = setup.config;
   const Dataset& reference = setup.reference;
   const Dataset& query = setup.query;
   const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
-  const std::size_t query_first = setup.ranges.query_first, query_count = setup.ranges.query_count;
+  const std::size_t query_first = setup.ranges.query_first;
+  std::size_t query_count = setup.ranges.query_count;
   const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
   const StandardizeConfig standardize = config.dird_seqslam.standardization(config.standardize);
   const DirdExtractor extractor(dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref =
-      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor);
-  const DescribedSequence qry =
-      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor);
+  const DescribedSequence ref = describe_sequence(config.run.threads, reference, ref_first,
+                                                  ref_first + ref_count, extractor, setup.stop);
+  const DescribedSequence qry = describe_sequence(config.run.threads, query, query_first,
+                                                  query_first + query_count, extractor, setup.stop);
+  query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   const CodedSequence ref_codes = code_sequence(ref, standardize);
   const CodedSequence qry_codes = code_sequence(qry, standardize);
   const double describe_s = seconds_since(t0);
@@ -479,7 +511,7 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
   for (std::size_t first = 0; first < query_count; first += kBlock) {
     const std::size_t count = std::min(kBlock, query_count - first);
     t0 = Clock::now();
-    parallel_indices(config.run.threads, count, [&](std::size_t k) {
+    parallel_indices(config.run.threads, count, nullptr, [&](std::size_t k) {
       const std::size_t q = first + k;
       rows[k].clear();
       if (!qry.valid[q]) return;
@@ -492,6 +524,7 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
     });
     distance_s += seconds_since(t0);
     t0 = Clock::now();
+    stop_request::check_abort("two-sequence run");  // a second stop signal aborts the search
     for (std::size_t k = 0; k < count; ++k)
       search.push(static_cast<std::int64_t>(first + k), rows[k], output);
     search_s += seconds_since(t0);
@@ -501,7 +534,7 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
   search_s += seconds_since(t0);
 
   LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv");
+  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   std::size_t loops_aligned = 0;
   std::vector<Detection> loops;  // indices within the ranges, score = mean z
   for (const LoopClosure& loop : output.loops) {
@@ -537,11 +570,15 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
     const bool error = !qry.errors[q].empty();
     frame_errors += error ? 1 : 0;
     frames_csv.write_row(
-        {std::to_string(frame), std::to_string(query.frame_t_ns(frame)),
+        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
          format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
-         has_best ? std::to_string(ref_first + static_cast<std::size_t>(verdict.best_j)) : "",
+         has_best
+             ? std::to_string(reference.source_index(ref_first + static_cast<std::size_t>(verdict.best_j)))
+             : "",
          has_best ? format_fixed(verdict.score, 6) : "", has_best ? format_fixed(verdict.velocity, 4) : "",
-         has_best ? std::to_string(query_first + static_cast<std::size_t>(verdict.line_end)) : "",
+         has_best
+             ? std::to_string(query.source_index(query_first + static_cast<std::size_t>(verdict.line_end)))
+             : "",
          error ? "error" : "ok", error ? qry.errors[q] + "; " + detection.reason : detection.reason});
   }
   frames_csv.close();
@@ -595,13 +632,14 @@ TwoSequenceResult run_dird_seqslam(const TwoSequenceSetup& setup, const std::fil
 
 // SeqSLAM (seqslam.md) between two runs: step 1 on both sequences in parallel, then the difference matrix
 // (reference rows x query columns), contrast enhancement and sequence search with exclusion "none".
-TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesystem::path& out_dir,
+TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                               Clock::time_point start) {
   const PipelineConfig& config = setup.config;
   const Dataset& reference = setup.reference;
   const Dataset& query = setup.query;
   const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
-  const std::size_t query_first = setup.ranges.query_first, query_count = setup.ranges.query_count;
+  const std::size_t query_first = setup.ranges.query_first;
+  std::size_t query_count = setup.ranges.query_count;
   PipelineConfig effective = config;
   if (effective.seqslam.exclusion != "none") {
     spdlog::warn(
@@ -615,12 +653,13 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
 
   auto t0 = Clock::now();
   const DescribedSequence ref =
-      preprocess_sequence(config.run.threads, reference, ref_first, ref_count, 0, batch);
+      preprocess_sequence(config.run.threads, reference, ref_first, ref_count, 0, batch, setup.stop);
   const DescribedSequence qry =
-      preprocess_sequence(config.run.threads, query, query_first, query_count, ref_count, batch);
+      preprocess_sequence(config.run.threads, query, query_first, query_count, ref_count, batch, setup.stop);
   const double preprocess_s = seconds_since(t0);
+  query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   for (const auto& [dataset, described] : {std::pair{&reference, &ref}, std::pair{&query, &qry}}) {
-    if (described->described == 0) {
+    if (described->described == 0 && query_count > 0) {
       const auto first_error = std::find_if(described->errors.begin(), described->errors.end(),
                                             [](const std::string& e) { return !e.empty(); });
       throw DataError(dataset->root(), "SeqSLAM: no image of the sequence could be preprocessed (" +
@@ -632,11 +671,11 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
   t0 = Clock::now();
   std::vector<SeqSlamMatch> matches;
   tbb::task_arena arena(config.run.threads);
-  arena.execute([&] { matches = batch.run_two_sequence(ref_count, query_count); });
+  if (query_count > 0) arena.execute([&] { matches = batch.run_two_sequence(ref_count, query_count); });
   const double search_s = seconds_since(t0);
 
   LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv");
+  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   CsvWriter frames_csv(out_dir / "frames.csv",
                        {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
                         "best_score", "second_score", "status", "reason"});
@@ -668,12 +707,12 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
     frame_errors += error ? 1 : 0;
     const std::string reason =
         error ? qry.errors[q] + " (took part as an all-zero image); " + detection.reason : detection.reason;
-    frames_csv.write_row({std::to_string(frame), std::to_string(query.frame_t_ns(frame)),
-                          format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n",
-                          detection.label, has_match ? std::to_string(ref_first + m.reference) : "",
-                          has_match ? format_fixed(m.ratio, 6) : "",
-                          has_match ? format_fixed(m.best_score, 6) : "",
-                          has_match ? format_fixed(m.second_score, 6) : "", error ? "error" : "ok", reason});
+    frames_csv.write_row(
+        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
+         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
+         has_match ? std::to_string(reference.source_index(ref_first + m.reference)) : "",
+         has_match ? format_fixed(m.ratio, 6) : "", has_match ? format_fixed(m.best_score, 6) : "",
+         has_match ? format_fixed(m.second_score, 6) : "", error ? "error" : "ok", reason});
   }
   loops_csv.close();
   frames_csv.close();
@@ -720,7 +759,8 @@ TwoSequenceResult run_seqslam(const TwoSequenceSetup& setup, const std::filesyst
 }  // namespace
 
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
-                                    const Dataset& query, const std::filesystem::path& out_dir) {
+                                    const Dataset& query, const std::filesystem::path& out_dir,
+                                    const std::atomic<bool>* stop) {
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");
     if (!dataset->has_images()) throw DataError(dataset->root(), "two-sequence mode needs images");
@@ -729,7 +769,7 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   const auto [query_first, query_last] = config.run.frame_range(query.frame_count());
   const AlignedSequences ranges{ref_first, ref_last - ref_first, query_first, query_last - query_first,
                                 config.eval.aligned_tolerance_frames};
-  const TwoSequenceSetup setup{config, reference, query, ranges};
+  const TwoSequenceSetup setup{config, reference, query, ranges, stop};
   spdlog::info("two-sequence run ({}): reference {} ({} frames) vs query {} ({} frames), {} threads",
                enum_name(config.run.method), reference.root().string(), setup.ranges.reference_count,
                query.root().string(), setup.ranges.query_count, config.run.threads);
@@ -738,6 +778,8 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   TwoSequenceResult result = config.run.seqslam()        ? run_seqslam(setup, out_dir, start)
                              : config.run.dird_seqslam() ? run_dird_seqslam(setup, out_dir, start)
                                                          : run_dird(setup, out_dir, start);
+  result.interrupted = stop && stop->load();
+  result.summary["interrupted"] = result.interrupted;
   write_json_file(out_dir / "summary.json", result.summary);
   return result;
 }

@@ -24,6 +24,7 @@
 // j reference frame).
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -42,12 +43,18 @@ struct TwoSequenceResult {
   std::size_t reference_frames = 0, query_frames = 0;
   std::size_t loops = 0;
   double wall_s = 0;
+  bool interrupted = false;  // a stop request: the outputs cover the query frames described before it
   nlohmann::json summary;
 };
 
 // `config` must be valid (load_config / apply_config validate it; run.mode is not used). Throws
 // ConfigError/DataError for bad input found before the run (no frames, no images, an empty frame range).
+// `stop` (may be null; issue 15): once set, no further frame is described; the query frames described so
+// far (a prefix of the range) are matched and every output is written for them, with "interrupted" in
+// summary.json (none when the stop came while the reference was described). A second stop signal
+// (core/stop_request.hpp) aborts the remaining work at once.
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
-                                    const Dataset& query, const std::filesystem::path& out_dir);
+                                    const Dataset& query, const std::filesystem::path& out_dir,
+                                    const std::atomic<bool>* stop = nullptr);
 
 }  // namespace loopgate

@@ -8,7 +8,7 @@
 namespace loopgate::sim {
 
 void ImuSynthConfig::validate() const {
-  if (!(rate_hz > 0.0)) throw ConfigError("imu.rate_hz must be > 0");
+  if (!(rate_hz > 0.0 && rate_hz <= 100'000.0)) throw ConfigError("imu.rate_hz: must be in (0, 100000] Hz");
   if (!(gravity_mps2 >= 0.0)) throw ConfigError("imu.gravity_mps2 must be >= 0");
   if (!(initial_gyro_bias_sigma_radps >= 0.0) || !(initial_accel_bias_sigma_mps2 >= 0.0)) {
     throw ConfigError("imu.initial_*_bias_sigma must be >= 0");

@@ -17,6 +17,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "io/config.hpp"
+#include "io/file_guard.hpp"
 #include "io/trajectory_io.hpp"
 #include "io/writers.hpp"
 #include "sim/renderer.hpp"
@@ -69,24 +70,26 @@ double estimate_rate_hz(const std::vector<Timestamp>& t_ns, double fallback_hz) 
 void SimulationSettings::validate() const {
   require_one_of("simulation.trajectory_format", trajectory_format, {"procedural", "kitti", "euroc", "tum"});
   require_one_of("simulation.imu_source", imu_source, {"synthesised", "file"});
-  require(max_frames >= 0, "simulation.max_frames", ">= 0 (0 = all)", std::to_string(max_frames));
+  require(max_frames >= 0 && max_frames <= 10'000'000, "simulation.max_frames", "in [0, 10000000] (0 = all)",
+          std::to_string(max_frames));
   require(imu_padding_s >= 0.0, "simulation.imu_padding_s", ">= 0", std::to_string(imu_padding_s));
-  require(frame_rate_hz > 0.0, "simulation.frame_rate_hz", "> 0", std::to_string(frame_rate_hz));
+  require(frame_rate_hz > 0.0 && frame_rate_hz <= 1000.0, "simulation.frame_rate_hz", "in (0, 1000] Hz",
+          std::to_string(frame_rate_hz));
   require(std::isfinite(up_x) && std::isfinite(up_y) && std::isfinite(up_z) &&
               Eigen::Vector3d(up_x, up_y, up_z).norm() > 0.0,
           "simulation.up_x/up_y/up_z", "a non-zero finite vector", "0");
   require(png_compression >= 0 && png_compression <= 9, "simulation.png_compression", "in 0..9",
           std::to_string(png_compression));
-  require(render_batch_frames >= 1, "simulation.render_batch_frames", ">= 1",
-          std::to_string(render_batch_frames));
+  require(render_batch_frames >= 1 && render_batch_frames <= 10'000, "simulation.render_batch_frames",
+          "in [1, 10000]", std::to_string(render_batch_frames));
   if (trajectory_format == "procedural" && imu_source == "file") {
     throw ConfigError("simulation.imu_source: 'file' needs a recorded trajectory (not 'procedural')");
   }
 }
 
 void CameraSettings::validate() const {
-  require(width_px > 0 && height_px > 0, "camera.width_px/height_px", "> 0",
-          std::to_string(width_px) + "x" + std::to_string(height_px));
+  require(width_px > 0 && height_px > 0 && width_px <= 8192 && height_px <= 8192, "camera.width_px/height_px",
+          "in [1, 8192] px", std::to_string(width_px) + "x" + std::to_string(height_px));
   require(fx > 0.0 && fy > 0.0, "camera.fx/fy", "> 0", std::to_string(fx) + "," + std::to_string(fy));
   require_one_of("camera.distortion_model", distortion_model, {"none", "radtan"});
   require(Eigen::Vector4d(q_b_c_w, q_b_c_x, q_b_c_y, q_b_c_z).norm() > 0.5, "camera.q_b_c_*",
@@ -445,7 +448,11 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   if (std::filesystem::exists(out_dir, ec)) {
     if (!std::filesystem::is_directory(out_dir, ec))
       throw DataError(out_dir, "--out exists and is not a directory");
-    if (!std::filesystem::is_empty(out_dir, ec)) {
+    // Empty apart from the lock of the command writing into it (io/file_guard.hpp).
+    bool empty = true;
+    for (const auto& entry : std::filesystem::directory_iterator(out_dir, ec))
+      empty = empty && entry.path().filename() == OutputLock::kFileName;
+    if (!empty) {
       if (!options.force)
         throw DataError(out_dir, "output directory is not empty (use --force to overwrite)");
       std::filesystem::remove_all(out_dir / "mav0", ec);

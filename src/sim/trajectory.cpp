@@ -378,9 +378,9 @@ void ProceduralRouteConfig::validate() const {
     throw ConfigError("length_x_m and length_y_m must be >= 2 * corner_radius_m");
   }
   if (shape == "waypoints") waypoint_pieces(parse_route_waypoints(waypoints), corner_radius_m);
-  if (laps < 1) throw ConfigError("laps must be >= 1");
-  if (frames < 2) throw ConfigError("frames must be >= 2");
-  if (!(rate_hz > 0.0)) throw ConfigError("rate_hz must be > 0");
+  if (laps < 1 || laps > 1000) throw ConfigError("route.laps: must be in [1, 1000]");
+  if (frames < 2 || frames > 10'000'000) throw ConfigError("route.frames: must be in [2, 10000000]");
+  if (!(rate_hz > 0.0 && rate_hz <= 1000.0)) throw ConfigError("route.rate_hz: must be in (0, 1000] Hz");
   if (!(speed_variation >= 0.0 && speed_variation < 1.0))
     throw ConfigError("speed_variation must be in [0, 1)");
   if (!(heading_wobble_period_s > 0.0)) throw ConfigError("heading_wobble_period_s must be > 0");

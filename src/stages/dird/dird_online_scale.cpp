@@ -2,9 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
+#include <string>
 
 #include "core/error.hpp"
+#include "core/validate.hpp"
 
 namespace loopgate {
 
@@ -62,7 +65,7 @@ void OnlineScaleConfig::validate() const {
   if (!(mu_quantile >= 0.0 && mu_quantile < cutoff_quantile)) {
     throw ConfigError("scale.mu_quantile: must be in [0, scale.cutoff_quantile)");
   }
-  if (min_distances < 1) throw ConfigError("scale.min_distances: must be >= 1");
+  require_in("scale.min_distances", min_distances, std::int64_t{1}, std::int64_t{1'000'000'000}, "distances");
 }
 
 LogisticScale standard_default_scale(const StandardizeConfig& config, double tau1) {

@@ -2,10 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <stdexcept>
+#include <string>
 
 #include "core/error.hpp"
+#include "core/validate.hpp"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -27,15 +30,19 @@ void StandardizeConfig::validate() const {
   if (!(clamp_sigma >= 0.5 && clamp_sigma <= 127.0)) {
     throw ConfigError("standardize.clamp_sigma: must be in [0.5, 127]");
   }
-  if (!(std::isfinite(min_stddev) && min_stddev > 0.0)) {
-    throw ConfigError("standardize.min_stddev: must be > 0 (descriptor byte units)");
+  if (!(std::isfinite(min_stddev) && min_stddev > 0.0 && min_stddev <= 128.0)) {
+    throw ConfigError("standardize.min_stddev: must be in (0, 128] descriptor byte units (got " +
+                      std::to_string(min_stddev) + ")");
   }
-  if (warm_up < 2) throw ConfigError("standardize.warm_up: must be >= 2 observations");
-  if (window != 0 && window < warm_up) {
-    throw ConfigError("standardize.window: must be 0 (all observations) or >= standardize.warm_up");
+  // Counts bounded by what makes sense (issue 15): a million frames is longer than any dataset.
+  require_in("standardize.warm_up", warm_up, std::int64_t{2}, std::int64_t{1'000'000}, "observations");
+  if (window != 0) {
+    require(window >= warm_up && window <= 1'000'000, "standardize.window",
+            "0 (all observations) or in [standardize.warm_up, 1000000] observations", std::to_string(window));
   }
-  if (refresh_every < 1) throw ConfigError("standardize.refresh_every: must be >= 1");
-  if (observe_every < 1) throw ConfigError("standardize.observe_every: must be >= 1 (frames)");
+  require_in("standardize.refresh_every", refresh_every, std::int64_t{1}, std::int64_t{1'000'000},
+             "observations");
+  require_in("standardize.observe_every", observe_every, std::int64_t{1}, std::int64_t{1'000'000}, "frames");
 }
 
 StandardizeConfig observations_config(const StandardizeConfig& config) {

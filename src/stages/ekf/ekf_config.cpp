@@ -28,36 +28,49 @@ void EkfConfig::validate() const {
   require(clone_every_n_frames >= 1 && clone_every_n_frames <= 10, "clone_every_n_frames",
           "must be in [1, 10]");
   require(positive(gravity_mps2), "gravity_mps2", "must be > 0");
-  require(max_features >= 8, "max_features", "must be >= 8");
-  require(grid_cols >= 1, "grid_cols", "must be >= 1");
-  require(grid_rows >= 1, "grid_rows", "must be >= 1");
-  require(positive(min_feature_distance_px), "min_feature_distance_px", "must be > 0");
-  require(non_negative(image_blur_sigma_px), "image_blur_sigma_px", "must be >= 0 (0 = no smoothing)");
+  // Upper bounds on counts, windows and pixel sizes: what makes sense for a feature tracker, so that no value
+  // makes a run hang or exhaust memory (issue 15).
+  require(max_features >= 8 && max_features <= 10'000, "max_features", "must be in [8, 10000]");
+  require(grid_cols >= 1 && grid_cols <= 100, "grid_cols", "must be in [1, 100]");
+  require(grid_rows >= 1 && grid_rows <= 100, "grid_rows", "must be in [1, 100]");
+  require(positive(min_feature_distance_px) && min_feature_distance_px <= 1000, "min_feature_distance_px",
+          "must be in (0, 1000] px");
+  require(non_negative(image_blur_sigma_px) && image_blur_sigma_px <= 20, "image_blur_sigma_px",
+          "must be in [0, 20] px (0 = no smoothing)");
   require(non_negative(corner_noise_factor), "corner_noise_factor", "must be >= 0 (0 = off)");
-  require(empty_cell_retry_frames >= 0, "empty_cell_retry_frames", "must be >= 0");
-  require(redetect_min_missing >= 1, "redetect_min_missing", "must be >= 1");
+  require(empty_cell_retry_frames >= 0 && empty_cell_retry_frames <= 100'000, "empty_cell_retry_frames",
+          "must be in [0, 100000] frames");
+  require(redetect_min_missing >= 1 && redetect_min_missing <= 10'000, "redetect_min_missing",
+          "must be in [1, 10000]");
   require(shi_tomasi_quality > 0.0 && shi_tomasi_quality < 1.0, "shi_tomasi_quality", "must be in (0, 1)");
-  require(shi_tomasi_block_size >= 3, "shi_tomasi_block_size", "must be >= 3");
-  require(klt_window_px >= 5 && klt_window_px % 2 == 1, "klt_window_px", "must be odd and >= 5");
+  require(shi_tomasi_block_size >= 3 && shi_tomasi_block_size <= 31, "shi_tomasi_block_size",
+          "must be in [3, 31] px");
+  require(klt_window_px >= 5 && klt_window_px <= 101 && klt_window_px % 2 == 1, "klt_window_px",
+          "must be odd and in [5, 101] px");
   require(klt_pyramid_levels >= 0 && klt_pyramid_levels <= 8, "klt_pyramid_levels", "must be in [0, 8]");
-  require(klt_max_iterations >= 1, "klt_max_iterations", "must be >= 1");
+  require(klt_max_iterations >= 1 && klt_max_iterations <= 1000, "klt_max_iterations",
+          "must be in [1, 1000]");
   require(positive(klt_epsilon), "klt_epsilon", "must be > 0");
   require(positive(fb_check_max_px), "fb_check_max_px", "must be > 0");
   require(positive(ransac_threshold_px), "ransac_threshold_px", "must be > 0");
   require(ransac_confidence > 0.0 && ransac_confidence < 1.0, "ransac_confidence", "must be in (0, 1)");
-  require(border_px >= 0, "border_px", "must be >= 0");
+  require(border_px >= 0 && border_px <= 1000, "border_px", "must be in [0, 1000] px");
   require(positive(pixel_sigma_px), "pixel_sigma_px", "must be > 0");
   require(chi2_quantile > 0.5 && chi2_quantile < 1.0, "chi2_quantile",
           "must be in (0.5, 1) (the upper quantile, e.g. 0.95)");
-  require(min_track_length >= 2, "min_track_length", "must be >= 2");
-  require(max_update_features >= 0, "max_update_features", "must be >= 0 (0 = no limit)");
+  require(min_track_length >= 2 && min_track_length <= 1000, "min_track_length",
+          "must be in [2, 1000] frames");
+  require(max_update_features >= 0 && max_update_features <= 10'000, "max_update_features",
+          "must be in [0, 10000] (0 = no limit)");
   require(positive(min_depth_m), "min_depth_m", "must be > 0");
   require(std::isfinite(max_depth_m) && max_depth_m > min_depth_m, "max_depth_m", "must be > min_depth_m");
   require(max_triangulation_cond > 1.0, "max_triangulation_cond", "must be > 1");
-  require(triangulation_iterations >= 1, "triangulation_iterations", "must be >= 1");
+  require(triangulation_iterations >= 1 && triangulation_iterations <= 1000, "triangulation_iterations",
+          "must be in [1, 1000]");
   require(positive(triangulation_max_reproj_sigma), "triangulation_max_reproj_sigma", "must be > 0");
   require(positive(zupt_max_disparity_px), "zupt_max_disparity_px", "must be > 0");
-  require(zupt_min_features >= 1, "zupt_min_features", "must be >= 1");
+  require(zupt_min_features >= 1 && zupt_min_features <= 10'000, "zupt_min_features",
+          "must be in [1, 10000]");
   require(positive(zupt_sigma_mps), "zupt_sigma_mps", "must be > 0");
   require(non_negative(gyro_noise_density), "gyro_noise_density", "must be >= 0 (0 = from imu0 sensor.yaml)");
   require(non_negative(gyro_random_walk), "gyro_random_walk", "must be >= 0 (0 = from imu0 sensor.yaml)");
@@ -71,11 +84,14 @@ void EkfConfig::validate() const {
   require(positive(init_sigma_gyro_bias_radps), "init_sigma_gyro_bias_radps", "must be > 0");
   require(positive(init_sigma_accel_bias_mps2), "init_sigma_accel_bias_mps2", "must be > 0");
   require(positive(init_sigma_yaw_rad), "init_sigma_yaw_rad", "must be > 0");
-  require(positive(standstill_duration_s), "standstill_duration_s", "must be > 0");
+  require(positive(standstill_duration_s) && standstill_duration_s <= 3600, "standstill_duration_s",
+          "must be in (0, 3600] s");
   require(positive(standstill_max_accel_std_mps2), "standstill_max_accel_std_mps2", "must be > 0");
   require(positive(standstill_max_gyro_std_radps), "standstill_max_gyro_std_radps", "must be > 0");
-  require(lost_min_features >= 0, "lost_min_features", "must be >= 0");
-  require(lost_max_frames >= 1, "lost_max_frames", "must be >= 1");
+  require(lost_min_features >= 0 && lost_min_features <= 10'000, "lost_min_features",
+          "must be in [0, 10000]");
+  require(lost_max_frames >= 1 && lost_max_frames <= 1'000'000, "lost_max_frames",
+          "must be in [1, 1000000] frames");
   require(positive(max_position_sigma_m), "max_position_sigma_m", "must be > 0");
 }
 

@@ -55,9 +55,10 @@ struct GateConfig {
     v("area_margin_reference_frames", self.area_margin_reference_frames);
     v("row_horizon_frames", self.row_horizon_frames);
   }
-  // Throws ConfigError naming the key: gap_frames >= 1, beta_m >= 0 (finite), sigma_norm in {max_eigen,
-  // trace}, confidence_scale >= 0 (finite),
-  // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size >= 1, kdtree_seed_neighbours >= 1, area_* >= 0.
+  // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], beta_m in [0, 1e5],
+  // sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000], covariance_tolerance_m2 in [0, 0.25],
+  // kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000], area_* in [0, 1e4] (query rows) or
+  // [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].
   void validate() const;
   // Throws ConfigError unless area_margin_query_frames >= sequence_length (the DP's L) and
   // row_horizon_frames >= max(area_margin_query_frames, area_max_hole_frames + 1).

@@ -51,15 +51,16 @@ void ContrastSearchConfig::validate() const {
           s + "contrast_half_window_frames", "in [1, 1000] frames", str(contrast_half_window_frames));
   require(contrast_min_cells >= 2 && contrast_min_cells <= 2 * contrast_half_window_frames + 1,
           s + "contrast_min_cells", "in [2, 2 * contrast_half_window_frames + 1]", str(contrast_min_cells));
-  require(std::isfinite(velocity_min) && velocity_min > 0.0, s + "velocity_min", "a number > 0",
-          str(velocity_min));
+  require(std::isfinite(velocity_min) && velocity_min > 0.0 && velocity_min <= 10.0, s + "velocity_min",
+          "in (0, 10] reference frames per query frame", str(velocity_min));
   require(std::isfinite(velocity_max) && velocity_max >= velocity_min && velocity_max <= 10.0,
-          s + "velocity_max", "in [velocity_min, 10]", str(velocity_max));
+          s + "velocity_max", "in [velocity_min, 10] reference frames per query frame", str(velocity_max));
   require(velocity_steps >= 1 && velocity_steps <= 64, s + "velocity_steps", "in [1, 64]",
           str(velocity_steps));
   require(velocity_steps > 1 || velocity_min == velocity_max, s + "velocity_steps",
           "> 1 when velocity_min < velocity_max", str(velocity_steps));
-  require(std::isfinite(min_score), s + "min_score", "a finite number", str(min_score));
+  // A line's score is a mean of z values, each within +-sqrt(2 w) <= 45 (the window's population stddev).
+  require_in(s + "min_score", min_score, -100.0, 100.0, "(a mean z, in local standard deviations)");
 }
 
 std::vector<double> ContrastSearchConfig::velocities() const {

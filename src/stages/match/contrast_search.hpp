@@ -66,7 +66,7 @@ struct ContrastSearchConfig {
   }
   // Throws ConfigError naming "dird_seqslam.<key>": contrast_half_window_frames in [1, 1000],
   // contrast_min_cells in [2, 2 w + 1], 0 < velocity_min <= velocity_max <= 10, velocity_steps in [1, 64]
-  // (1 only when min == max), min_score finite.
+  // (1 only when min == max), min_score in [-100, 100]; each message states the bound (issue 15).
   void validate() const;
 
   // The velocities, ascending.

@@ -25,8 +25,8 @@ struct MatchConfig {
     v("max_step", self.max_step);
     v("nms_half_window", self.nms_half_window);
   }
-  // Throws ConfigError naming the key: margin >= 0, sequence_length >= 1, tau3 >= 0 (finite),
-  // max_step >= 0, nms_half_window >= 0.
+  // Throws ConfigError naming the key and its bounds: margin in [0, 1e6], sequence_length in [1, 1000],
+  // tau3 in [0, 1], max_step in [0, 100], nms_half_window in [0, 1000].
   void validate() const;
 
   double dp_threshold() const { return tau3 * static_cast<double>(sequence_length); }

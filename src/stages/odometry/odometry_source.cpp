@@ -7,8 +7,9 @@
 namespace loopgate {
 
 namespace {
-void require_non_negative(const std::string& key, double value) {
-  require(value >= 0, "odometry." + key, ">= 0", std::to_string(value));
+// Sigmas and variances: >= 0 and finite, at most `hi` (beyond it the gate would pass every frame).
+void require_non_negative(const std::string& key, double value, double hi = 1e3) {
+  require_in("odometry." + key, value, 0.0, hi);
 }
 }  // namespace
 
@@ -25,7 +26,8 @@ void OdometryConfig::validate() const {
   require_non_negative("file_sigma2_b_m2_per_m", file_sigma2_b_m2_per_m);
   require_non_negative("file_rot_sigma2_a_rad2", file_rot_sigma2_a_rad2);
   require_non_negative("file_rot_sigma2_b_rad2_per_m", file_rot_sigma2_b_rad2_per_m);
-  require(file_max_gap_s > 0, "odometry.file_max_gap_s", "> 0", std::to_string(file_max_gap_s));
+  require(file_max_gap_s > 0 && file_max_gap_s <= 3600, "odometry.file_max_gap_s", "in (0, 3600] s",
+          std::to_string(file_max_gap_s));
   if (source == "file")
     require(!file.empty(), "odometry.file", "a TUM trajectory path when source is file", "''");
 }

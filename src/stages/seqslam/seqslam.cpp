@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/stop_request.hpp"
 #include "stages/seqslam/seqslam_preprocess.hpp"
 
 #if defined(__SSE2__)
@@ -111,6 +112,7 @@ std::size_t seqslam_difference_block(const SeqSlamImages& reference, const SeqSl
   std::array<const std::uint8_t*, kQueriesPerPass> q_images{};
   std::array<std::uint32_t, kQueriesPerPass> sads{};
   for (std::size_t qt = q_begin; qt < q_end; qt += kTileQueries) {
+    stop_request::check_abort("SeqSLAM difference matrix");  // O(n^2): a second stop signal aborts it
     const std::size_t qt_end = std::min(q_end, qt + kTileQueries);
     for (std::size_t rt = r_begin; rt < r_end; rt += kTileReferences) {
       const std::size_t rt_end = std::min(r_end, rt + kTileReferences);
@@ -245,6 +247,7 @@ SeqSlamMatch seqslam_match_from_scores(std::size_t query, const double* scores, 
 }
 
 SeqSlamMatch seqslam_match_query(const SeqSlamMatrix& E, std::size_t query, const SeqSlamConfig& config) {
+  stop_request::check_abort("SeqSLAM sequence search");
   const std::vector<double> scores = seqslam_sequence_scores(E, query, config);
   return seqslam_match_from_scores(query, scores.data(), scores.size(), 0, config);
 }

@@ -10,8 +10,8 @@
 namespace loopgate {
 
 void SyncConfig::validate() const {
-  if (!(max_gap_ms > 0)) {
-    throw ConfigError("sync.max_gap_ms: must be > 0 (got " + std::to_string(max_gap_ms) + ")");
+  if (!(max_gap_ms > 0 && max_gap_ms <= 60'000)) {
+    throw ConfigError("sync.max_gap_ms: must be in (0, 60000] ms (got " + std::to_string(max_gap_ms) + ")");
   }
 }
 
