@@ -280,6 +280,17 @@ nlohmann::json sequences_json(const TwoSequenceSetup& setup) {
             {"last_frame", setup.ranges.query_first + setup.ranges.query_count}}}};
 }
 
+// summary.json "aligned" (with a tolerance only): the loops within the tolerance of the aligned frame and the
+// queries whose best match is.
+void add_aligned_json(const TwoSequenceSetup& setup, std::size_t loops, std::size_t loops_aligned,
+                      std::size_t best_aligned, nlohmann::json& summary) {
+  if (setup.tolerance() < 0) return;
+  summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
+                        {"loops_within_tolerance", loops_aligned},
+                        {"loops_beyond_tolerance", loops - loops_aligned},
+                        {"best_match_within_tolerance", best_aligned}};
+}
+
 // DIRD (dird.md §5): describe both, S for every (reference, query) pair, the streaming matcher.
 TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                            Clock::time_point start) {
@@ -465,12 +476,7 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   result.summary["scale"] = {{"mode", config.scale.mode},    {"mu", scale.mu},
                              {"sigma", scale.sigma},         {"cutoff_distance", scale.cutoff_distance},
                              {"estimated", scale.estimated}, {"distances", scale_distances}};
-  if (setup.tolerance() >= 0) {
-    result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
-                                 {"loops_within_tolerance", loops_aligned},
-                                 {"loops_beyond_tolerance", output.loops.size() - loops_aligned},
-                                 {"best_match_within_tolerance", best_aligned}};
-  }
+  add_aligned_json(setup, output.loops.size(), loops_aligned, best_aligned, result.summary);
   return result;
 }
 
@@ -621,12 +627,7 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   if (standardize.enabled())
     result.summary["standardize"] = standardize_json(standardize, ref_codes, qry_codes);
   result.summary.update(sequences_json(setup));
-  if (setup.tolerance() >= 0) {
-    result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
-                                 {"loops_within_tolerance", loops_aligned},
-                                 {"loops_beyond_tolerance", output.loops.size() - loops_aligned},
-                                 {"best_match_within_tolerance", best_aligned}};
-  }
+  add_aligned_json(setup, output.loops.size(), loops_aligned, best_aligned, result.summary);
   return result;
 }
 
@@ -747,12 +748,7 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
       {"peak_rss_mb", peak_rss_mb()},
   };
   result.summary.update(sequences_json(setup));
-  if (setup.tolerance() >= 0) {
-    result.summary["aligned"] = {{"tolerance_frames", setup.tolerance()},
-                                 {"loops_within_tolerance", loops_aligned},
-                                 {"loops_beyond_tolerance", loops.size() - loops_aligned},
-                                 {"best_match_within_tolerance", best_aligned}};
-  }
+  add_aligned_json(setup, loops.size(), loops_aligned, best_aligned, result.summary);
   return result;
 }
 
