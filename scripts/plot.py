@@ -472,7 +472,11 @@ def plot_pr(summaries, path, written, source):
     ax.set_xlabel("recall")
     ax.set_ylabel("precision")
     ax.set_title("precision-recall")
-    ax.legend(loc="lower left", fontsize=9)
+    if drawn > 4:  # many methods: the legend below the axes, where it covers no curve
+        fig.set_size_inches(7, 6 + 0.25 * ((drawn + 1) // 2))
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
+    else:
+        ax.legend(loc="lower left", fontsize=9)
     ax.grid(alpha=0.3)
     save(fig, path, written)
 
