@@ -143,6 +143,15 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
   EXPECT_EQ(summary["frames_processed"].get<int>(), 30);
   EXPECT_TRUE(summary["dataset"]["has_imu"].get<bool>());
+  // Provenance (issue 14): how this output was made.
+  const auto& provenance = summary.at("provenance");
+  EXPECT_NE(provenance.at("command_line").get<std::string>().find(" run --config "), std::string::npos)
+      << provenance.dump();
+  EXPECT_NE(provenance.at("command_line").get<std::string>().find(out.string()), std::string::npos);
+  EXPECT_EQ(provenance.at("version").get<std::string>().rfind(LOOPGATE_PROJECT_VERSION " (", 0), 0u)
+      << provenance.dump();
+  EXPECT_EQ(provenance.at("config_hash").get<std::string>().size(), 16u);
+  EXPECT_FALSE(provenance.at("start_time_utc").get<std::string>().empty());
 
   // Damage the IMU file: drop 60 rows (0.3 s at 200 Hz) in the middle and cut the last line in half.
   const fs::path imu_csv = sim / "mav0" / "imu0" / "data.csv";

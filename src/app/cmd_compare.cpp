@@ -23,6 +23,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
+#include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
@@ -314,6 +315,7 @@ int compare_two_sequences(const CompareOptions& options) {
   }
   compare["comparison"] = json::object();
   compare["methods"] = ran;
+  compare["provenance"] = provenance_json(config_to_json(base));
   compare["two_sequence"] = {{"reference", options.reference}, {"query", options.query}};
   write_json_file(out_dir / "compare.json", compare);
 
@@ -413,6 +415,7 @@ int compare_command(const CompareOptions& options) {
   }
   compare["comparison"] = comparison;
   compare["methods"] = ran;
+  compare["provenance"] = provenance_json(config_to_json(base));
   write_json_file(out_dir / "compare.json", compare);
 
   if (!ran.empty()) {

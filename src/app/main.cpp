@@ -8,15 +8,17 @@
 #include <iostream>
 
 #include "app/commands.hpp"
+#include "io/provenance.hpp"
 
 int main(int argc, char** argv) {
+  loopgate::record_invocation(argc, argv);  // summary.json provenance: the command line and start time
   // Logs go to stderr: stdout carries results (CSV lines, tables) that users pipe into files.
   spdlog::set_default_logger(spdlog::stderr_color_mt("loopgate"));
   // A file-size limit reached (ulimit -f) becomes a write error, reported like a full disk, instead of
   // killing the process with outputs cut mid-line.
   std::signal(SIGXFSZ, SIG_IGN);
   CLI::App app{"loopgate: pose-gated, illumination-robust visual loop-closure detection (DIRD)"};
-  app.set_version_flag("--version", std::string("loopgate ") + LOOPGATE_VERSION);
+  app.set_version_flag("--version", std::string("loopgate ") + loopgate::build_version());
   app.require_subcommand(1);
   std::string log_level = "info";
   app.add_option("--log-level", log_level, "trace|debug|info|warn|error|off")

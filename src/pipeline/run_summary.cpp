@@ -6,6 +6,7 @@
 #include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
+#include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/loops_writer.hpp"
@@ -84,8 +85,10 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
     issues.push_back(issue.to_string());
   }
   const std::size_t reads = parts.images.reads_for_description();
+  nlohmann::json config_json = config_to_json(parts.config);
   nlohmann::json summary = {
-      {"config", config_to_json(parts.config)},
+      {"provenance", provenance_json(config_json)},
+      {"config", std::move(config_json)},
       {"dataset",
        {{"root", dataset.root().string()},
         {"layout", dataset.layout()},

@@ -24,6 +24,7 @@
 #include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
+#include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/run_resources.hpp"
@@ -776,6 +777,7 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
                                                          : run_dird(setup, out_dir, start);
   result.interrupted = stop && stop->load();
   result.summary["interrupted"] = result.interrupted;
+  result.summary["provenance"] = provenance_json(result.summary.value("config", nlohmann::json::object()));
   write_json_file(out_dir / "summary.json", result.summary);
   return result;
 }
