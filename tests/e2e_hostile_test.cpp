@@ -222,7 +222,7 @@ TEST(E2eHostile, ASecondRunIntoTheSameFolderFailsAtOnce) {
   expect_whole_csv(out / "frames.csv");
   EXPECT_EQ(read_csv(out / "frames.csv").size(), summary["frames_processed"].get<std::size_t>());
   EXPECT_FALSE(fs::exists(out / ".loopgate.lock"));  // released: the next run may go
-  EXPECT_EQ(run(run_args(dataset, out) + " --frames 0:5", &status).find("in use"), std::string::npos);
+  EXPECT_EQ(run(run_args(dataset, out) + " --frames 0:5 --force", &status).find("in use"), std::string::npos);
   EXPECT_EQ(status, 0);
 }
 

@@ -87,6 +87,40 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
   EXPECT_NE(output.find("p99 ms"), std::string::npos) << "profiler table on stderr";
 }
 
+// Issue 14: a folder holding another run's outputs is refused (nothing in it changes) unless --force, which
+// replaces them; the same for compare.
+TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
+  const fs::path dataset = make_kitti_dataset(30);
+  const fs::path out = testing::make_temp_dir("e2e-run-refuse");
+  const std::string base = "run --dataset " + dataset.string() + " --out " + out.string();
+  int status = -1;
+  std::string output = run(base + " --mode full", &status);
+  ASSERT_EQ(status, 0) << output;
+  const std::string frames_before = read_file(out / "frames.csv");
+  const std::string summary_before = read_file(out / "summary.json");
+  output = run(base + " --mode gated", &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("already holds another run's outputs (frames.csv, loops.csv"), std::string::npos)
+      << output;
+  EXPECT_NE(output.find("--force"), std::string::npos) << output;
+  EXPECT_EQ(read_file(out / "frames.csv"), frames_before);
+  EXPECT_EQ(read_file(out / "summary.json"), summary_before);
+  output = run(base + " --mode gated --force", &status);
+  EXPECT_EQ(status, 0) << output;
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_EQ(summary["config"]["run"]["mode"].get<std::string>(), "gated");
+
+  const fs::path compare_out = testing::make_temp_dir("e2e-compare-refuse");
+  const std::string compare = "compare --dataset " + dataset.string() + " --out " + compare_out.string() +
+                              " --no-plots --methods full";
+  ASSERT_EQ((run(compare, &status), status), 0);
+  output = run(compare, &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("compare: --out"), std::string::npos) << output;
+  output = run(compare + " --force", &status);
+  EXPECT_EQ(status, 0) << output;
+}
+
 TEST(E2eRun, ConfigErrorsNameTheKey) {
   const fs::path dataset = make_kitti_dataset(3);
   const fs::path out = testing::make_temp_dir("e2e-run-bad");

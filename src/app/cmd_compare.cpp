@@ -45,6 +45,7 @@ struct CompareOptions {
   std::string frames;
   int threads = 0;
   bool no_plots = false;
+  bool force = false;
   std::string plot_script;
   std::vector<std::string> overrides;
 };
@@ -74,6 +75,18 @@ constexpr CompareMethod kCompareMethods[] = {
 
 // The methods of a two-sequence compare (no poses: no gate).
 constexpr const char* kTwoSequenceMethods = "full,std-full,seqslam,dird-seqslam";
+
+// What a compare writes into its folder: compare.json, the plots and one run folder per method.
+std::vector<std::string> compare_output_names() {
+  std::vector<std::string> names = {"compare.json", "plots"};
+  for (const CompareMethod& m : kCompareMethods) names.emplace_back(m.name);
+  return names;
+}
+
+void remove_compare_outputs(const fs::path& out_dir) {
+  std::error_code ec;
+  for (const std::string& name : compare_output_names()) fs::remove_all(out_dir / name, ec);
+}
 
 std::string method_names() {
   std::string out;
@@ -296,6 +309,9 @@ int compare_two_sequences(const CompareOptions& options) {
   for (const std::string& method : methods)
     refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
   const OutputLock lock(out_dir, "loopgate compare --reference --query");
+  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
+  remove_compare_outputs(
+      out_dir);  // --force: the previous compare's folders go, none is taken for this one's
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
@@ -353,6 +369,9 @@ int compare_command(const CompareOptions& options) {
   for (const std::string& method : methods)
     refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
   const OutputLock lock(out_dir, "loopgate compare");
+  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
+  remove_compare_outputs(
+      out_dir);               // --force: the previous compare's folders go, none is taken for this one's
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
 
@@ -468,6 +487,8 @@ void add_compare_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", options->threads, "worker threads of each run (default 2)")
       ->check(CLI::Range(1, 256));
   cmd->add_flag("--no-plots", options->no_plots, "do not call scripts/plot.py");
+  cmd->add_flag("--force", options->force,
+                "replace another compare's outputs in --out (without it such a folder is refused)");
   cmd->add_option("--plot-script", options->plot_script,
                   "path of plot.py (default: the source tree's scripts/plot.py)");
   cmd->add_option("--set", options->overrides, "override any config key: section.key=value (repeatable)")

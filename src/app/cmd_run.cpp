@@ -33,6 +33,7 @@ struct RunOptions {
   std::string rate;
   int threads = 0;
   bool trace = false;
+  bool force = false;
   std::string frames;
   std::vector<std::string> overrides;
 };
@@ -70,6 +71,7 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   log_config_lines(config_to_lines(config));
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run --reference --query");
+  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
   OpenOptions open_options;
   open_options.strict = config.run.strict;
   open_options.camera_index = config.run.camera_index;
@@ -113,6 +115,7 @@ int run_command(const RunOptions& options) {
   // Before anything is written: no output over an input, and one command at a time in the folder.
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run");
+  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
 
   // From here a stop signal (SIGINT, SIGTERM, SIGHUP) drains the run and writes every output.
   const StopSignals signals;
@@ -164,9 +167,11 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--mode", options->mode,
                   "gated (default: the method only inside the pose gate's candidate areas), full (on every "
                   "frame) or odometry (no loop detection); overrides run.mode");
-  cmd->add_option("--method", options->method,
-                  "dird (default) or seqslam (the SeqSLAM baseline, gated or full as --mode says); overrides "
-                  "run.method");
+  cmd->add_option(
+      "--method", options->method,
+      "dird-seqslam (the shipped configs' choice: DIRD matched by contrast and sequence, robust "
+      "across day/night and seasons), dird (the paper's matcher; the default without a config) or "
+      "seqslam (the baseline); gated or full as --mode says; overrides run.method");
   cmd->add_option("--reference", options->reference,
                   "two-sequence mode (with --query): reference dataset folder, e.g. Nordland summer");
   cmd->add_option("--query", options->query, "two-sequence mode (with --reference): query dataset folder");
@@ -176,6 +181,8 @@ void add_run_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--rate", options->rate, "replay rate: max (default) or R x real time, e.g. 1.0");
   cmd->add_option("--threads", options->threads, "worker threads of the graph (default 2)")
       ->check(CLI::Range(1, 256));
+  cmd->add_flag("--force", options->force,
+                "replace another run's outputs in --out (without it such a folder is refused)");
   cmd->add_flag("--trace", options->trace,
                 "also write trace.json (Chrome trace-event format, opens in Perfetto)");
   cmd->add_option("--frames", options->frames, "frame range A:B (indices, B exclusive; A: or :B)");

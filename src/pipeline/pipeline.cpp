@@ -364,6 +364,25 @@ const std::vector<std::string>& run_output_file_names() {
   return names;
 }
 
+void refuse_previous_outputs(const std::filesystem::path& out_dir, const std::vector<std::string>& names,
+                             bool force, const std::string& command) {
+  if (force) return;
+  std::vector<std::string> found;
+  std::error_code ec;
+  for (const std::string& name : names) {
+    if (std::filesystem::exists(out_dir / name, ec)) found.push_back(name);
+  }
+  if (found.empty()) return;
+  constexpr std::size_t kListed = 5;
+  std::string list;
+  for (std::size_t k = 0; k < std::min(found.size(), kListed); ++k) list += (k ? ", " : "") + found[k];
+  if (found.size() > kListed) list += fmt::format(" and {} more", found.size() - kListed);
+  throw ConfigError(fmt::format(
+      "{}: --out {} already holds another run's outputs ({}): choose another folder, or pass --force to "
+      "replace them (their files would otherwise mix with this run's)",
+      command, out_dir.string(), list));
+}
+
 void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
                                 const std::vector<std::filesystem::path>& extra_inputs) {
   std::vector<NamedPath> inputs;
