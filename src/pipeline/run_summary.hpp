@@ -16,6 +16,7 @@ class Dataset;
 class ImageSource;
 class ImuSynchronizer;
 class LoopsWriter;
+class LoopCloser;
 class RunOutputs;
 
 struct RunParts {
@@ -29,6 +30,7 @@ struct RunParts {
   const ImuSynchronizer* synchronizer = nullptr;
   const SeqIndex& seqs;
   double end_of_stream_ms = 0;
+  const LoopCloser* closer = nullptr;
 };
 
 // Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not
