@@ -117,7 +117,11 @@ void RunOutputs::sink(FrameRecord& r) {
   CsvRow row;
   add_frame_cells(r, status, reason, row);
   if (method_.detects()) {
-    held_.push_back(HeldRow{static_cast<std::size_t>(r.seq), r.frame, std::move(row)});
+    HeldRow held;
+    held.seq = static_cast<std::size_t>(r.seq);
+    held.frame = r.frame;
+    held.row = std::move(row);
+    held_.push_back(std::move(held));
     write_ready_rows(false);
   } else {
     frames_csv_.write_row(row.values());
@@ -176,8 +180,12 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
 void RunOutputs::write_ready_rows(bool end_of_stream) {
   while (!held_.empty()) {
     HeldRow& held = held_.front();
-    const std::optional<FrameVerdict> verdict = method_.detection(held.seq);
-    if (!verdict && !end_of_stream) return;
+    if (!held.final) {
+      held.verdict = method_.detection(held.seq);
+      if (!held.verdict && !end_of_stream) return;
+      held.final = true;
+    }
+    const std::optional<FrameVerdict>& verdict = held.verdict;
     // A loop frame's row also waits for the verification of its loops (the loop closer's worker).
     std::optional<std::string> geometry;
     if (geometry_column()) {

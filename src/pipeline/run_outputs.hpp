@@ -73,6 +73,8 @@ class RunOutputs {
     std::size_t seq = 0;
     std::size_t frame = 0;
     CsvRow row;
+    bool final = false;                   // the method's detection is known (asked once per seq)
+    std::optional<FrameVerdict> verdict;  // then: the method's detection
   };
   std::deque<HeldRow> held_;
 };
