@@ -105,9 +105,49 @@ std::optional<std::string> LoopCloser::geometry_cell(std::size_t frame) const {
   return cell;
 }
 
-LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) const {
+std::shared_ptr<const OrbFeatures> LoopCloser::features_of(std::size_t frame) {
+  if (const auto it = feature_cache_.find(frame); it != feature_cache_.end()) return it->second;
+  auto features = std::make_shared<const OrbFeatures>(verifier_.detect(dataset_.load_image(frame)));
+  feature_cache_.emplace(frame, features);
+  feature_cache_order_.push_back(frame);
+  while (feature_cache_order_.size() > static_cast<std::size_t>(verify_config_.feature_cache_frames)) {
+    feature_cache_.erase(feature_cache_order_.front());
+    feature_cache_order_.pop_front();
+  }
+  return features;
+}
+
+std::string LoopCloser::skip_reason(const Detection& loop) const {
+  const auto near = [](std::size_t a, std::size_t b, int window) {
+    return (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
+  };
+  int tried_for_query = 0;
+  for (auto it = results_.rbegin(); it != results_.rend(); ++it) {
+    const LoopResult& r = *it;
+    if (r.skipped) continue;
+    if (r.loop.query == loop.query) ++tried_for_query;
+    const int window = r.result.verified ? verify_config_.skip_after_verified_frames
+                                         : verify_config_.skip_after_rejected_frames;
+    if (window > 0 && near(r.loop.query, loop.query, window) &&
+        near(r.loop.reference, loop.reference, window))
+      return fmt::format("skipped: near ({}, {}) {}", r.loop.query, r.loop.reference,
+                         r.result.verified ? "verified" : "rejected");
+  }
+  if (verify_config_.max_per_query > 0 && tried_for_query >= verify_config_.max_per_query)
+    return fmt::format("skipped: {} loop(s) of frame {} already verified", tried_for_query, loop.query);
+  return {};
+}
+
+LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
   LoopResult out;
   out.loop = loop;
+  if (unusable_.empty()) {
+    if (std::string why = skip_reason(loop); !why.empty()) {
+      out.result.reason = std::move(why);
+      out.skipped = true;
+      return out;
+    }
+  }
   const auto start = std::chrono::steady_clock::now();
   const int k = verify_config_.neighbour_offset_frames;
   const auto shifted = [&](int offset) -> std::optional<std::size_t> {
@@ -125,10 +165,14 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) const {
   } else {
     out.neighbour = *neighbour;
     try {
-      const VerifyFrame i{dataset_.load_image(loop.query), Eigen::Isometry3d::Identity()};
-      const VerifyFrame j{dataset_.load_image(loop.reference), *pose_of(loop.reference)};
-      const VerifyFrame n{dataset_.load_image(*neighbour), *pose_of(*neighbour)};
-      out.result = verifier_.verify(i, j, n);
+      const std::shared_ptr<const OrbFeatures> i = features_of(loop.query);
+      const std::shared_ptr<const OrbFeatures> j = features_of(loop.reference);
+      const std::shared_ptr<const OrbFeatures> n = features_of(*neighbour);
+      if (i->image_size.empty() || j->image_size.empty() || n->image_size.empty()) {
+        out.result.reason = "geometry: image missing";
+      } else {
+        out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour));
+      }
     } catch (const std::exception& e) {
       out.result.reason = std::string("geometry: ") + e.what();
     }
@@ -253,12 +297,16 @@ void LoopCloser::finish() {
     nodes_.clear();
     node_poses_.clear();
   }
-  std::size_t verified = 0;
-  for (const LoopResult& r : results_) verified += r.result.verified ? 1 : 0;
+  std::size_t verified = 0, skipped = 0;
+  for (const LoopResult& r : results_) {
+    verified += r.result.verified ? 1 : 0;
+    skipped += r.skipped ? 1 : 0;
+  }
   spdlog::info(
-      "loop closure: {} loops, {} verified, {} rejected by geometry, {} outliers in the pose graph; "
-      "final solve {:.1f} ms",
-      results_.size(), verified, results_.size() - verified, final_report_.outliers, final_solve_ms_);
+      "loop closure: {} loops, {} verified, {} rejected by geometry, {} skipped, {} outliers in the pose "
+      "graph; final solve {:.1f} ms",
+      results_.size(), verified, results_.size() - verified - skipped, skipped, final_report_.outliers,
+      final_solve_ms_);
 }
 
 std::vector<StampedPose> LoopCloser::corrected(const std::vector<StampedPose>& tracked) const {
@@ -303,11 +351,16 @@ void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& 
     const Eigen::Quaterniond q(r.result.T_j_i.rotation());
     const bool v = r.result.verified;
     const auto num = [v](double x) { return v ? format_fixed(x, 6) : std::string(); };
-    return std::vector<std::string>{v ? "y" : "n",   std::to_string(r.result.inliers),
-                                    r.result.reason, num(t.x()),
-                                    num(t.y()),      num(t.z()),
-                                    num(q.x()),      num(q.y()),
-                                    num(q.z()),      num(q.w())};
+    return std::vector<std::string>{v ? "y" : (r.skipped ? "skipped" : "n"),
+                                    std::to_string(r.result.inliers),
+                                    r.result.reason,
+                                    num(t.x()),
+                                    num(t.y()),
+                                    num(t.z()),
+                                    num(q.x()),
+                                    num(q.y()),
+                                    num(q.z()),
+                                    num(q.w())};
   };
   for (const LoopResult& r : results_) {
     const std::vector<std::string> c = cells(r);
@@ -343,18 +396,20 @@ void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& 
 }
 
 nlohmann::json LoopCloser::summary() const {
-  std::size_t verified = 0, outliers = 0;
+  std::size_t verified = 0, outliers = 0, skipped = 0;
   std::vector<double> verify_ms;
   for (const LoopResult& r : results_) {
     verified += r.result.verified ? 1 : 0;
     outliers += r.outlier ? 1 : 0;
-    verify_ms.push_back(r.verify_ms);
+    skipped += r.skipped ? 1 : 0;
+    if (!r.skipped) verify_ms.push_back(r.verify_ms);
   }
   return {{"enabled", active_},
           {"unusable_reason", unusable_},
           {"loops", results_.size()},
           {"verified", verified},
-          {"rejected_geometry", results_.size() - verified},
+          {"rejected_geometry", results_.size() - verified - skipped},
+          {"skipped", skipped},
           {"graph_outliers", outliers},
           {"graph_nodes", nodes_.size()},
           {"verify", stats_json(verify_ms)},
@@ -370,7 +425,8 @@ nlohmann::json LoopCloser::summary() const {
 std::string LoopCloser::profile_line() const {
   if (!active_) return {};
   std::vector<double> verify_ms;
-  for (const LoopResult& r : results_) verify_ms.push_back(r.verify_ms);
+  for (const LoopResult& r : results_)
+    if (!r.skipped) verify_ms.push_back(r.verify_ms);
   const double verify_total = std::accumulate(verify_ms.begin(), verify_ms.end(), 0.0);
   const double solve_total = std::accumulate(solve_ms_.begin(), solve_ms_.end(), 0.0);
   return fmt::format(

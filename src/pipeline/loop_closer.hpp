@@ -13,11 +13,13 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <thread>
+#include <unordered_map>
 #include <vector>
 
 #include "core/types.hpp"
@@ -67,9 +69,14 @@ class LoopCloser {
     double verify_ms = 0;
     bool outlier = false;  // switched off by the final solve
     double chi2 = 0;
+    bool skipped = false;  // not verified by choice (verify.max_per_query, skip_after_*_frames)
   };
   void work();
-  LoopResult verify_one(const Detection& loop) const;
+  LoopResult verify_one(const Detection& loop);
+  // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
+  std::string skip_reason(const Detection& loop) const;
+  // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
+  std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);
   // Builds the graph from the poses of frames <= last and the verified loops so far; solves.
   void solve(std::size_t last, bool final);
   std::optional<Eigen::Isometry3d> pose_of(std::size_t frame) const;
@@ -92,6 +99,8 @@ class LoopCloser {
   std::thread worker_;
 
   // Worker-only (and finish(), after the join).
+  std::unordered_map<std::size_t, std::shared_ptr<const OrbFeatures>> feature_cache_;
+  std::deque<std::size_t> feature_cache_order_;  // oldest first
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
   double final_solve_ms_ = 0;

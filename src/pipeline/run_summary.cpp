@@ -146,6 +146,7 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
     nlohmann::json closure = parts.closer->summary();
     summary["loops_verified"] = closure["verified"];
     summary["loops_rejected_geometry"] = closure["rejected_geometry"];
+    summary["loops_skipped_geometry"] = closure["skipped"];
     nlohmann::json corrected =
         trajectory_accuracy_json(parts.closer->corrected(parts.outputs.tracked_poses()), dataset);
     if (corrected.value("available", false))

@@ -17,31 +17,13 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-struct Features {
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat descriptors;
-  std::vector<Eigen::Vector2d> xy;  // undistorted normalised coordinates
-};
-
-Features detect(const cv::Mat& image, const CameraModel& camera, const VerifyConfig& config) {
-  Features f;
-  cv::Ptr<cv::ORB> orb =
-      cv::ORB::create(config.features, 1.2f, 8, config.orb_patch_px, 0, 2, cv::ORB::HARRIS_SCORE,
-                      config.orb_patch_px, config.orb_fast_threshold);
-  orb->detectAndCompute(image, cv::noArray(), f.keypoints, f.descriptors);
-  f.xy.reserve(f.keypoints.size());
-  for (const cv::KeyPoint& k : f.keypoints)
-    f.xy.push_back(camera.undistort_normalized(Eigen::Vector2d(k.pt.x, k.pt.y)));
-  return f;
-}
-
 // query index -> train index of the matches passing the ratio test (-1: none).
-std::vector<int> ratio_match(const Features& query, const Features& train, double ratio) {
-  std::vector<int> out(query.keypoints.size(), -1);
-  if (query.descriptors.empty() || train.descriptors.rows < 2) return out;
+std::vector<int> ratio_match(const cv::Mat& query, const cv::Mat& train, double ratio) {
+  std::vector<int> out(static_cast<std::size_t>(query.rows), -1);
+  if (query.empty() || train.rows < 2) return out;
   cv::BFMatcher matcher(cv::NORM_HAMMING);
   std::vector<std::vector<cv::DMatch>> knn;
-  matcher.knnMatch(query.descriptors, train.descriptors, knn, 2);
+  matcher.knnMatch(query, train, knn, 2);
   for (const auto& m : knn) {
     if (m.size() < 2) continue;
     if (m[0].distance < ratio * m[1].distance) out[static_cast<std::size_t>(m[0].queryIdx)] = m[0].trainIdx;
@@ -72,6 +54,10 @@ void VerifyConfig::validate() const {
   if (features < 50) throw ConfigError("verify.features: must be >= 50");
   if (orb_patch_px < 5) throw ConfigError("verify.orb_patch_px: must be >= 5");
   if (orb_fast_threshold < 1) throw ConfigError("verify.orb_fast_threshold: must be >= 1");
+  if (max_per_query < 0) throw ConfigError("verify.max_per_query: must be >= 0 (0: no limit)");
+  if (skip_after_verified_frames < 0) throw ConfigError("verify.skip_after_verified_frames: must be >= 0");
+  if (skip_after_rejected_frames < 0) throw ConfigError("verify.skip_after_rejected_frames: must be >= 0");
+  if (feature_cache_frames < 3) throw ConfigError("verify.feature_cache_frames: must be >= 3");
   if (!(ratio > 0.0 && ratio <= 1.0)) throw ConfigError("verify.ratio: must be in (0, 1]");
   if (min_inliers < 6) throw ConfigError("verify.min_inliers: must be >= 6 (PnP needs 4, RANSAC more)");
   if (!(std::isfinite(reprojection_px) && reprojection_px > 0.0))
@@ -106,6 +92,20 @@ std::string GeometricVerifier::unusable_reason(const cv::Size& image_size) const
   return {};
 }
 
+OrbFeatures GeometricVerifier::detect(const cv::Mat& image) const {
+  OrbFeatures f;
+  f.image_size = image.size();
+  if (!camera_ || image.empty()) return f;
+  const cv::Ptr<cv::ORB> orb =
+      cv::ORB::create(config_.features, 1.2f, 8, config_.orb_patch_px, 0, 2, cv::ORB::HARRIS_SCORE,
+                      config_.orb_patch_px, config_.orb_fast_threshold);
+  orb->detectAndCompute(image, cv::noArray(), f.keypoints, f.descriptors);
+  f.xy.reserve(f.keypoints.size());
+  for (const cv::KeyPoint& k : f.keypoints)
+    f.xy.push_back(camera_->undistort_normalized(Eigen::Vector2d(k.pt.x, k.pt.y)));
+  return f;
+}
+
 VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& j,
                                        const VerifyFrame& n) const {
   VerifyResult result;
@@ -117,10 +117,21 @@ VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& 
     result.reason = why;
     return result;
   }
+  return verify(detect(i.image), detect(j.image), j.T_w_b, detect(n.image), n.T_w_b);
+}
+
+VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures& fj,
+                                       const Eigen::Isometry3d& T_w_bj, const OrbFeatures& fn,
+                                       const Eigen::Isometry3d& T_w_bn) const {
+  VerifyResult result;
+  if (std::string why = unusable_reason(fj.image_size); !why.empty()) {
+    result.reason = why;
+    return result;
+  }
   const CameraModel& camera = *camera_;
   const Eigen::Isometry3d& T_b_c = camera.calibration().T_b_c;
-  const Eigen::Isometry3d T_w_cj = j.T_w_b * T_b_c;
-  const Eigen::Isometry3d T_w_cn = n.T_w_b * T_b_c;
+  const Eigen::Isometry3d T_w_cj = T_w_bj * T_b_c;
+  const Eigen::Isometry3d T_w_cn = T_w_bn * T_b_c;
   const Eigen::Isometry3d T_cn_cj = T_w_cn.inverse() * T_w_cj;
   const double baseline_m = T_cn_cj.translation().norm();
   if (!(baseline_m >= config_.min_baseline_m)) {
@@ -132,12 +143,9 @@ VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& 
   const double threshold = config_.reprojection_px / f_px;  // in normalised coordinates
   const double min_cos = std::cos(config_.min_parallax_deg * kPi / 180.0);
 
-  const Features fj = detect(j.image, camera, config_);
-  const Features fn = detect(n.image, camera, config_);
-  const Features fi = detect(i.image, camera, config_);
   // Points of j triangulated with its neighbour, in camera j.
   std::vector<Eigen::Vector3d> p_cj(fj.keypoints.size(), Eigen::Vector3d::Constant(std::nan("")));
-  const std::vector<int> jn = ratio_match(fj, fn, config_.ratio);
+  const std::vector<int> jn = ratio_match(fj.descriptors, fn.descriptors, config_.ratio);
   const Eigen::Vector3d centre_n_in_j = T_cn_cj.inverse().translation();
   for (std::size_t a = 0; a < jn.size(); ++a) {
     if (jn[a] < 0) continue;
@@ -154,14 +162,19 @@ VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& 
     p_cj[a] = p;
     ++result.points;
   }
-  // Frame i against j's points.
-  const std::vector<int> ij = ratio_match(fi, fj, config_.ratio);
+  // Frame i against j's triangulated points only (the ratio test among the candidates that can be used).
+  std::vector<int> point_rows;
+  for (std::size_t a = 0; a < p_cj.size(); ++a)
+    if (p_cj[a].allFinite()) point_rows.push_back(static_cast<int>(a));
+  cv::Mat point_descriptors(static_cast<int>(point_rows.size()), fj.descriptors.cols, fj.descriptors.type());
+  for (std::size_t r = 0; r < point_rows.size(); ++r)
+    fj.descriptors.row(point_rows[r]).copyTo(point_descriptors.row(static_cast<int>(r)));
+  const std::vector<int> ij = ratio_match(fi.descriptors, point_descriptors, config_.ratio);
   std::vector<cv::Point3d> object;
   std::vector<cv::Point2d> image;
   for (std::size_t a = 0; a < ij.size(); ++a) {
     if (ij[a] < 0) continue;
-    const Eigen::Vector3d& p = p_cj[static_cast<std::size_t>(ij[a])];
-    if (!p.allFinite()) continue;
+    const Eigen::Vector3d& p = p_cj[static_cast<std::size_t>(point_rows[static_cast<std::size_t>(ij[a])])];
     object.emplace_back(p.x(), p.y(), p.z());
     image.emplace_back(fi.xy[a].x(), fi.xy[a].y());
   }

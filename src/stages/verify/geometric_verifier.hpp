@@ -14,6 +14,7 @@
 #include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/camera_model.hpp"
 #include "core/types.hpp"
@@ -21,7 +22,7 @@
 namespace loopgate {
 
 struct VerifyConfig {
-  bool enabled = true;
+  bool enabled = false;          // off by default: runs without it are unchanged (configs turn it on)
   int features = 1000;           // ORB features per frame
   int orb_patch_px = 31;         // ORB patch size and edge threshold (OpenCV's 31; smaller for small images)
   int orb_fast_threshold = 20;   // FAST threshold of ORB (OpenCV's 20)
@@ -36,6 +37,12 @@ struct VerifyConfig {
   double max_translation_m = 30.0;  // |t_j_i| above this is rejected (a revisit is near)
   double sigma_position_m = 0.3;    // T_j_i covariance at min_inliers (see above)
   double sigma_rotation_rad = 0.02;
+  // Which loops are verified (the loop closer; 0 = no limit / no skipping). A revisit gives one loop per
+  // query frame; one verified edge every few frames is all the pose graph needs.
+  int max_per_query = 0;               // loops verified per query frame (the first ones submitted)
+  int skip_after_verified_frames = 0;  // skip (i, j) when (i', j') was verified with |i-i'|, |j-j'| <= N
+  int skip_after_rejected_frames = 0;  // the same after a rejected (i', j')
+  int feature_cache_frames = 64;       // ORB features kept per frame (detected once, reused)
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -54,6 +61,10 @@ struct VerifyConfig {
     v("max_translation_m", self.max_translation_m);
     v("sigma_position_m", self.sigma_position_m);
     v("sigma_rotation_rad", self.sigma_rotation_rad);
+    v("max_per_query", self.max_per_query);
+    v("skip_after_verified_frames", self.skip_after_verified_frames);
+    v("skip_after_rejected_frames", self.skip_after_rejected_frames);
+    v("feature_cache_frames", self.feature_cache_frames);
   }
   // Throws ConfigError naming verify.KEY and its bound.
   void validate() const;
@@ -75,6 +86,14 @@ struct VerifyFrame {
   Eigen::Isometry3d T_w_b = Eigen::Isometry3d::Identity();
 };
 
+// ORB features of one frame (detected once per frame, cacheable).
+struct OrbFeatures {
+  std::vector<cv::KeyPoint> keypoints;
+  cv::Mat descriptors;
+  std::vector<Eigen::Vector2d> xy;  // undistorted normalised coordinates
+  cv::Size image_size;
+};
+
 class GeometricVerifier {
  public:
   // `camera`: nullopt when the dataset has no calibration (every loop is then rejected with that reason).
@@ -83,6 +102,13 @@ class GeometricVerifier {
   // Loop (i, j): frame i, frame j and j's neighbour n = j + neighbour_offset_frames. Never throws on bad
   // input: the result says why it is not verified.
   VerifyResult verify(const VerifyFrame& i, const VerifyFrame& j, const VerifyFrame& n) const;
+
+  // The same from features detected beforehand (detect()): i's features, j's and n's with their poses.
+  VerifyResult verify(const OrbFeatures& i, const OrbFeatures& j, const Eigen::Isometry3d& T_w_bj,
+                      const OrbFeatures& n, const Eigen::Isometry3d& T_w_bn) const;
+
+  // ORB features of a grey image (none without a calibration or for an empty image).
+  OrbFeatures detect(const cv::Mat& image) const;
 
   // A reason when no loop can be verified at all (no calibration, images too small), else empty.
   std::string unusable_reason(const cv::Size& image_size) const;
