@@ -116,6 +116,22 @@ TEST(GeometricVerifier, RecoversTheBodyPoseWithARotatedCamera) {
   expect_recovered(scene(T_b_c));
 }
 
+TEST(GeometricVerifier, CachedFeaturesGiveTheSameResultAndItIsOffByDefault) {
+  EXPECT_FALSE(VerifyConfig{}.enabled);  // runs that do not ask for it are unchanged
+  const Scene s = scene(Eigen::Isometry3d::Identity());
+  const GeometricVerifier verifier(VerifyConfig{}, s.camera);
+  const VerifyResult from_frames = verifier.verify(s.i, s.j, s.n);
+  const VerifyResult from_features = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image),
+                                                     s.j.T_w_b, verifier.detect(s.n.image), s.n.T_w_b);
+  ASSERT_TRUE(from_features.verified) << from_features.reason;
+  EXPECT_EQ(from_features.inliers, from_frames.inliers);
+  EXPECT_TRUE(from_features.T_j_i.isApprox(from_frames.T_j_i));
+  // Features of an image too small are detected (none useful) and the loop is rejected with the reason.
+  const OrbFeatures tiny = verifier.detect(cv::Mat(32, 64, CV_8UC1, cv::Scalar(100)));
+  EXPECT_NE(verifier.verify(tiny, tiny, s.j.T_w_b, tiny, s.n.T_w_b).reason.find("image too small"),
+            std::string::npos);
+}
+
 TEST(GeometricVerifier, RejectsAnUnrelatedView) {
   const Scene s = scene(Eigen::Isometry3d::Identity(), 99);
   const GeometricVerifier verifier(VerifyConfig{}, s.camera);
