@@ -6,6 +6,7 @@ packages=(
   cmake ninja-build g++ pkg-config
   libeigen3-dev libopencv-dev libtbb-dev libspdlog-dev libcli11-dev libnanoflann-dev
   libyaml-cpp-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
+  libceres-dev
   python3-matplotlib python3-numpy
 )
 missing=()

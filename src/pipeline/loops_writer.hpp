@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "core/types.hpp"
@@ -25,6 +26,11 @@ class LoopsWriter {
   void write(std::size_t frame_i, std::size_t frame_j, Timestamp t_i_ns, Timestamp t_j_ns, double score);
   void flush() { csv_.flush(); }
   void close();
+  // Called with every loop as it is written (the loop closer's queue; set before the run starts).
+  void set_listener(std::function<void(const Detection&)> listener) { listener_ = std::move(listener); }
+  // After close(): writes the file again with `columns` appended to every row, `cells(k)` giving loop k's.
+  void rewrite_with(const std::vector<std::string>& columns,
+                    const std::function<std::vector<std::string>(std::size_t)>& cells);
 
   // Every loop written, (i, j, score) in dataset frame indices.
   const std::vector<Detection>& loops() const { return loops_; }
@@ -34,6 +40,9 @@ class LoopsWriter {
   CsvWriter csv_;
   Label label_i_, label_j_;
   std::vector<Detection> loops_;
+  std::vector<std::vector<std::string>> rows_;  // the cells written, for rewrite_with()
+  std::filesystem::path file_;
+  std::function<void(const Detection&)> listener_;
 };
 
 }  // namespace loopgate

@@ -16,6 +16,7 @@
 #include "io/file_guard.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
+#include "pipeline/loop_closer.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/parallel_handoff.hpp"
@@ -43,11 +44,14 @@ class PipelineRun {
         images_(dataset, seqs_),
         method_(make_detection_method({config, seqs_, images_, loops_, seqs_.capacity()},
                                       dataset.has_images(), dataset.root())),
+        closer_(config, dataset, range_.first, range_.second, method_->detects()),
         steps_(config, dataset, make_odometry_source(config.odometry, config.ekf, dataset), images_,
                method_->needs_every_image()),
         outputs_(config, out_dir, *method_, seqs_, clock_, steps_.odometry_source().needs_images(),
-                 seqs_.capacity()),
-        replay_(config.run, dataset, range_.first, clock_) {}
+                 seqs_.capacity(), &closer_),
+        replay_(config.run, dataset, range_.first, clock_) {
+    if (closer_.active()) loops_.set_listener([this](const Detection& loop) { closer_.submit(loop); });
+  }
 
   RunResult run();
 
@@ -110,6 +114,7 @@ class PipelineRun {
   ImageSource images_;
   LoopsWriter loops_;
   std::unique_ptr<DetectionMethod> method_;
+  LoopCloser closer_;  // verification + pose graph of the accepted loops, on its own thread
   FrameSteps steps_;
   RunOutputs outputs_;
   ReplayClock replay_;
@@ -193,8 +198,10 @@ RunResult PipelineRun::run() {
     sync = std::make_unique<Node>(*g, serial, body(kSync, true, [this](FrameRecord& r) { steps_.sync(r); }));
     decode = std::make_unique<Node>(*g, unlimited,
                                     body(kDecode, false, [this](FrameRecord& r) { steps_.decode(r); }));
-    odometry = std::make_unique<Node>(*g, serial,
-                                      body(kOdometry, true, [this](FrameRecord& r) { steps_.odometry(r); }));
+    odometry = std::make_unique<Node>(*g, serial, body(kOdometry, true, [this](FrameRecord& r) {
+      steps_.odometry(r);
+      closer_.record_pose(r.frame, r.usable_pose() ? std::optional(r.odometry.pose.T_w_b) : std::nullopt);
+    }));
     gate =
         std::make_unique<Node>(*g, serial, body(kGate, true, [this](FrameRecord& r) { method_->gate(r); }));
     describe = std::make_unique<Node>(
@@ -270,6 +277,9 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
     }
     write_output("loops.csv", [&] { loops_.close(); });
   }
+  const std::int64_t closer_start_ns = clock_.now_ns();
+  closer_.finish();  // the last loops' verification and the final pose-graph solve
+  const double loop_closure_ms = 1e-6 * static_cast<double>(clock_.now_ns() - closer_start_ns);
   const double end_of_stream_ms = 1e-6 * static_cast<double>(clock_.now_ns() - start_ns);
   {
     std::lock_guard failure_lock(failure_mutex_);
@@ -282,6 +292,16 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   result.peak_rss_mb = peak_rss_mb();
   for (std::string& error : outputs_.finish(true)) output_errors_.push_back(std::move(error));
   write_output("the method's files", [&] { method_->write_files(out_dir_); });
+  if (closer_.active()) {
+    write_output("loop_edges.csv and loops.csv's verification",
+                 [&] { closer_.write_files(out_dir_, loops_); });
+    write_output("trajectory_corrected.tum", [&] {
+      TumWriter corrected(out_dir_ / "trajectory_corrected.tum");
+      for (const StampedPose& pose : closer_.corrected(outputs_.tracked_poses()))
+        corrected.write(pose.t_ns, pose.T_w_b);
+      corrected.close();
+    });
+  }
   const RunCounters& counters = outputs_.counters();
   result.frames_in = replay_.frames_in();
   result.frames_dropped = replay_.frames_dropped();
@@ -299,9 +319,12 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
           "deadline misses; real-time factor {:.2f}\n",
           result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
           result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
-          result.realtime_factor);
-  RunParts parts{config_, dataset_, range_.first,          range_.second, *method_,         outputs_,
-                 loops_,  images_,  steps_.synchronizer(), seqs_,         end_of_stream_ms, std::nullopt};
+          result.realtime_factor) +
+      closer_.profile_line() +
+      (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
+  RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
+                 outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
+                 end_of_stream_ms, std::nullopt, &closer_};
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
   // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
   const std::size_t processed = outputs_.frames_through();
@@ -357,10 +380,13 @@ std::vector<std::string> PipelineRun::missing_outputs() const {
 }  // namespace
 
 const std::vector<std::string>& run_output_file_names() {
-  static const std::vector<std::string> names = {
-      "frames.csv",          "loops.csv",           "trajectory.tum",   "timing.csv",
-      "summary.json",        "trace.json",          "ground_truth.tum", "truth_loops.csv",
-      "candidate_areas.csv", "candidate_cells.csv", "descriptors.csv",  "descriptor.csv"};
+  static const std::vector<std::string> names = {"frames.csv",          "loops.csv",
+                                                 "trajectory.tum",      "timing.csv",
+                                                 "summary.json",        "trace.json",
+                                                 "ground_truth.tum",    "truth_loops.csv",
+                                                 "candidate_areas.csv", "candidate_cells.csv",
+                                                 "descriptors.csv",     "descriptor.csv",
+                                                 "loop_edges.csv",      "trajectory_corrected.tum"};
   return names;
 }
 

@@ -16,8 +16,10 @@
 #include "stages/match/contrast_search.hpp"
 #include "stages/match/match_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
+#include "stages/posegraph/pose_graph.hpp"
 #include "stages/seqslam/seqslam_config.hpp"
 #include "stages/sync/imu_sync.hpp"
+#include "stages/verify/geometric_verifier.hpp"
 
 namespace loopgate {
 
@@ -209,6 +211,10 @@ struct PipelineConfig {
   // and the contrast enhancement and sequence search (stages/match/contrast_search.hpp); its sequence
   // length is match.sequence_length, its margin match.margin.
   DirdSeqSlamConfig dird_seqslam;
+  // Loop closures that correct the trajectory (issue 13): geometric verification of every accepted loop and
+  // the pose graph they feed (trajectory_corrected.tum, loop_edges.csv).
+  VerifyConfig verify;
+  PoseGraphConfig posegraph;
   EvalConfig eval;
   OutputConfig output;
 
@@ -227,6 +233,8 @@ struct PipelineConfig {
     v("scale", self.scale);
     v("seqslam", self.seqslam);
     v("dird_seqslam", self.dird_seqslam);
+    v("verify", self.verify);
+    v("posegraph", self.posegraph);
     v("eval", self.eval);
     v("output", self.output);
   }
@@ -242,6 +250,8 @@ struct PipelineConfig {
     scale.validate();
     seqslam.validate();
     dird_seqslam.validate();
+    verify.validate();
+    posegraph.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
     eval.validate();
     output.validate();

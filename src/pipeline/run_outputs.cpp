@@ -28,7 +28,7 @@ std::string join_messages(const std::vector<std::string>& messages) {
 
 RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
                        DetectionMethod& method, const SeqIndex& seqs, const RunClock& clock,
-                       bool visual_odometry, std::size_t total_frames)
+                       bool visual_odometry, std::size_t total_frames, const LoopCloser* closer)
     : config_(config),
       out_dir_(out_dir),
       method_(method),
@@ -36,6 +36,7 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
       clock_(clock),
       visual_odometry_(visual_odometry),
       total_frames_(total_frames),
+      closer_(closer),
       profiler_({kStageNames.begin(), kStageNames.end()}) {
   const std::string& progress = config.output.progress;
   show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
@@ -93,6 +94,7 @@ void RunOutputs::open() {
   CsvRow header;
   add_frame_cells(FrameRecord{}, "", "", header);
   if (method_.detects()) add_detection_cells(std::nullopt, header);
+  if (method_.detects() && geometry_column()) header.add("geometry", "");
   frames_csv_.open(out_dir_ / "frames.csv", header.names());
   std::vector<std::string> timing_columns = {"seq", "frame"};
   for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
@@ -115,7 +117,11 @@ void RunOutputs::sink(FrameRecord& r) {
   CsvRow row;
   add_frame_cells(r, status, reason, row);
   if (method_.detects()) {
-    held_.push_back(HeldRow{static_cast<std::size_t>(r.seq), std::move(row)});
+    HeldRow held;
+    held.seq = static_cast<std::size_t>(r.seq);
+    held.frame = r.frame;
+    held.row = std::move(row);
+    held_.push_back(std::move(held));
     write_ready_rows(false);
   } else {
     frames_csv_.write_row(row.values());
@@ -174,10 +180,21 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
 void RunOutputs::write_ready_rows(bool end_of_stream) {
   while (!held_.empty()) {
     HeldRow& held = held_.front();
-    const std::optional<FrameVerdict> verdict = method_.detection(held.seq);
-    if (!verdict && !end_of_stream) return;
+    if (!held.final) {
+      held.verdict = method_.detection(held.seq);
+      if (!held.verdict && !end_of_stream) return;
+      held.final = true;
+    }
+    const std::optional<FrameVerdict>& verdict = held.verdict;
+    // A loop frame's row also waits for the verification of its loops (the loop closer's worker).
+    std::optional<std::string> geometry;
+    if (geometry_column()) {
+      geometry = closer_->geometry_cell(held.frame);
+      if (!geometry && !end_of_stream) return;
+    }
     if (verdict) counters_.count(verdict->detection.outcome);
     add_detection_cells(verdict, held.row);
+    if (geometry_column()) held.row.add("geometry", geometry.value_or(""));
     frames_csv_.write_row(held.row.values());
     held_.pop_front();
   }

@@ -14,6 +14,7 @@
 #include "pipeline/csv_row.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_record.hpp"
+#include "pipeline/loop_closer.hpp"
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_counters.hpp"
 #include "pipeline/stage_profiler.hpp"
@@ -24,7 +25,8 @@ class RunOutputs {
  public:
   // `visual_odometry`: frames.csv gets tracked_features; `total_frames`: for the progress line.
   RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir, DetectionMethod& method,
-             const SeqIndex& seqs, const RunClock& clock, bool visual_odometry, std::size_t total_frames);
+             const SeqIndex& seqs, const RunClock& clock, bool visual_odometry, std::size_t total_frames,
+             const LoopCloser* closer = nullptr);
 
   void open();
   // The frame leaving the graph: its frames.csv row (or held), trajectory, counters, timing, trace.
@@ -44,6 +46,7 @@ class RunOutputs {
   void add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
                        CsvRow& row) const;
   void add_detection_cells(const std::optional<FrameVerdict>& verdict, CsvRow& row) const;
+  bool geometry_column() const { return closer_ && closer_->active(); }
   void write_ready_rows(bool end_of_stream);
   void timing(FrameRecord& r, std::int64_t exit_ns);
   void show_progress(bool final);
@@ -55,6 +58,7 @@ class RunOutputs {
   const RunClock& clock_;
   bool visual_odometry_;
   std::size_t total_frames_;
+  const LoopCloser* closer_;  // frames.csv "geometry": a loop frame's row waits for its verification
   bool show_progress_ = false;
   std::int64_t last_progress_ns_ = 0;
 
@@ -68,7 +72,10 @@ class RunOutputs {
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection
     std::size_t seq = 0;
+    std::size_t frame = 0;
     CsvRow row;
+    bool final = false;                   // the method's detection is known (asked once per seq)
+    std::optional<FrameVerdict> verdict;  // then: the method's detection
   };
   std::deque<HeldRow> held_;
 };

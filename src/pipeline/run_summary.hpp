@@ -17,6 +17,7 @@ class Dataset;
 class ImageSource;
 class ImuSynchronizer;
 class LoopsWriter;
+class LoopCloser;
 class RunOutputs;
 
 struct RunParts {
@@ -33,6 +34,7 @@ struct RunParts {
   // The evaluation's frames are [first_frame, evaluated_end_frame): those the run got to (an interrupted
   // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
   std::optional<std::size_t> evaluated_end_frame;
+  const LoopCloser* closer = nullptr;
 };
 
 // Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not

@@ -1,0 +1,440 @@
+#include "pipeline/loop_closer.hpp"
+
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <numeric>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "io/writers.hpp"
+#include "pipeline/loops_writer.hpp"
+#include "pipeline/pipeline_config.hpp"
+
+namespace loopgate {
+
+namespace {
+
+double ms_since(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+nlohmann::json stats_json(std::vector<double> values) {
+  if (values.empty()) return {{"count", 0}, {"total_ms", 0.0}};
+  std::sort(values.begin(), values.end());
+  const auto at = [&](double q) {
+    return values[std::min(values.size() - 1,
+                           static_cast<std::size_t>(q * static_cast<double>(values.size())))];
+  };
+  return {{"count", values.size()},
+          {"p50_ms", at(0.5)},
+          {"p90_ms", at(0.9)},
+          {"max_ms", values.back()},
+          {"total_ms", std::accumulate(values.begin(), values.end(), 0.0)}};
+}
+
+}  // namespace
+
+LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std::size_t first_frame,
+                       std::size_t last_frame, bool detects)
+    : dataset_(dataset),
+      first_(first_frame),
+      last_(last_frame),
+      active_(detects && config.verify.enabled),
+      verify_config_(config.verify),
+      graph_config_(config.posegraph),
+      verifier_(config.verify, dataset.camera()) {
+  if (!active_) return;
+  poses_.resize(last_ - first_);
+  pending_by_frame_.assign(last_ - first_, 0);
+  if (!dataset.has_images()) {
+    unusable_ = "geometry: the dataset has no images";
+  } else if (const auto camera = dataset.camera()) {
+    unusable_ = verifier_.unusable_reason(cv::Size(camera->width_px, camera->height_px));
+  } else {
+    unusable_ = verifier_.unusable_reason(cv::Size(0, 0));
+  }
+  if (!unusable_.empty()) spdlog::warn("verify: loops are not verified: {}", unusable_);
+  worker_ = std::thread([this] { work(); });
+}
+
+LoopCloser::~LoopCloser() {
+  if (worker_.joinable()) {
+    {
+      std::lock_guard lock(mutex_);
+      stopping_ = true;
+    }
+    wake_.notify_all();
+    worker_.join();
+  }
+}
+
+void LoopCloser::record_pose(std::size_t frame, const std::optional<Eigen::Isometry3d>& T_w_b) {
+  if (!active_ || frame < first_ || frame >= last_) return;
+  poses_[frame - first_] = T_w_b;
+}
+
+std::optional<Eigen::Isometry3d> LoopCloser::pose_of(std::size_t frame) const {
+  if (frame < first_ || frame >= last_) return std::nullopt;
+  return poses_[frame - first_];
+}
+
+void LoopCloser::submit(const Detection& loop) {
+  if (!active_) return;
+  {
+    std::lock_guard lock(mutex_);
+    queue_.push_back(loop);
+    if (loop.query >= first_ && loop.query < last_) ++pending_by_frame_[loop.query - first_];
+  }
+  wake_.notify_all();
+}
+
+std::optional<std::string> LoopCloser::geometry_cell(std::size_t frame) const {
+  if (!active_) return std::string();
+  std::lock_guard lock(mutex_);
+  if (frame >= first_ && frame < last_ && pending_by_frame_[frame - first_] > 0) return std::nullopt;
+  std::string cell;
+  for (const LoopResult& r : results_) {
+    if (r.loop.query != frame) continue;
+    cell += (cell.empty() ? "" : "; ") +
+            (r.result.verified ? fmt::format("verified j={} ({} inliers)", r.loop.reference, r.result.inliers)
+                               : fmt::format("j={} {}", r.loop.reference, r.result.reason));
+  }
+  return cell;
+}
+
+std::shared_ptr<const OrbFeatures> LoopCloser::features_of(std::size_t frame) {
+  if (const auto it = feature_cache_.find(frame); it != feature_cache_.end()) return it->second;
+  auto features = std::make_shared<const OrbFeatures>(verifier_.detect(dataset_.load_image(frame)));
+  feature_cache_.emplace(frame, features);
+  feature_cache_order_.push_back(frame);
+  while (feature_cache_order_.size() > static_cast<std::size_t>(verify_config_.feature_cache_frames)) {
+    feature_cache_.erase(feature_cache_order_.front());
+    feature_cache_order_.pop_front();
+  }
+  return features;
+}
+
+std::string LoopCloser::skip_reason(const Detection& loop) const {
+  const auto near = [](std::size_t a, std::size_t b, int window) {
+    return (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
+  };
+  int tried_for_query = 0;
+  for (auto it = results_.rbegin(); it != results_.rend(); ++it) {
+    const LoopResult& r = *it;
+    if (r.skipped) continue;
+    if (r.loop.query == loop.query) ++tried_for_query;
+    const int window = r.result.verified ? verify_config_.skip_after_verified_frames
+                                         : verify_config_.skip_after_rejected_frames;
+    if (window > 0 && near(r.loop.query, loop.query, window) &&
+        near(r.loop.reference, loop.reference, window))
+      return fmt::format("skipped: near ({}, {}) {}", r.loop.query, r.loop.reference,
+                         r.result.verified ? "verified" : "rejected");
+  }
+  if (verify_config_.max_per_query > 0 && tried_for_query >= verify_config_.max_per_query)
+    return fmt::format("skipped: {} loop(s) of frame {} already verified", tried_for_query, loop.query);
+  return {};
+}
+
+LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
+  LoopResult out;
+  out.loop = loop;
+  if (unusable_.empty()) {
+    if (std::string why = skip_reason(loop); !why.empty()) {
+      out.result.reason = std::move(why);
+      out.skipped = true;
+      return out;
+    }
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const int k = verify_config_.neighbour_offset_frames;
+  const auto shifted = [&](int offset) -> std::optional<std::size_t> {
+    const auto n = static_cast<std::int64_t>(loop.reference) + offset;
+    if (n < static_cast<std::int64_t>(first_) || n >= static_cast<std::int64_t>(last_)) return std::nullopt;
+    return static_cast<std::size_t>(n);
+  };
+  std::optional<std::size_t> neighbour = shifted(k);
+  if (!neighbour || !pose_of(*neighbour) || *neighbour >= loop.query) neighbour = shifted(-k);
+  if (!unusable_.empty()) {
+    out.result.reason = unusable_;
+  } else if (!neighbour || !pose_of(*neighbour) || !pose_of(loop.reference)) {
+    out.result.reason =
+        fmt::format("geometry: no odometry pose for frame {} or its neighbour", loop.reference);
+  } else {
+    out.neighbour = *neighbour;
+    try {
+      const std::shared_ptr<const OrbFeatures> i = features_of(loop.query);
+      const std::shared_ptr<const OrbFeatures> j = features_of(loop.reference);
+      const std::shared_ptr<const OrbFeatures> n = features_of(*neighbour);
+      if (i->image_size.empty() || j->image_size.empty() || n->image_size.empty()) {
+        out.result.reason = "geometry: image missing";
+      } else {
+        out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour));
+      }
+    } catch (const std::exception& e) {
+      out.result.reason = std::string("geometry: ") + e.what();
+    }
+  }
+  out.verify_ms = ms_since(start);
+  return out;
+}
+
+void LoopCloser::work() {
+  for (;;) {
+    Detection loop;
+    {
+      std::unique_lock lock(mutex_);
+      wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+      if (queue_.empty()) return;  // stopping, nothing left
+      loop = queue_.front();
+    }
+    LoopResult result = verify_one(loop);
+    bool solve_now = false;
+    std::size_t last = 0;
+    {
+      std::lock_guard lock(mutex_);
+      queue_.pop_front();
+      if (loop.query >= first_ && loop.query < last_) --pending_by_frame_[loop.query - first_];
+      results_.push_back(std::move(result));
+      const std::size_t verified = static_cast<std::size_t>(std::count_if(
+          results_.begin(), results_.end(), [](const LoopResult& r) { return r.result.verified; }));
+      solve_now = graph_config_.enabled && graph_config_.optimize_on_loop && queue_.empty() && !stopping_ &&
+                  verified > verified_at_last_solve_;
+      if (solve_now) verified_at_last_solve_ = verified;
+      last = loop.query;
+    }
+    if (solve_now) {
+      try {
+        solve(last, false);
+      } catch (const std::exception& e) {
+        spdlog::warn("posegraph: solve while streaming failed: {}", e.what());
+      }
+    }
+  }
+}
+
+void LoopCloser::solve(std::size_t last, bool final) {
+  std::vector<LoopResult> loops;
+  {
+    std::lock_guard lock(mutex_);
+    for (const LoopResult& r : results_)
+      if (r.result.verified) loops.push_back(r);
+  }
+  const std::size_t span = std::min(last + 1, last_) - first_;
+  std::vector<char> is_node(span, 0);
+  const auto every = static_cast<std::size_t>(graph_config_.node_every_frames);
+  for (std::size_t k = 0; k < span; ++k) is_node[k] = (k % every == 0) && poses_[k].has_value();
+  for (const LoopResult& r : loops) {
+    for (const std::size_t f : {r.loop.query, r.loop.reference})
+      if (f >= first_ && f - first_ < span && poses_[f - first_]) is_node[f - first_] = 1;
+  }
+  PoseGraph graph(graph_config_);
+  std::vector<std::int64_t> node_of(span, -1);
+  std::vector<std::size_t> frames;
+  for (std::size_t k = 0; k < span; ++k) {
+    if (!is_node[k]) continue;
+    node_of[k] = static_cast<std::int64_t>(graph.add_node(*poses_[k]));
+    frames.push_back(first_ + k);
+  }
+  for (std::size_t n = 1; n < frames.size(); ++n) {
+    const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
+    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, graph_config_.odometry_cov(T_a_b));
+  }
+  // Loop edges (the loop's query and reference frame must both be nodes), keyed by (i, j) for the report.
+  std::vector<std::pair<std::pair<std::size_t, std::size_t>, std::size_t>> edge_of_loop;
+  for (const LoopResult& r : loops) {
+    if (r.loop.query - first_ >= span) continue;
+    const std::int64_t a = node_of[r.loop.reference - first_];
+    const std::int64_t b = node_of[r.loop.query - first_];
+    if (a < 0 || b < 0) continue;
+    edge_of_loop.push_back({{r.loop.query, r.loop.reference}, graph.edges().size()});
+    graph.add_edge(static_cast<std::size_t>(a), static_cast<std::size_t>(b), EdgeKind::kLoop, r.result.T_j_i,
+                   r.result.cov);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  const SolveReport report = graph.optimize(final, final ? 0.0 : graph_config_.max_solve_s);
+  const double ms = ms_since(start);
+  spdlog::debug(
+      "posegraph: {} nodes, {} loop edges ({} outliers), {} iterations, cost {:.3g} -> {:.3g}, {:.1f} ms",
+      graph.node_count(), report.loop_edges, report.outliers, report.iterations, report.initial_cost,
+      report.final_cost, ms);
+  if (!final) {
+    solve_ms_.push_back(ms);
+    return;
+  }
+  final_solve_ms_ = ms;
+  final_report_ = report;
+  nodes_ = frames;
+  node_poses_.clear();
+  for (std::size_t n = 0; n < graph.node_count(); ++n) node_poses_.push_back(graph.pose(n));
+  // Mark the outlier loops (in submission order, like edge_of_loop).
+  std::size_t next = 0;
+  std::lock_guard lock(mutex_);
+  for (LoopResult& r : results_) {
+    if (!r.result.verified || next >= edge_of_loop.size()) continue;
+    if (edge_of_loop[next].first != std::pair(r.loop.query, r.loop.reference)) continue;
+    const PoseGraphEdge& edge = graph.edges().at(edge_of_loop[next++].second);
+    r.outlier = edge.outlier;
+    r.chi2 = edge.chi2;
+  }
+}
+
+void LoopCloser::finish() {
+  if (!active_) return;
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+  }
+  wake_.notify_all();
+  if (worker_.joinable()) worker_.join();
+  if (!graph_config_.enabled) return;
+  try {
+    solve(last_ - 1, true);
+  } catch (const std::exception& e) {
+    spdlog::error("posegraph: the final solve failed: {}", e.what());
+    nodes_.clear();
+    node_poses_.clear();
+  }
+  std::size_t verified = 0, skipped = 0;
+  for (const LoopResult& r : results_) {
+    verified += r.result.verified ? 1 : 0;
+    skipped += r.skipped ? 1 : 0;
+  }
+  spdlog::info(
+      "loop closure: {} loops, {} verified, {} rejected by geometry, {} skipped, {} outliers in the pose "
+      "graph; final solve {:.1f} ms",
+      results_.size(), verified, results_.size() - verified - skipped, skipped, final_report_.outliers,
+      final_solve_ms_);
+}
+
+std::vector<StampedPose> LoopCloser::corrected(const std::vector<StampedPose>& tracked) const {
+  if (nodes_.empty()) return tracked;
+  std::vector<StampedPose> out;
+  out.reserve(tracked.size());
+  // tracked poses are in frame order; nodes_ too. A frame takes the correction of the last node at or before
+  // it (the first node for frames before it): T_corr(f) = T_corr(node) T_odo(node)^-1 T_odo(f).
+  std::size_t n = 0;
+  for (const StampedPose& pose : tracked) {
+    while (n + 1 < nodes_.size() && dataset_.frame_t_ns(nodes_[n + 1]) <= pose.t_ns) ++n;
+    const Eigen::Isometry3d& T_odo_node = *poses_[nodes_[n] - first_];
+    out.push_back({pose.t_ns, node_poses_[n] * T_odo_node.inverse() * pose.T_w_b});
+  }
+  return out;
+}
+
+void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& loops) const {
+  if (!active_) return;
+  CsvWriter edges(out_dir / "loop_edges.csv", {"i",
+                                               "j",
+                                               "neighbour",
+                                               "verified",
+                                               "inliers",
+                                               "matches",
+                                               "points",
+                                               "reason",
+                                               "x_m",
+                                               "y_m",
+                                               "z_m",
+                                               "qx",
+                                               "qy",
+                                               "qz",
+                                               "qw",
+                                               "sigma_position_m",
+                                               "sigma_rotation_rad",
+                                               "graph_outlier",
+                                               "chi2",
+                                               "verify_ms"});
+  const auto cells = [](const LoopResult& r) {
+    const Eigen::Vector3d t = r.result.T_j_i.translation();
+    const Eigen::Quaterniond q(r.result.T_j_i.rotation());
+    const bool v = r.result.verified;
+    const auto num = [v](double x) { return v ? format_fixed(x, 6) : std::string(); };
+    return std::vector<std::string>{v ? "y" : (r.skipped ? "skipped" : "n"),
+                                    std::to_string(r.result.inliers),
+                                    r.result.reason,
+                                    num(t.x()),
+                                    num(t.y()),
+                                    num(t.z()),
+                                    num(q.x()),
+                                    num(q.y()),
+                                    num(q.z()),
+                                    num(q.w())};
+  };
+  for (const LoopResult& r : results_) {
+    const std::vector<std::string> c = cells(r);
+    const bool v = r.result.verified;
+    edges.write_row({std::to_string(r.loop.query),
+                     std::to_string(r.loop.reference),
+                     r.neighbour ? std::to_string(r.neighbour) : "",
+                     c[0],
+                     c[1],
+                     std::to_string(r.result.matches),
+                     std::to_string(r.result.points),
+                     c[2],
+                     c[3],
+                     c[4],
+                     c[5],
+                     c[6],
+                     c[7],
+                     c[8],
+                     c[9],
+                     v ? format_fixed(std::sqrt(r.result.cov(0, 0)), 6) : "",
+                     v ? format_fixed(std::sqrt(r.result.cov(3, 3)), 6) : "",
+                     v ? (r.outlier ? "y" : "n") : "",
+                     v ? format_fixed(r.chi2, 3) : "",
+                     format_fixed(r.verify_ms, 3)});
+  }
+  edges.close();
+  // loops.csv: one row per loop written, in the same order as the loops were submitted.
+  if (loops.count() == results_.size()) {
+    loops.rewrite_with(
+        {"verified", "inliers", "geometry_reason", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw"},
+        [&](std::size_t k) { return cells(results_[k]); });
+  }
+}
+
+nlohmann::json LoopCloser::summary() const {
+  std::size_t verified = 0, outliers = 0, skipped = 0;
+  std::vector<double> verify_ms;
+  for (const LoopResult& r : results_) {
+    verified += r.result.verified ? 1 : 0;
+    outliers += r.outlier ? 1 : 0;
+    skipped += r.skipped ? 1 : 0;
+    if (!r.skipped) verify_ms.push_back(r.verify_ms);
+  }
+  return {{"enabled", active_},
+          {"unusable_reason", unusable_},
+          {"loops", results_.size()},
+          {"verified", verified},
+          {"rejected_geometry", results_.size() - verified - skipped},
+          {"skipped", skipped},
+          {"graph_outliers", outliers},
+          {"graph_nodes", nodes_.size()},
+          {"verify", stats_json(verify_ms)},
+          {"optimize_streaming", stats_json(solve_ms_)},
+          {"optimize_final",
+           {{"ms", final_solve_ms_},
+            {"iterations", final_report_.iterations},
+            {"initial_cost", final_report_.initial_cost},
+            {"final_cost", final_report_.final_cost},
+            {"converged", final_report_.converged}}}};
+}
+
+std::string LoopCloser::profile_line() const {
+  if (!active_) return {};
+  std::vector<double> verify_ms;
+  for (const LoopResult& r : results_)
+    if (!r.skipped) verify_ms.push_back(r.verify_ms);
+  const double verify_total = std::accumulate(verify_ms.begin(), verify_ms.end(), 0.0);
+  const double solve_total = std::accumulate(solve_ms_.begin(), solve_ms_.end(), 0.0);
+  return fmt::format(
+      "loop closure (off the frame path): verify {} loops {:.1f} ms ({:.1f} ms/loop); {} streaming solves "
+      "{:.1f} ms; final solve {:.1f} ms\n",
+      verify_ms.size(), verify_total,
+      verify_ms.empty() ? 0.0 : verify_total / static_cast<double>(verify_ms.size()), solve_ms_.size(),
+      solve_total, final_solve_ms_);
+}
+
+}  // namespace loopgate

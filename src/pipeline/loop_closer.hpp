@@ -1,0 +1,112 @@
+// Loop closures that correct the trajectory (issue 13): every loop the method accepts (LoopsWriter's
+// listener) is queued to one worker thread that verifies it geometrically (stages/verify) and, while the
+// stream runs, solves the pose graph (stages/posegraph) whenever verified loops arrived, bounded by
+// posegraph.max_solve_s. Nothing of the frame's path waits for it: the sink only holds a loop frame's
+// frames.csv row until that frame's loops are verified. At the end of the stream finish() drains the queue
+// and solves once more from the odometry poses (no time bound), so every output depends only on the loops
+// and the poses, never on the timing of the solves in between: trajectory_corrected.tum, loop_edges.csv,
+// the verification columns of loops.csv and frames.csv, summary fields.
+#pragma once
+
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "core/types.hpp"
+#include "eval/precision_recall.hpp"
+#include "stages/posegraph/pose_graph.hpp"
+#include "stages/verify/geometric_verifier.hpp"
+
+namespace loopgate {
+
+class Dataset;
+struct PipelineConfig;
+class LoopsWriter;
+
+class LoopCloser {
+ public:
+  // Frames [first_frame, last_frame) of `dataset`. Inactive (does nothing) unless enabled and the run
+  // detects.
+  LoopCloser(const PipelineConfig& config, const Dataset& dataset, std::size_t first_frame,
+             std::size_t last_frame, bool detects);
+  ~LoopCloser();
+  LoopCloser(const LoopCloser&) = delete;
+  LoopCloser& operator=(const LoopCloser&) = delete;
+
+  bool active() const { return active_; }
+  // The odometry node (serial), once per frame: the pose the verifier and the graph use (nullopt: none).
+  void record_pose(std::size_t frame, const std::optional<Eigen::Isometry3d>& T_w_b);
+  // A loop accepted by the method (match node or end of stream); queued in this order.
+  void submit(const Detection& loop);
+  // frames.csv's "geometry" cell of frame `frame` once every loop of that query frame is verified
+  // (empty when it has none), nullopt while one is pending.
+  std::optional<std::string> geometry_cell(std::size_t frame) const;
+  // After the last submit(): drains the queue, solves the final graph.
+  void finish();
+
+  // After finish(): the files and the summary fields.
+  void write_files(const std::filesystem::path& out_dir, LoopsWriter& loops) const;
+  // tracked poses of the run -> corrected poses (same times).
+  std::vector<StampedPose> corrected(const std::vector<StampedPose>& tracked) const;
+  nlohmann::json summary() const;
+  std::string profile_line() const;
+
+ private:
+  struct LoopResult {
+    Detection loop;
+    std::size_t neighbour = 0;
+    VerifyResult result;
+    double verify_ms = 0;
+    bool outlier = false;  // switched off by the final solve
+    double chi2 = 0;
+    bool skipped = false;  // not verified by choice (verify.max_per_query, skip_after_*_frames)
+  };
+  void work();
+  LoopResult verify_one(const Detection& loop);
+  // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
+  std::string skip_reason(const Detection& loop) const;
+  // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
+  std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);
+  // Builds the graph from the poses of frames <= last and the verified loops so far; solves.
+  void solve(std::size_t last, bool final);
+  std::optional<Eigen::Isometry3d> pose_of(std::size_t frame) const;
+
+  const Dataset& dataset_;
+  std::size_t first_ = 0, last_ = 0;
+  bool active_ = false;
+  VerifyConfig verify_config_;
+  PoseGraphConfig graph_config_;
+  GeometricVerifier verifier_;
+  std::string unusable_;  // the reason no loop can be verified (empty: they can)
+  std::vector<std::optional<Eigen::Isometry3d>> poses_;  // by frame - first, written once each
+
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::deque<Detection> queue_;
+  std::vector<LoopResult> results_;    // in submission order
+  std::vector<int> pending_by_frame_;  // loops of query frame f queued, not yet verified
+  bool stopping_ = false;
+  std::thread worker_;
+
+  // Worker-only (and finish(), after the join).
+  std::unordered_map<std::size_t, std::shared_ptr<const OrbFeatures>> feature_cache_;
+  std::deque<std::size_t> feature_cache_order_;  // oldest first
+  std::size_t verified_at_last_solve_ = 0;
+  std::vector<double> solve_ms_;  // solves while streaming
+  double final_solve_ms_ = 0;
+  SolveReport final_report_;
+  std::vector<std::size_t> nodes_;  // frames of the final graph's nodes
+  std::vector<Eigen::Isometry3d> node_poses_;
+};
+
+}  // namespace loopgate

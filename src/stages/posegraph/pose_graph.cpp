@@ -1,0 +1,191 @@
+#include "stages/posegraph/pose_graph.hpp"
+
+#include <ceres/ceres.h>
+
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+namespace {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+// r = sqrt_information * [R_a^T (p_b - p_a) - t_ab ; 2 vec(q_ab_measured^-1 q_a^-1 q_b)].
+class RelativePoseCost {
+ public:
+  RelativePoseCost(const Eigen::Isometry3d& T_a_b, const Matrix6d& sqrt_information)
+      : t_a_b_(T_a_b.translation()), q_a_b_(T_a_b.rotation()), sqrt_information_(sqrt_information) {}
+
+  template <class T>
+  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, T* residual) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
+    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
+    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
+    const Eigen::Matrix<T, 3, 1> p_ab = q_a_inverse * (p_b - p_a);
+    const Eigen::Quaternion<T> q_error = q_a_b_.template cast<T>().conjugate() * (q_a_inverse * q_b);
+    Eigen::Map<Eigen::Matrix<T, 6, 1>> r(residual);
+    r.template head<3>() = p_ab - t_a_b_.template cast<T>();
+    r.template tail<3>() = T(2.0) * q_error.vec();
+    r.applyOnTheLeft(sqrt_information_.template cast<T>());
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d t_a_b_;
+  Eigen::Quaterniond q_a_b_;
+  Matrix6d sqrt_information_;
+};
+
+Eigen::Isometry3d to_isometry(const std::array<double, 7>& s) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(s[0], s[1], s[2]);
+  T.linear() = Eigen::Quaterniond(s[6], s[3], s[4], s[5]).normalized().toRotationMatrix();
+  return T;
+}
+
+std::array<double, 7> to_state(const Eigen::Isometry3d& T) {
+  const Eigen::Quaterniond q(T.rotation());
+  const Eigen::Vector3d& t = T.translation();
+  return {t.x(), t.y(), t.z(), q.x(), q.y(), q.z(), q.w()};
+}
+
+}  // namespace
+
+void PoseGraphConfig::validate() const {
+  const auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
+  const auto non_negative = [](double v) { return std::isfinite(v) && v >= 0.0; };
+  if (node_every_frames < 1) throw ConfigError("posegraph.node_every_frames: must be >= 1");
+  if (!non_negative(odometry_sigma_position_m_per_sqrt_m))
+    throw ConfigError("posegraph.odometry_sigma_position_m_per_sqrt_m: must be a finite number >= 0");
+  if (!positive(odometry_sigma_position_floor_m))
+    throw ConfigError("posegraph.odometry_sigma_position_floor_m: must be a finite number > 0");
+  if (!non_negative(odometry_sigma_rotation_rad_per_sqrt_m))
+    throw ConfigError("posegraph.odometry_sigma_rotation_rad_per_sqrt_m: must be a finite number >= 0");
+  if (!positive(odometry_sigma_rotation_floor_rad))
+    throw ConfigError("posegraph.odometry_sigma_rotation_floor_rad: must be a finite number > 0");
+  if (loss != "cauchy" && loss != "huber" && loss != "none")
+    throw ConfigError("posegraph.loss: '" + loss + "' is not one of: cauchy, huber, none");
+  if (!positive(loss_scale)) throw ConfigError("posegraph.loss_scale: must be a finite number > 0");
+  if (!positive(outlier_chi2)) throw ConfigError("posegraph.outlier_chi2: must be a finite number > 0");
+  if (max_iterations < 1) throw ConfigError("posegraph.max_iterations: must be >= 1");
+  if (!non_negative(max_solve_s)) throw ConfigError("posegraph.max_solve_s: must be a finite number >= 0");
+}
+
+Eigen::Matrix<double, 6, 6> PoseGraphConfig::odometry_cov(const Eigen::Isometry3d& T_a_b) const {
+  const double root_d = std::sqrt(T_a_b.translation().norm());
+  const double sigma_p = odometry_sigma_position_floor_m + odometry_sigma_position_m_per_sqrt_m * root_d;
+  const double sigma_r = odometry_sigma_rotation_floor_rad + odometry_sigma_rotation_rad_per_sqrt_m * root_d;
+  Matrix6d cov = Matrix6d::Zero();
+  cov.topLeftCorner<3, 3>().diagonal().setConstant(sigma_p * sigma_p);
+  cov.bottomRightCorner<3, 3>().diagonal().setConstant(sigma_r * sigma_r);
+  return cov;
+}
+
+PoseGraph::PoseGraph(const PoseGraphConfig& config) : config_(config) {}
+
+std::size_t PoseGraph::add_node(const Eigen::Isometry3d& T_w_b) {
+  initial_.push_back(T_w_b);
+  state_.push_back(to_state(T_w_b));
+  return initial_.size() - 1;
+}
+
+void PoseGraph::add_edge(std::size_t a, std::size_t b, EdgeKind kind, const Eigen::Isometry3d& T_a_b,
+                         const Eigen::Matrix<double, 6, 6>& cov) {
+  if (a >= node_count() || b >= node_count() || a == b)
+    throw std::invalid_argument("pose graph edge between unknown or equal nodes");
+  const Eigen::LLT<Matrix6d> cov_llt(cov);
+  if (!cov.allFinite() || cov_llt.info() != Eigen::Success)
+    throw std::invalid_argument("pose graph edge covariance is not positive definite");
+  const Eigen::LLT<Matrix6d> llt(cov.inverse());
+  if (llt.info() != Eigen::Success || !llt.matrixU().toDenseMatrix().allFinite())
+    throw std::invalid_argument("pose graph edge covariance is not positive definite");
+  PoseGraphEdge edge;
+  edge.a = a;
+  edge.b = b;
+  edge.kind = kind;
+  edge.T_a_b = T_a_b;
+  edge.sqrt_information = llt.matrixU();  // U^T U = information, so |U r|^2 = r^T information r
+  edges_.push_back(edge);
+}
+
+Eigen::Isometry3d PoseGraph::pose(std::size_t id) const {
+  return to_isometry(state_.at(id));
+}
+
+SolveReport PoseGraph::optimize(bool from_initial, double max_seconds) {
+  if (from_initial) {
+    for (std::size_t k = 0; k < initial_.size(); ++k) state_[k] = to_state(initial_[k]);
+  }
+  for (PoseGraphEdge& e : edges_) e.outlier = false;
+  SolveReport report = solve_once(max_seconds);
+  std::size_t outliers = 0;
+  for (PoseGraphEdge& e : edges_) {
+    if (e.kind == EdgeKind::kLoop && e.chi2 > config_.outlier_chi2) {
+      e.outlier = true;
+      ++outliers;
+    }
+  }
+  if (outliers > 0) {
+    const SolveReport second = solve_once(max_seconds);
+    report.iterations += second.iterations;
+    report.final_cost = second.final_cost;
+    report.seconds += second.seconds;
+    report.converged = second.converged;
+  }
+  report.outliers = outliers;
+  return report;
+}
+
+SolveReport PoseGraph::solve_once(double max_seconds) {
+  SolveReport report;
+  ceres::Problem::Options problem_options;
+  problem_options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+  ceres::Problem problem(problem_options);
+  ceres::EigenQuaternionManifold quaternion;
+  std::unique_ptr<ceres::LossFunction> loss;
+  if (config_.loss == "cauchy") loss = std::make_unique<ceres::CauchyLoss>(config_.loss_scale);
+  if (config_.loss == "huber") loss = std::make_unique<ceres::HuberLoss>(config_.loss_scale);
+  for (const PoseGraphEdge& e : edges_) {
+    if (e.outlier) continue;
+    if (e.kind == EdgeKind::kLoop) ++report.loop_edges;
+    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseCost, 6, 3, 4, 3, 4>(
+        new RelativePoseCost(e.T_a_b, e.sqrt_information));
+    problem.AddResidualBlock(cost, e.kind == EdgeKind::kLoop ? loss.get() : nullptr, state_[e.a].data(),
+                             state_[e.a].data() + 3, state_[e.b].data(), state_[e.b].data() + 3);
+  }
+  for (std::size_t k = 0; k < state_.size(); ++k) {
+    if (!problem.HasParameterBlock(state_[k].data())) continue;
+    problem.SetManifold(state_[k].data() + 3, &quaternion);
+  }
+  if (!state_.empty() && problem.HasParameterBlock(state_[0].data())) {
+    problem.SetParameterBlockConstant(state_[0].data());
+    problem.SetParameterBlockConstant(state_[0].data() + 3);
+  }
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.max_num_iterations = config_.max_iterations;
+  if (max_seconds > 0) options.max_solver_time_in_seconds = max_seconds;
+  options.num_threads = 1;  // deterministic
+  options.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  if (problem.NumResidualBlocks() > 0) ceres::Solve(options, &problem, &summary);
+  report.iterations = static_cast<int>(summary.iterations.size());
+  report.initial_cost = summary.initial_cost;
+  report.final_cost = summary.final_cost;
+  report.seconds = summary.total_time_in_seconds;
+  report.converged = summary.termination_type == ceres::CONVERGENCE;
+  for (PoseGraphEdge& e : edges_) {
+    const RelativePoseCost cost(e.T_a_b, e.sqrt_information);
+    Eigen::Matrix<double, 6, 1> r;
+    cost(state_[e.a].data(), state_[e.a].data() + 3, state_[e.b].data(), state_[e.b].data() + 3, r.data());
+    e.chi2 = r.squaredNorm();
+  }
+  return report;
+}
+
+}  // namespace loopgate

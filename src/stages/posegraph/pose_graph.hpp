@@ -1,0 +1,108 @@
+// A 6-DoF pose graph on Ceres: nodes are body poses T_w_b (initialised from the odometry), edges relative
+// poses T_a_b with a 6x6 covariance (position, rotation as a right perturbation). Odometry edges are plain
+// least squares; loop edges go through a robust loss (Cauchy or Huber, on the whitened squared norm) so
+// that one wrong loop cannot bend the map, and after a solve a loop edge whose whitened squared residual
+// exceeds outlier_chi2 is switched off and the graph solved again. The first node is held fixed (gauge).
+// Section "posegraph". No threads, no files.
+//
+// 6-DoF, not VINS-Mono's 4-DoF (x, y, z, yaw): it needs no gravity axis (KITTI camera worlds are -y up,
+// EuRoC z up, image folders have none) and the odometry edges' rotation sigmas keep roll and pitch where the
+// odometry put them.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <array>
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace loopgate {
+
+struct PoseGraphConfig {
+  bool enabled = true;
+  int node_every_frames = 1;  // a node every N tracked frames (and one at every loop frame)
+  // Odometry edge of length d metres: sigma = floor + per_sqrt_m * sqrt(d), position and rotation.
+  double odometry_sigma_position_m_per_sqrt_m = 0.02;
+  double odometry_sigma_position_floor_m = 0.005;
+  double odometry_sigma_rotation_rad_per_sqrt_m = 0.002;
+  double odometry_sigma_rotation_floor_rad = 0.0005;
+  std::string loss = "cauchy";   // cauchy | huber | none (loop edges only)
+  double loss_scale = 1.0;       // in whitened units (sigma)
+  double outlier_chi2 = 22.46;   // chi-square, 6 dof, 0.999
+  int max_iterations = 50;       // per solve
+  double max_solve_s = 2.0;      // per solve while the stream runs (the final solve has no time bound)
+  bool optimize_on_loop = true;  // solve whenever verified loops arrived (off the frame's critical path)
+
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("enabled", self.enabled);
+    v("node_every_frames", self.node_every_frames);
+    v("odometry_sigma_position_m_per_sqrt_m", self.odometry_sigma_position_m_per_sqrt_m);
+    v("odometry_sigma_position_floor_m", self.odometry_sigma_position_floor_m);
+    v("odometry_sigma_rotation_rad_per_sqrt_m", self.odometry_sigma_rotation_rad_per_sqrt_m);
+    v("odometry_sigma_rotation_floor_rad", self.odometry_sigma_rotation_floor_rad);
+    v("loss", self.loss);
+    v("loss_scale", self.loss_scale);
+    v("outlier_chi2", self.outlier_chi2);
+    v("max_iterations", self.max_iterations);
+    v("max_solve_s", self.max_solve_s);
+    v("optimize_on_loop", self.optimize_on_loop);
+  }
+  void validate() const;  // throws ConfigError naming posegraph.KEY and its bound
+
+  // The covariance of an odometry edge T_a_b under this model.
+  Eigen::Matrix<double, 6, 6> odometry_cov(const Eigen::Isometry3d& T_a_b) const;
+};
+
+enum class EdgeKind { kOdometry, kLoop };
+
+struct PoseGraphEdge {
+  std::size_t a = 0, b = 0;
+  EdgeKind kind = EdgeKind::kOdometry;
+  Eigen::Isometry3d T_a_b = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> sqrt_information = Eigen::Matrix<double, 6, 6>::Identity();
+  bool outlier = false;  // loop edges switched off by the last solve
+  double chi2 = 0.0;     // whitened squared residual after the last solve
+};
+
+struct SolveReport {
+  int iterations = 0;
+  double initial_cost = 0.0;
+  double final_cost = 0.0;
+  double seconds = 0.0;
+  std::size_t loop_edges = 0;
+  std::size_t outliers = 0;
+  bool converged = false;
+};
+
+class PoseGraph {
+ public:
+  explicit PoseGraph(const PoseGraphConfig& config);
+
+  // A node with its initial pose; returns its id (0, 1, ...).
+  std::size_t add_node(const Eigen::Isometry3d& T_w_b);
+  // Throws std::invalid_argument for an unknown node or a covariance that is not positive definite.
+  void add_edge(std::size_t a, std::size_t b, EdgeKind kind, const Eigen::Isometry3d& T_a_b,
+                const Eigen::Matrix<double, 6, 6>& cov);
+
+  // Solves from the current estimate (from_initial: from the initial poses, so the result depends only on
+  // the graph, not on earlier solves). max_seconds <= 0: no time bound. Loop edges found outliers are
+  // switched off and the graph solved once more.
+  SolveReport optimize(bool from_initial, double max_seconds);
+
+  std::size_t node_count() const { return initial_.size(); }
+  Eigen::Isometry3d pose(std::size_t id) const;
+  const Eigen::Isometry3d& initial_pose(std::size_t id) const { return initial_.at(id); }
+  const std::vector<PoseGraphEdge>& edges() const { return edges_; }
+
+ private:
+  SolveReport solve_once(double max_seconds);
+
+  PoseGraphConfig config_;
+  std::vector<Eigen::Isometry3d> initial_;
+  std::vector<std::array<double, 7>> state_;  // tx ty tz qx qy qz qw
+  std::vector<PoseGraphEdge> edges_;
+};
+
+}  // namespace loopgate

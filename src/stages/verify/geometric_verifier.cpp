@@ -1,0 +1,242 @@
+#include "stages/verify/geometric_verifier.hpp"
+
+#include <spdlog/fmt/fmt.h>
+
+#include <Eigen/SVD>
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <opencv2/features2d.hpp>
+#include <vector>
+
+#include "core/error.hpp"
+
+namespace loopgate {
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// query index -> train index of the matches passing the ratio test (-1: none).
+std::vector<int> ratio_match(const cv::Mat& query, const cv::Mat& train, double ratio) {
+  std::vector<int> out(static_cast<std::size_t>(query.rows), -1);
+  if (query.empty() || train.rows < 2) return out;
+  cv::BFMatcher matcher(cv::NORM_HAMMING);
+  std::vector<std::vector<cv::DMatch>> knn;
+  matcher.knnMatch(query, train, knn, 2);
+  for (const auto& m : knn) {
+    if (m.size() < 2) continue;
+    if (m[0].distance < ratio * m[1].distance) out[static_cast<std::size_t>(m[0].queryIdx)] = m[0].trainIdx;
+  }
+  return out;
+}
+
+// Linear triangulation of normalised points x_a (camera a = reference) and x_b with T_b_a; the point in a.
+Eigen::Vector3d triangulate(const Eigen::Vector2d& x_a, const Eigen::Vector2d& x_b,
+                            const Eigen::Isometry3d& T_b_a) {
+  Eigen::Matrix<double, 3, 4> P_a = Eigen::Matrix<double, 3, 4>::Zero();
+  P_a.leftCols<3>().setIdentity();
+  const Eigen::Matrix<double, 3, 4> P_b = T_b_a.matrix().topRows<3>();
+  Eigen::Matrix4d A;
+  A.row(0) = x_a.x() * P_a.row(2) - P_a.row(0);
+  A.row(1) = x_a.y() * P_a.row(2) - P_a.row(1);
+  A.row(2) = x_b.x() * P_b.row(2) - P_b.row(0);
+  A.row(3) = x_b.y() * P_b.row(2) - P_b.row(1);
+  const Eigen::JacobiSVD<Eigen::Matrix4d> svd(A, Eigen::ComputeFullV);
+  const Eigen::Vector4d X = svd.matrixV().col(3);
+  if (std::abs(X.w()) < 1e-12) return Eigen::Vector3d::Constant(std::nan(""));
+  return X.head<3>() / X.w();
+}
+
+}  // namespace
+
+void VerifyConfig::validate() const {
+  if (features < 50) throw ConfigError("verify.features: must be >= 50");
+  if (orb_patch_px < 5) throw ConfigError("verify.orb_patch_px: must be >= 5");
+  if (orb_fast_threshold < 1) throw ConfigError("verify.orb_fast_threshold: must be >= 1");
+  if (max_per_query < 0) throw ConfigError("verify.max_per_query: must be >= 0 (0: no limit)");
+  if (skip_after_verified_frames < 0) throw ConfigError("verify.skip_after_verified_frames: must be >= 0");
+  if (skip_after_rejected_frames < 0) throw ConfigError("verify.skip_after_rejected_frames: must be >= 0");
+  if (feature_cache_frames < 3) throw ConfigError("verify.feature_cache_frames: must be >= 3");
+  if (!(ratio > 0.0 && ratio <= 1.0)) throw ConfigError("verify.ratio: must be in (0, 1]");
+  if (min_inliers < 6) throw ConfigError("verify.min_inliers: must be >= 6 (PnP needs 4, RANSAC more)");
+  if (!(std::isfinite(reprojection_px) && reprojection_px > 0.0))
+    throw ConfigError("verify.reprojection_px: must be a finite number > 0");
+  if (neighbour_offset_frames == 0) throw ConfigError("verify.neighbour_offset_frames: must not be 0");
+  if (!(std::isfinite(min_baseline_m) && min_baseline_m >= 0.0))
+    throw ConfigError("verify.min_baseline_m: must be a finite number >= 0");
+  if (!(std::isfinite(min_parallax_deg) && min_parallax_deg >= 0.0 && min_parallax_deg < 90.0))
+    throw ConfigError("verify.min_parallax_deg: must be in [0, 90)");
+  if (min_image_px < 16) throw ConfigError("verify.min_image_px: must be >= 16");
+  if (ransac_iterations < 10) throw ConfigError("verify.ransac_iterations: must be >= 10");
+  if (!(std::isfinite(max_translation_m) && max_translation_m > 0.0))
+    throw ConfigError("verify.max_translation_m: must be a finite number > 0");
+  if (!(std::isfinite(sigma_position_m) && sigma_position_m > 0.0))
+    throw ConfigError("verify.sigma_position_m: must be a finite number > 0");
+  if (!(std::isfinite(sigma_rotation_rad) && sigma_rotation_rad > 0.0))
+    throw ConfigError("verify.sigma_rotation_rad: must be a finite number > 0");
+}
+
+GeometricVerifier::GeometricVerifier(const VerifyConfig& config,
+                                     const std::optional<CameraCalibration>& camera)
+    : config_(config) {
+  if (camera) camera_.emplace(*camera);
+}
+
+std::string GeometricVerifier::unusable_reason(const cv::Size& image_size) const {
+  if (!camera_) return "geometry: no camera calibration";
+  if (image_size.width < config_.min_image_px || image_size.height < config_.min_image_px) {
+    return fmt::format("geometry: image too small for features ({}x{} < {} px)", image_size.width,
+                       image_size.height, config_.min_image_px);
+  }
+  return {};
+}
+
+OrbFeatures GeometricVerifier::detect(const cv::Mat& image) const {
+  OrbFeatures f;
+  f.image_size = image.size();
+  if (!camera_ || image.empty()) return f;
+  const cv::Ptr<cv::ORB> orb =
+      cv::ORB::create(config_.features, 1.2f, 8, config_.orb_patch_px, 0, 2, cv::ORB::HARRIS_SCORE,
+                      config_.orb_patch_px, config_.orb_fast_threshold);
+  orb->detectAndCompute(image, cv::noArray(), f.keypoints, f.descriptors);
+  f.xy.reserve(f.keypoints.size());
+  for (const cv::KeyPoint& k : f.keypoints)
+    f.xy.push_back(camera_->undistort_normalized(Eigen::Vector2d(k.pt.x, k.pt.y)));
+  return f;
+}
+
+VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& j,
+                                       const VerifyFrame& n) const {
+  VerifyResult result;
+  if (i.image.empty() || j.image.empty() || n.image.empty()) {
+    result.reason = "geometry: image missing";
+    return result;
+  }
+  if (std::string why = unusable_reason(j.image.size()); !why.empty()) {
+    result.reason = why;
+    return result;
+  }
+  return verify(detect(i.image), detect(j.image), j.T_w_b, detect(n.image), n.T_w_b);
+}
+
+VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures& fj,
+                                       const Eigen::Isometry3d& T_w_bj, const OrbFeatures& fn,
+                                       const Eigen::Isometry3d& T_w_bn) const {
+  VerifyResult result;
+  if (std::string why = unusable_reason(fj.image_size); !why.empty()) {
+    result.reason = why;
+    return result;
+  }
+  const CameraModel& camera = *camera_;
+  const Eigen::Isometry3d& T_b_c = camera.calibration().T_b_c;
+  const Eigen::Isometry3d T_w_cj = T_w_bj * T_b_c;
+  const Eigen::Isometry3d T_w_cn = T_w_bn * T_b_c;
+  const Eigen::Isometry3d T_cn_cj = T_w_cn.inverse() * T_w_cj;
+  const double baseline_m = T_cn_cj.translation().norm();
+  if (!(baseline_m >= config_.min_baseline_m)) {
+    result.reason = fmt::format("geometry: baseline {:.3f} m < {} m between j and its neighbour", baseline_m,
+                                config_.min_baseline_m);
+    return result;
+  }
+  const double f_px = camera.calibration().fx;
+  const double threshold = config_.reprojection_px / f_px;  // in normalised coordinates
+  const double min_cos = std::cos(config_.min_parallax_deg * kPi / 180.0);
+
+  // Points of j triangulated with its neighbour, in camera j.
+  std::vector<Eigen::Vector3d> p_cj(fj.keypoints.size(), Eigen::Vector3d::Constant(std::nan("")));
+  const std::vector<int> jn = ratio_match(fj.descriptors, fn.descriptors, config_.ratio);
+  const Eigen::Vector3d centre_n_in_j = T_cn_cj.inverse().translation();
+  for (std::size_t a = 0; a < jn.size(); ++a) {
+    if (jn[a] < 0) continue;
+    const Eigen::Vector2d& x_j = fj.xy[a];
+    const Eigen::Vector2d& x_n = fn.xy[static_cast<std::size_t>(jn[a])];
+    const Eigen::Vector3d p = triangulate(x_j, x_n, T_cn_cj);
+    if (!p.allFinite() || p.z() <= 0.0) continue;
+    const Eigen::Vector3d p_n = T_cn_cj * p;
+    if (p_n.z() <= 0.0) continue;
+    const double cos_parallax = p.normalized().dot((p - centre_n_in_j).normalized());
+    if (cos_parallax > min_cos) continue;
+    if ((p.head<2>() / p.z() - x_j).norm() > threshold || (p_n.head<2>() / p_n.z() - x_n).norm() > threshold)
+      continue;
+    p_cj[a] = p;
+    ++result.points;
+  }
+  // Frame i against j's triangulated points only (the ratio test among the candidates that can be used).
+  std::vector<int> point_rows;
+  for (std::size_t a = 0; a < p_cj.size(); ++a)
+    if (p_cj[a].allFinite()) point_rows.push_back(static_cast<int>(a));
+  cv::Mat point_descriptors(static_cast<int>(point_rows.size()), fj.descriptors.cols, fj.descriptors.type());
+  for (std::size_t r = 0; r < point_rows.size(); ++r)
+    fj.descriptors.row(point_rows[r]).copyTo(point_descriptors.row(static_cast<int>(r)));
+  const std::vector<int> ij = ratio_match(fi.descriptors, point_descriptors, config_.ratio);
+  std::vector<cv::Point3d> object;
+  std::vector<cv::Point2d> image;
+  for (std::size_t a = 0; a < ij.size(); ++a) {
+    if (ij[a] < 0) continue;
+    const Eigen::Vector3d& p = p_cj[static_cast<std::size_t>(point_rows[static_cast<std::size_t>(ij[a])])];
+    object.emplace_back(p.x(), p.y(), p.z());
+    image.emplace_back(fi.xy[a].x(), fi.xy[a].y());
+  }
+  result.matches = static_cast<int>(object.size());
+  if (result.matches < config_.min_inliers) {
+    result.reason = fmt::format("geometry: {} matches with 3-D points < {} ({} points triangulated)",
+                                result.matches, config_.min_inliers, result.points);
+    return result;
+  }
+  cv::Mat rvec, tvec;
+  std::vector<int> inliers;
+  bool ok = false;
+  try {
+    ok = cv::solvePnPRansac(object, image, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rvec, tvec, false,
+                            config_.ransac_iterations, static_cast<float>(threshold), 0.99, inliers,
+                            cv::SOLVEPNP_EPNP);
+  } catch (const cv::Exception& e) {
+    result.reason = std::string("geometry: PnP failed: ") + e.what();
+    return result;
+  }
+  result.inliers = static_cast<int>(inliers.size());
+  if (!ok || result.inliers < config_.min_inliers) {
+    result.reason = fmt::format("geometry: {} inliers < {}", result.inliers, config_.min_inliers);
+    return result;
+  }
+  // Refine on the inliers (iterative, from the RANSAC solution).
+  std::vector<cv::Point3d> object_in;
+  std::vector<cv::Point2d> image_in;
+  for (const int k : inliers) {
+    object_in.push_back(object[static_cast<std::size_t>(k)]);
+    image_in.push_back(image[static_cast<std::size_t>(k)]);
+  }
+  cv::solvePnP(object_in, image_in, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rvec, tvec, true,
+               cv::SOLVEPNP_ITERATIVE);
+  cv::Mat R_cv;
+  cv::Rodrigues(rvec, R_cv);
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  cv::cv2eigen(R_cv, R);
+  cv::cv2eigen(tvec, t);
+  Eigen::Isometry3d T_ci_cj = Eigen::Isometry3d::Identity();
+  T_ci_cj.linear() = R;
+  T_ci_cj.translation() = t;
+  if (!T_ci_cj.matrix().allFinite()) {
+    result.reason = "geometry: PnP gave a non-finite pose";
+    return result;
+  }
+  result.T_j_i = T_b_c * T_ci_cj.inverse() * T_b_c.inverse();
+  const double distance_m = result.T_j_i.translation().norm();
+  if (distance_m > config_.max_translation_m) {
+    result.reason =
+        fmt::format("geometry: relative translation {:.1f} m > {} m", distance_m, config_.max_translation_m);
+    return result;
+  }
+  const double shrink = std::sqrt(static_cast<double>(config_.min_inliers) / result.inliers);
+  result.cov.setZero();
+  result.cov.topLeftCorner<3, 3>().diagonal().setConstant(std::pow(config_.sigma_position_m * shrink, 2));
+  result.cov.bottomRightCorner<3, 3>().diagonal().setConstant(
+      std::pow(config_.sigma_rotation_rad * shrink, 2));
+  result.verified = true;
+  result.reason = "verified";
+  return result;
+}
+
+}  // namespace loopgate

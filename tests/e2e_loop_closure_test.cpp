@@ -1,0 +1,162 @@
+// The loop closer end to end (issue 13): on a short rendered street drive, loops forced by a small match
+// margin (pairs a few metres apart, which do share geometry) are verified and corrected identically with 1
+// and 2 threads, and the outputs carry their columns; thumbnail-size images skip verification with a reason;
+// without verify.enabled no loop-closure output appears.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::read_csv;
+using testing::read_file;
+
+std::string run(const std::string& args, int* status) {
+  std::string output;
+  *status = testing::run_command(testing::loopgate_binary().string() + " --log-level warn " + args, &output);
+  return output;
+}
+
+fs::path simulate(const std::string& name, const std::string& extra) {
+  const fs::path sim = testing::make_temp_dir(name);
+  int status = -1;
+  const std::string output =
+      run("simulate --preset demo --frames 60 --force --out " + sim.string() + " " + extra, &status);
+  EXPECT_EQ(status, 0) << output;
+  return sim;
+}
+
+// configs/demo.yaml with verify.enabled=true (the demo config has it off) in full mode with loops forced
+// between frames ~5 m apart.
+fs::path run_forced(const fs::path& sim, int threads, const std::string& extra = "") {
+  const fs::path out = testing::make_temp_dir("e2e-closure-out-" + std::to_string(threads));
+  int status = -1;
+  const std::string output =
+      run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+              sim.string() + " --out " + out.string() + " --mode full --threads " + std::to_string(threads) +
+              " --set match.margin=4 --set dird_seqslam.min_score=0 --set output.progress=off --set "
+              "verify.enabled=true " +
+              extra,
+          &status);
+  EXPECT_EQ(status, 0) << output;
+  return out;
+}
+
+std::vector<std::string> header(const fs::path& csv) {
+  std::vector<std::string> h;
+  read_csv(csv, &h);
+  return h;
+}
+
+std::size_t line_count(const fs::path& file) {
+  const std::string text = read_file(file);
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+}
+
+// loop_edges.csv without its verify_ms column (a timing).
+std::vector<std::vector<std::string>> edges_without_timing(const fs::path& out) {
+  auto rows = read_csv(out / "loop_edges.csv");
+  for (auto& row : rows) row.pop_back();
+  return rows;
+}
+
+TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
+  const fs::path sim = simulate("e2e-closure-sim", "");
+  const fs::path one = run_forced(sim, 1);
+  const fs::path two = run_forced(sim, 2);
+
+  const auto summary = nlohmann::json::parse(read_file(one / "summary.json"));
+  ASSERT_TRUE(summary.contains("loops_verified")) << summary.dump();
+  EXPECT_GT(summary["loops_verified"].get<int>(), 0);
+  EXPECT_TRUE(summary.contains("loops_rejected_geometry"));
+  EXPECT_TRUE(summary.contains("loops_skipped_geometry"));
+  ASSERT_TRUE(summary.contains("trajectory_accuracy_corrected"));
+  EXPECT_TRUE(summary["trajectory_accuracy_corrected"].contains("rmse_m"));
+  EXPECT_GT(summary["loop_closure"]["verify"]["count"].get<int>(), 0);
+
+  EXPECT_EQ(header(one / "loop_edges.csv"), (std::vector<std::string>{"i",
+                                                                      "j",
+                                                                      "neighbour",
+                                                                      "verified",
+                                                                      "inliers",
+                                                                      "matches",
+                                                                      "points",
+                                                                      "reason",
+                                                                      "x_m",
+                                                                      "y_m",
+                                                                      "z_m",
+                                                                      "qx",
+                                                                      "qy",
+                                                                      "qz",
+                                                                      "qw",
+                                                                      "sigma_position_m",
+                                                                      "sigma_rotation_rad",
+                                                                      "graph_outlier",
+                                                                      "chi2",
+                                                                      "verify_ms"}));
+  const std::vector<std::string> loops_header = header(one / "loops.csv");
+  const std::vector<std::string> tail{
+      "verified", "inliers", "geometry_reason", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw"};
+  ASSERT_GE(loops_header.size(), tail.size());
+  EXPECT_EQ(std::vector<std::string>(loops_header.end() - static_cast<std::ptrdiff_t>(tail.size()),
+                                     loops_header.end()),
+            tail);
+  EXPECT_EQ(header(one / "frames.csv").back(), "geometry");
+  // Every loop is in loop_edges.csv once: verified (y), rejected (n) or skipped.
+  const auto edges = read_csv(one / "loop_edges.csv");
+  EXPECT_EQ(edges.size(), summary["loops"].get<std::size_t>());
+  for (const auto& row : edges) {
+    EXPECT_TRUE(row[3] == "y" || row[3] == "n" || row[3] == "skipped") << row[3];
+    if (row[3] == "skipped") {
+      EXPECT_EQ(row[7].rfind("skipped: ", 0), 0u) << row[7];
+    } else if (row[3] == "n") {
+      EXPECT_EQ(row[7].rfind("geometry: ", 0), 0u) << row[7];
+    }
+  }
+  EXPECT_EQ(line_count(one / "trajectory_corrected.tum"), line_count(one / "trajectory.tum"));
+
+  EXPECT_EQ(edges_without_timing(one), edges_without_timing(two));
+  for (const char* file : {"trajectory_corrected.tum", "loops.csv", "frames.csv", "trajectory.tum"})
+    EXPECT_EQ(read_file(one / file), read_file(two / file)) << file;
+}
+
+TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {
+  const fs::path sim = simulate("e2e-closure-thumbs",
+                                "--set camera.width_px=64 --set camera.height_px=32 "
+                                "--set camera.fx=37 --set camera.fy=37 "
+                                "--set camera.cx=31.5 --set camera.cy=15.5");
+  const fs::path out = run_forced(sim, 2);
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  ASSERT_GT(summary["loops"].get<int>(), 0);
+  EXPECT_EQ(summary["loops_verified"].get<int>(), 0);
+  EXPECT_NE(summary["loop_closure"]["unusable_reason"].get<std::string>().find("image too small"),
+            std::string::npos)
+      << summary["loop_closure"].dump();
+  for (const auto& row : read_csv(out / "loop_edges.csv")) {
+    EXPECT_EQ(row[3], "n");
+    EXPECT_NE(row[7].find("image too small for features (64x32"), std::string::npos) << row[7];
+  }
+  // Nothing verified: the corrected trajectory is the odometry's.
+  EXPECT_NEAR(summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
+              summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
+}
+
+TEST(E2eLoopClosure, OffByDefault) {
+  const fs::path sim = simulate("e2e-closure-off", "");
+  const fs::path out = run_forced(sim, 2, "--set verify.enabled=false");
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_FALSE(summary.contains("loops_verified"));
+  EXPECT_FALSE(fs::exists(out / "loop_edges.csv"));
+  EXPECT_FALSE(fs::exists(out / "trajectory_corrected.tum"));
+  EXPECT_NE(header(out / "frames.csv").back(), "geometry");
+}
+
+}  // namespace
+}  // namespace loopgate

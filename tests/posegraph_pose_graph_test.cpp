@@ -1,0 +1,158 @@
+// The pose graph on toy graphs with known solutions, and the robust loss against a wrong loop.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "core/error.hpp"
+#include "stages/posegraph/pose_graph.hpp"
+
+namespace loopgate {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+Eigen::Isometry3d pose(double x, double y, double z, double yaw) {
+  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
+  T.translation() = Eigen::Vector3d(x, y, z);
+  T.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return T;
+}
+
+Eigen::Matrix<double, 6, 6> cov(double sigma_p, double sigma_r) {
+  Eigen::Matrix<double, 6, 6> c = Eigen::Matrix<double, 6, 6>::Zero();
+  c.topLeftCorner<3, 3>().diagonal().setConstant(sigma_p * sigma_p);
+  c.bottomRightCorner<3, 3>().diagonal().setConstant(sigma_r * sigma_r);
+  return c;
+}
+
+// A circle of n poses (radius 50 m) driven twice; odometry with a heading bias (drift).
+struct Drive {
+  std::vector<Eigen::Isometry3d> truth;
+  std::vector<Eigen::Isometry3d> odometry;
+};
+
+Drive circle_drive(std::size_t per_lap, double heading_bias_rad) {
+  Drive d;
+  const std::size_t n = 2 * per_lap;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double a = 2 * kPi * static_cast<double>(k) / static_cast<double>(per_lap);
+    d.truth.push_back(pose(50 * std::sin(a), 50 - 50 * std::cos(a), 0, a));
+  }
+  d.odometry.push_back(d.truth[0]);
+  const Eigen::Isometry3d bias = pose(0, 0, 0, heading_bias_rad);
+  for (std::size_t k = 1; k < n; ++k)
+    d.odometry.push_back(d.odometry.back() * (d.truth[k - 1].inverse() * d.truth[k]) * bias);
+  return d;
+}
+
+double rmse(const PoseGraph& graph, const std::vector<Eigen::Isometry3d>& truth) {
+  double sum = 0;
+  for (std::size_t k = 0; k < truth.size(); ++k)
+    sum += (graph.pose(k).translation() - truth[k].translation()).squaredNorm();
+  return std::sqrt(sum / static_cast<double>(truth.size()));
+}
+
+PoseGraph graph_of(const Drive& d, const PoseGraphConfig& config, std::size_t per_lap, std::size_t loops) {
+  PoseGraph graph(config);
+  for (const auto& T : d.odometry) graph.add_node(T);
+  for (std::size_t k = 1; k < d.odometry.size(); ++k) {
+    const Eigen::Isometry3d T_a_b = d.odometry[k - 1].inverse() * d.odometry[k];
+    graph.add_edge(k - 1, k, EdgeKind::kOdometry, T_a_b, config.odometry_cov(T_a_b));
+  }
+  // True loops of the second lap onto the first.
+  for (std::size_t l = 0; l < loops; ++l) {
+    const std::size_t j = 5 + l * (per_lap / loops);
+    const std::size_t i = j + per_lap;
+    graph.add_edge(j, i, EdgeKind::kLoop, d.truth[j].inverse() * d.truth[i], cov(0.1, 0.01));
+  }
+  return graph;
+}
+
+TEST(PoseGraph, ConsistentSquareReachesTheTruth) {
+  // Four poses on a 10 m square; exact odometry and loop edges, drifted initial poses: the optimum is the
+  // truth.
+  const std::vector<Eigen::Isometry3d> truth = {pose(0, 0, 0, 0), pose(10, 0, 0, kPi / 2),
+                                                pose(10, 10, 0, kPi), pose(0, 10, 0, -kPi / 2)};
+  PoseGraphConfig config;
+  PoseGraph graph(config);
+  graph.add_node(truth[0]);
+  for (std::size_t k = 1; k < 4; ++k) graph.add_node(truth[k] * pose(0.5, -0.3, 0.2, 0.1 * k));
+  for (std::size_t k = 1; k < 4; ++k)
+    graph.add_edge(k - 1, k, EdgeKind::kOdometry, truth[k - 1].inverse() * truth[k], cov(0.1, 0.01));
+  graph.add_edge(0, 3, EdgeKind::kLoop, truth[0].inverse() * truth[3], cov(0.1, 0.01));
+  const SolveReport report = graph.optimize(false, 0);
+  EXPECT_EQ(report.outliers, 0u);
+  for (std::size_t k = 0; k < 4; ++k) {
+    EXPECT_LT((graph.pose(k).translation() - truth[k].translation()).norm(), 1e-6) << k;
+    EXPECT_LT(Eigen::AngleAxisd(graph.pose(k).rotation().transpose() * truth[k].rotation()).angle(), 1e-6)
+        << k;
+  }
+}
+
+TEST(PoseGraph, TrueLoopsRemoveTheDrift) {
+  const std::size_t per_lap = 100;
+  const Drive d = circle_drive(per_lap, 0.002);
+  PoseGraphConfig config;
+  PoseGraph graph = graph_of(d, config, per_lap, 10);
+  PoseGraph odometry_only = graph_of(d, config, per_lap, 0);
+  const double before = rmse(odometry_only, d.truth);
+  graph.optimize(true, 0);
+  const double after = rmse(graph, d.truth);
+  EXPECT_GT(before, 5.0);
+  EXPECT_LT(after, 0.25 * before);
+}
+
+TEST(PoseGraph, AWrongLoopDoesNotBendTheMap) {
+  const std::size_t per_lap = 100;
+  const Drive d = circle_drive(per_lap, 0.002);
+  PoseGraphConfig config;
+  PoseGraph clean = graph_of(d, config, per_lap, 10);
+  PoseGraph wrong = graph_of(d, config, per_lap, 10);
+  // Frame 150 claims to be where frame 20 was (they are 100 m apart on the circle).
+  wrong.add_edge(20, 150, EdgeKind::kLoop, pose(1, 0, 0, 0), cov(0.1, 0.01));
+  clean.optimize(true, 0);
+  const SolveReport report = wrong.optimize(true, 0);
+  EXPECT_GE(report.outliers, 1u);
+  EXPECT_TRUE(wrong.edges().back().outlier);
+  EXPECT_LE(rmse(wrong, d.truth), 1.1 * rmse(clean, d.truth));
+}
+
+TEST(PoseGraph, SameResultFromTheInitialPosesWhateverSolvedBefore) {
+  const std::size_t per_lap = 60;
+  const Drive d = circle_drive(per_lap, 0.003);
+  PoseGraphConfig config;
+  PoseGraph a = graph_of(d, config, per_lap, 6);
+  PoseGraph b = graph_of(d, config, per_lap, 6);
+  b.optimize(false, 0);  // an intermediate solve
+  a.optimize(true, 0);
+  b.optimize(true, 0);
+  for (std::size_t k = 0; k < a.node_count(); ++k)
+    EXPECT_EQ(a.pose(k).translation(), b.pose(k).translation()) << k;
+}
+
+TEST(PoseGraph, BadEdgesAndConfigAreRejected) {
+  PoseGraphConfig config;
+  PoseGraph graph(config);
+  graph.add_node(Eigen::Isometry3d::Identity());
+  graph.add_node(Eigen::Isometry3d::Identity());
+  EXPECT_THROW(graph.add_edge(0, 2, EdgeKind::kOdometry, Eigen::Isometry3d::Identity(), cov(1, 1)),
+               std::invalid_argument);
+  EXPECT_THROW(graph.add_edge(0, 1, EdgeKind::kOdometry, Eigen::Isometry3d::Identity(),
+                              Eigen::Matrix<double, 6, 6>::Zero()),
+               std::invalid_argument);
+  config.loss = "tukey";
+  EXPECT_THROW(config.validate(), ConfigError);
+  config = PoseGraphConfig{};
+  config.node_every_frames = 0;
+  try {
+    config.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("posegraph.node_every_frames"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace loopgate
