@@ -129,6 +129,10 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
   if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
+  // Geometric verification and the pose graph (issue 13) compare the trajectory, not the detectors: off here,
+  // so every column times the same loop-detection work (a full method's thousands of loops would each be
+  // verified); `run` with the config runs them.
+  config.verify.enabled = false;
   config.validate();
   return config;
 }
