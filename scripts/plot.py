@@ -33,10 +33,15 @@ Pictures:
            timing.png      per-frame time of each stage (stacked) and the total
            pr.png          PR curve (when summary.json has one)
            descriptor.png  the DIRD descriptor as a 54 x 64 grey picture (paper Fig. 3)
+           correction.png  with loop correction (trajectory_corrected.tum): ground truth, the odometry and
+                           the corrected trajectory, each aligned as its ATE is (summary.json's
+                           trajectory_accuracy[_corrected].T_gt_est), ATE RMSE in the legend
   compare  pr.png          PR curves of every method, AP and R@P100 in the legend (paper Fig. 9/12)
            time_per_frame.png  describe+match(+decode) time per frame and cumulative, full vs gated,
                            medians in the legend (paper Fig. 8/11)
            plane.png, trajectory.png  of the gated run
+           correction.png  with loop correction (compare.json's "loop_correction"): ground truth, the
+                           odometry and every method's corrected trajectory, ATE RMSE in the legend
 A detection is true when the ground-truth positions of i and j are within config.eval.accept_radius_m
 (in config.eval.plane when given, else 3-D), else when (i, j) is listed in truth_loops.csv. Without
 truth_loops.csv, true loops are computed from ground truth: j <= i - gap_frames within radius_m.
@@ -350,6 +355,55 @@ def plot_trajectory(run, path, written, title):
     save(fig, path, written)
 
 
+def aligned_xyz(path, accuracy):
+    """Positions of a TUM file under the ATE's alignment T_gt_est (3 x 4 rows), or None without one."""
+    if not accuracy or not accuracy.get("available") or "T_gt_est" not in accuracy or not path.is_file():
+        return None
+    T = np.array(accuracy["T_gt_est"], dtype=float)
+    if T.shape != (3, 4):
+        raise InputError(f"{path}: T_gt_est is not 3 x 4")
+    _, xyz = read_tum(path)
+    return xyz @ T[:, :3].T + T[:, 3]
+
+
+def plot_correction(gt_path, odometry, corrected, path, written, title):
+    """odometry: (label, xyz, ate_m); corrected: list of (label, xyz, ate_m). Drawn in the two axes of
+    largest extent of the ground truth."""
+    if not corrected or not gt_path.is_file():
+        return
+    _, gt = read_tum(gt_path)
+    extent = np.ptp(gt, 0)
+    a, b = sorted(np.argsort(-extent)[:2])
+    fig, ax = plt.subplots(figsize=(8, 7))
+    ax.plot(gt[:, a], gt[:, b], color="0.55", lw=2.0, label="ground truth")
+    if odometry is not None:
+        label, xyz, ate = odometry
+        ax.plot(xyz[:, a], xyz[:, b], color="tab:red", lw=0.9, label=f"{label}: ATE {ate:.3f} m")
+    colours = ["tab:blue", "tab:green", "tab:purple", "tab:orange", "tab:cyan", "tab:olive", "tab:brown",
+               "tab:pink"]
+    for k, (label, xyz, ate) in enumerate(corrected):
+        ax.plot(xyz[:, a], xyz[:, b], color=colours[k % len(colours)], lw=0.9,
+                label=f"{label}: ATE {ate:.3f} m")
+    ax.set_xlabel(f"{AXES[a]} [m]")
+    ax.set_ylabel(f"{AXES[b]} [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, path, written)
+
+
+def correction_lines(run_dir, summary, corrected_fields, label):
+    """(odometry line, corrected line) of a run with loop correction, or (None, None)."""
+    before = summary.get("trajectory_accuracy")
+    after = corrected_fields.get("trajectory_accuracy_corrected")
+    odo = aligned_xyz(run_dir / "trajectory.tum", before)
+    cor = aligned_xyz(run_dir / "trajectory_corrected.tum", after)
+    if odo is None or cor is None:
+        return None, None
+    return ("odometry", odo, before["rmse_m"]), (label, cor, after["rmse_m"])
+
+
 def plot_plane(run, path, written, title):
     truth = run.true_pairs()
     f = run.frames_table
@@ -524,6 +578,10 @@ def cmd_run(run_dir, out):
             name = method if mode != "gated" else f"{method}-gated"
         plot_pr({name: run.summary}, out / "pr.png", written, run_dir / "summary.json")
     plot_descriptor(run_dir, out / "descriptor.png", written)
+    odo, cor = correction_lines(run_dir, run.summary, run.summary, "corrected (pose graph)")
+    if cor is not None:
+        plot_correction(run_dir / "ground_truth.tum", odo, [cor], out / "correction.png", written,
+                        f"{run_dir.name}: loop correction")
     return written
 
 
@@ -557,6 +615,20 @@ def cmd_compare(compare_dir, out):
         plot_trajectory(runs["gated"], out / "trajectory.png", written, title)
     else:
         note(f"{source}: no gated run, plane.png and trajectory.png skipped")
+    odometry, corrected, gt_path = None, [], None
+    for name, summary in summaries.items():
+        if "loop_correction" not in summary:
+            continue
+        odo, cor = correction_lines(compare_dir / name, summary, summary["loop_correction"],
+                                    f"corrected, {METHOD_LABELS.get(name, name)}")
+        if cor is None:
+            continue
+        odometry = odometry or odo  # the same odometry in every method's run
+        corrected.append(cor)
+        gt_path = gt_path or compare_dir / name / "ground_truth.tum"
+    if corrected:
+        plot_correction(gt_path, odometry, corrected, out / "correction.png", written,
+                        f"{compare_dir.resolve().name}: loop correction")
     return written
 
 

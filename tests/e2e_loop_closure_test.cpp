@@ -1,7 +1,8 @@
 // The loop closer end to end (issue 13): on a short rendered street drive, loops forced by a small match
 // margin (pairs a few metres apart, which do share geometry) are verified and corrected identically with 1
 // and 2 threads, and the outputs carry their columns; thumbnail-size images skip verification with a reason;
-// without verify.enabled no loop-closure output appears.
+// without verify.enabled no loop-closure output appears; compare's loop correction after a run gives the
+// files the run gives.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -122,9 +123,60 @@ TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
   }
   EXPECT_EQ(line_count(one / "trajectory_corrected.tum"), line_count(one / "trajectory.tum"));
 
+  // timing.csv: the loop-closure columns, one row per frame, and the verification booked on the query frames
+  // adds up to the summary's total (4 decimals per cell).
+  std::vector<std::string> timing_header;
+  const auto timing = read_csv(one / "timing.csv", &timing_header);
+  ASSERT_GE(timing_header.size(), 2u);
+  EXPECT_EQ(timing_header[timing_header.size() - 2], "loop_verify_ms");
+  EXPECT_EQ(timing_header.back(), "loop_optimize_ms");
+  EXPECT_EQ(timing.size(), summary["frames_processed"].get<std::size_t>());
+  double verify_ms = 0, optimize_ms = 0;
+  for (const auto& row : timing) {
+    verify_ms += std::stod(row[row.size() - 2]);
+    optimize_ms += std::stod(row.back());
+  }
+  EXPECT_NEAR(verify_ms, summary["loop_closure"]["verify"]["total_ms"].get<double>(),
+              1e-3 + 1e-4 * static_cast<double>(timing.size()));
+  const auto& streaming = summary["loop_closure"]["optimize_streaming"];
+  EXPECT_NEAR(optimize_ms, streaming.value("total_ms", 0.0),
+              1e-3 + 1e-4 * static_cast<double>(timing.size()));
+
   EXPECT_EQ(edges_without_timing(one), edges_without_timing(two));
   for (const char* file : {"trajectory_corrected.tum", "loops.csv", "frames.csv", "trajectory.tum"})
     EXPECT_EQ(read_file(one / file), read_file(two / file)) << file;
+}
+
+// compare runs the methods without verification (their timing is the detectors'), then corrects each
+// method's trajectory with its loops: the same loop_edges.csv and trajectory_corrected.tum as `run` with
+// verify.enabled, the ATE before and after in compare.json and the table.
+TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
+  const fs::path sim = simulate("e2e-closure-compare-sim", "");
+  const fs::path ran = run_forced(sim, 2);
+  const fs::path out = testing::make_temp_dir("e2e-closure-compare-out");
+  int status = -1;
+  const std::string output =
+      run("compare --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+              sim.string() + " --out " + out.string() +
+              " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
+              "dird_seqslam.min_score=0 "
+              "--set output.progress=off --set verify.enabled=true",
+          &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find("ATE corrected (m)"), std::string::npos) << output;
+  const auto compare = nlohmann::json::parse(read_file(out / "compare.json"));
+  const auto& method = compare["dird-seqslam"];
+  ASSERT_TRUE(method.contains("loop_correction")) << method.dump();
+  EXPECT_FALSE(method.contains("loops_verified"));  // the timed run itself did not verify
+  const auto summary = nlohmann::json::parse(read_file(ran / "summary.json"));
+  const auto& correction = method["loop_correction"];
+  EXPECT_EQ(correction["loops_verified"], summary["loops_verified"]);
+  EXPECT_EQ(correction["loops_rejected_geometry"], summary["loops_rejected_geometry"]);
+  EXPECT_NEAR(correction["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
+              summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(), 1e-9);
+  EXPECT_EQ(edges_without_timing(out / "dird-seqslam"), edges_without_timing(ran));
+  EXPECT_EQ(read_file(out / "dird-seqslam" / "trajectory_corrected.tum"),
+            read_file(ran / "trajectory_corrected.tum"));
 }
 
 TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {

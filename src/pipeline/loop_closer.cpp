@@ -11,7 +11,9 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loops_writer.hpp"
+#include "pipeline/pipeline.hpp"
 #include "pipeline/pipeline_config.hpp"
+#include "pipeline/run_metrics.hpp"
 
 namespace loopgate {
 
@@ -192,30 +194,43 @@ void LoopCloser::work() {
     }
     LoopResult result = verify_one(loop);
     bool solve_now = false;
-    std::size_t last = 0;
     {
       std::lock_guard lock(mutex_);
       queue_.pop_front();
-      if (loop.query >= first_ && loop.query < last_) --pending_by_frame_[loop.query - first_];
       results_.push_back(std::move(result));
       const std::size_t verified = static_cast<std::size_t>(std::count_if(
           results_.begin(), results_.end(), [](const LoopResult& r) { return r.result.verified; }));
       solve_now = graph_config_.enabled && graph_config_.optimize_on_loop && queue_.empty() && !stopping_ &&
                   verified > verified_at_last_solve_;
       if (solve_now) verified_at_last_solve_ = verified;
-      last = loop.query;
     }
+    double solve_ms = 0;
     if (solve_now) {
       try {
-        solve(last, false);
+        solve_ms = solve(loop.query, false);
       } catch (const std::exception& e) {
         spdlog::warn("posegraph: solve while streaming failed: {}", e.what());
       }
     }
+    // The frame's rows (frames.csv, timing.csv) wait until its loop is verified and the solve it started is
+    // done, so that timing.csv books that solve on it.
+    std::lock_guard lock(mutex_);
+    if (solve_now) solve_ms_by_frame_[loop.query] += solve_ms;
+    if (loop.query >= first_ && loop.query < last_) --pending_by_frame_[loop.query - first_];
   }
 }
 
-void LoopCloser::solve(std::size_t last, bool final) {
+LoopCloser::FrameMs LoopCloser::frame_ms(std::size_t frame) const {
+  FrameMs out;
+  std::lock_guard lock(mutex_);
+  for (const LoopResult& r : results_)
+    if (r.loop.query == frame && !r.skipped) out.verify_ms += r.verify_ms;
+  if (const auto it = solve_ms_by_frame_.find(frame); it != solve_ms_by_frame_.end())
+    out.optimize_ms = it->second;
+  return out;
+}
+
+double LoopCloser::solve(std::size_t last, bool final) {
   std::vector<LoopResult> loops;
   {
     std::lock_guard lock(mutex_);
@@ -262,7 +277,7 @@ void LoopCloser::solve(std::size_t last, bool final) {
       report.final_cost, ms);
   if (!final) {
     solve_ms_.push_back(ms);
-    return;
+    return ms;
   }
   final_solve_ms_ = ms;
   final_report_ = report;
@@ -279,6 +294,7 @@ void LoopCloser::solve(std::size_t last, bool final) {
     r.outlier = edge.outlier;
     r.chi2 = edge.chi2;
   }
+  return ms;
 }
 
 void LoopCloser::finish() {
@@ -324,7 +340,32 @@ std::vector<StampedPose> LoopCloser::corrected(const std::vector<StampedPose>& t
   return out;
 }
 
-void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& loops) const {
+// loops.csv's verification cells of a loop (also the start of its loop_edges.csv row).
+std::vector<std::string> LoopCloser::verification_cells(const LoopResult& r) {
+  const Eigen::Vector3d t = r.result.T_j_i.translation();
+  const Eigen::Quaterniond q(r.result.T_j_i.rotation());
+  const bool v = r.result.verified;
+  const auto num = [v](double x) { return v ? format_fixed(x, 6) : std::string(); };
+  return std::vector<std::string>{v ? "y" : (r.skipped ? "skipped" : "n"),
+                                  std::to_string(r.result.inliers),
+                                  r.result.reason,
+                                  num(t.x()),
+                                  num(t.y()),
+                                  num(t.z()),
+                                  num(q.x()),
+                                  num(q.y()),
+                                  num(q.z()),
+                                  num(q.w())};
+}
+
+void LoopCloser::write_corrected(const std::filesystem::path& out_dir,
+                                 const std::vector<StampedPose>& tracked) const {
+  TumWriter file(out_dir / "trajectory_corrected.tum");
+  for (const StampedPose& pose : corrected(tracked)) file.write(pose.t_ns, pose.T_w_b);
+  file.close();
+}
+
+void LoopCloser::write_edges(const std::filesystem::path& out_dir) const {
   if (!active_) return;
   CsvWriter edges(out_dir / "loop_edges.csv", {"i",
                                                "j",
@@ -346,24 +387,8 @@ void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& 
                                                "graph_outlier",
                                                "chi2",
                                                "verify_ms"});
-  const auto cells = [](const LoopResult& r) {
-    const Eigen::Vector3d t = r.result.T_j_i.translation();
-    const Eigen::Quaterniond q(r.result.T_j_i.rotation());
-    const bool v = r.result.verified;
-    const auto num = [v](double x) { return v ? format_fixed(x, 6) : std::string(); };
-    return std::vector<std::string>{v ? "y" : (r.skipped ? "skipped" : "n"),
-                                    std::to_string(r.result.inliers),
-                                    r.result.reason,
-                                    num(t.x()),
-                                    num(t.y()),
-                                    num(t.z()),
-                                    num(q.x()),
-                                    num(q.y()),
-                                    num(q.z()),
-                                    num(q.w())};
-  };
   for (const LoopResult& r : results_) {
-    const std::vector<std::string> c = cells(r);
+    const std::vector<std::string> c = verification_cells(r);
     const bool v = r.result.verified;
     edges.write_row({std::to_string(r.loop.query),
                      std::to_string(r.loop.reference),
@@ -387,11 +412,15 @@ void LoopCloser::write_files(const std::filesystem::path& out_dir, LoopsWriter& 
                      format_fixed(r.verify_ms, 3)});
   }
   edges.close();
+}
+
+void LoopCloser::annotate_loops(LoopsWriter& loops) const {
+  if (!active_) return;
   // loops.csv: one row per loop written, in the same order as the loops were submitted.
   if (loops.count() == results_.size()) {
     loops.rewrite_with(
         {"verified", "inliers", "geometry_reason", "x_m", "y_m", "z_m", "qx", "qy", "qz", "qw"},
-        [&](std::size_t k) { return cells(results_[k]); });
+        [&](std::size_t k) { return verification_cells(results_[k]); });
   }
 }
 
@@ -422,6 +451,18 @@ nlohmann::json LoopCloser::summary() const {
             {"converged", final_report_.converged}}}};
 }
 
+nlohmann::json LoopCloser::summary_fields(const std::vector<StampedPose>& tracked) const {
+  nlohmann::json closure = summary();
+  nlohmann::json corrected = trajectory_accuracy_json(this->corrected(tracked), dataset_);
+  if (corrected.value("available", false))
+    corrected["poses"] = "odometry poses with status tracking, corrected by the pose graph";
+  return {{"loops_verified", closure["verified"]},
+          {"loops_rejected_geometry", closure["rejected_geometry"]},
+          {"loops_skipped_geometry", closure["skipped"]},
+          {"trajectory_accuracy_corrected", std::move(corrected)},
+          {"loop_closure", std::move(closure)}};
+}
+
 std::string LoopCloser::profile_line() const {
   if (!active_) return {};
   std::vector<double> verify_ms;
@@ -435,6 +476,21 @@ std::string LoopCloser::profile_line() const {
       verify_ms.size(), verify_total,
       verify_ms.empty() ? 0.0 : verify_total / static_cast<double>(verify_ms.size()), solve_ms_.size(),
       solve_total, final_solve_ms_);
+}
+
+nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& dataset, const RunTrack& track,
+                                 const std::filesystem::path& run_dir) {
+  const auto start = std::chrono::steady_clock::now();
+  LoopCloser closer(config, dataset, track.first_frame, track.last_frame, true);
+  if (!closer.active()) throw std::logic_error("correct_after_run: verify.enabled is false");
+  for (const auto& [frame, T_w_b] : track.frame_poses) closer.record_pose(frame, T_w_b);
+  for (const Detection& loop : track.loops) closer.submit(loop);
+  closer.finish();
+  closer.write_edges(run_dir);
+  closer.write_corrected(run_dir, track.tracked_poses);
+  nlohmann::json fields = closer.summary_fields(track.tracked_poses);
+  fields["ms"] = ms_since(start);
+  return fields;
 }
 
 }  // namespace loopgate

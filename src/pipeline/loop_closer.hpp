@@ -51,14 +51,27 @@ class LoopCloser {
   // frames.csv's "geometry" cell of frame `frame` once every loop of that query frame is verified
   // (empty when it has none), nullopt while one is pending.
   std::optional<std::string> geometry_cell(std::size_t frame) const;
+  // timing.csv's loop-closure cells of a query frame, once geometry_cell() has a value: the verification of
+  // its loops and the streaming pose-graph solve its loop started (0 when none). Off the frame's path.
+  struct FrameMs {
+    double verify_ms = 0;
+    double optimize_ms = 0;
+  };
+  FrameMs frame_ms(std::size_t frame) const;
   // After the last submit(): drains the queue, solves the final graph.
   void finish();
 
   // After finish(): the files and the summary fields.
-  void write_files(const std::filesystem::path& out_dir, LoopsWriter& loops) const;
+  void write_edges(const std::filesystem::path& out_dir) const;  // loop_edges.csv
+  // loops.csv again with the verification columns (when every loop written was submitted here).
+  void annotate_loops(LoopsWriter& loops) const;
   // tracked poses of the run -> corrected poses (same times).
   std::vector<StampedPose> corrected(const std::vector<StampedPose>& tracked) const;
+  void write_corrected(const std::filesystem::path& out_dir, const std::vector<StampedPose>& tracked) const;
   nlohmann::json summary() const;
+  // The run summary's fields: loops_verified, loops_rejected_geometry, loops_skipped_geometry,
+  // trajectory_accuracy_corrected (of `tracked` corrected) and loop_closure (summary()).
+  nlohmann::json summary_fields(const std::vector<StampedPose>& tracked) const;
   std::string profile_line() const;
 
  private:
@@ -71,14 +84,16 @@ class LoopCloser {
     double chi2 = 0;
     bool skipped = false;  // not verified by choice (verify.max_per_query, skip_after_*_frames)
   };
+  static std::vector<std::string> verification_cells(const LoopResult& r);
   void work();
   LoopResult verify_one(const Detection& loop);
   // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
   std::string skip_reason(const Detection& loop) const;
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
   std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);
-  // Builds the graph from the poses of frames <= last and the verified loops so far; solves.
-  void solve(std::size_t last, bool final);
+  // Builds the graph from the poses of frames <= last and the verified loops so far; solves. Returns the
+  // solve's time.
+  double solve(std::size_t last, bool final);
   std::optional<Eigen::Isometry3d> pose_of(std::size_t frame) const;
 
   const Dataset& dataset_;
@@ -103,10 +118,21 @@ class LoopCloser {
   std::deque<std::size_t> feature_cache_order_;  // oldest first
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
+  std::unordered_map<std::size_t, double>
+      solve_ms_by_frame_;  // the query frame whose loop started it (mutex_)
   double final_solve_ms_ = 0;
   SolveReport final_report_;
   std::vector<std::size_t> nodes_;  // frames of the final graph's nodes
   std::vector<Eigen::Isometry3d> node_poses_;
 };
+
+struct RunTrack;
+
+// compare's loop correction: a finished run's loops verified and its pose graph solved after the run, outside
+// its timing (the same LoopCloser, fed the run's poses and loops in order, so the files are those a run with
+// verify.enabled writes). Writes loop_edges.csv and trajectory_corrected.tum into run_dir and returns
+// summary_fields() plus "ms" (the wall time of the correction). `config.verify.enabled` must be true.
+nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& dataset, const RunTrack& track,
+                                 const std::filesystem::path& run_dir);
 
 }  // namespace loopgate

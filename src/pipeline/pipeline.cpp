@@ -293,14 +293,10 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   for (std::string& error : outputs_.finish(true)) output_errors_.push_back(std::move(error));
   write_output("the method's files", [&] { method_->write_files(out_dir_); });
   if (closer_.active()) {
-    write_output("loop_edges.csv and loops.csv's verification",
-                 [&] { closer_.write_files(out_dir_, loops_); });
-    write_output("trajectory_corrected.tum", [&] {
-      TumWriter corrected(out_dir_ / "trajectory_corrected.tum");
-      for (const StampedPose& pose : closer_.corrected(outputs_.tracked_poses()))
-        corrected.write(pose.t_ns, pose.T_w_b);
-      corrected.close();
-    });
+    write_output("loop_edges.csv", [&] { closer_.write_edges(out_dir_); });
+    write_output("loops.csv's verification", [&] { closer_.annotate_loops(loops_); });
+    write_output("trajectory_corrected.tum",
+                 [&] { closer_.write_corrected(out_dir_, outputs_.tracked_poses()); });
   }
   const RunCounters& counters = outputs_.counters();
   result.frames_in = replay_.frames_in();
@@ -341,6 +337,8 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
                [&] { evaluation = evaluate_run(parts, out_dir_); });
   result.summary = make_run_summary(parts, result, std::move(evaluation));
+  result.track = {range_.first, range_.second, outputs_.frame_poses(), outputs_.tracked_poses(),
+                  loops_.loops()};
   if (config_.output.trace) {
     write_output("trace.json", [&] { outputs_.write_trace(out_dir_ / "trace.json", config_.run.threads); });
   }

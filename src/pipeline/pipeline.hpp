@@ -48,12 +48,23 @@
 #include <utility>
 #include <vector>
 
+#include "core/types.hpp"
+#include "eval/precision_recall.hpp"
 #include "pipeline/pipeline_config.hpp"
 #include "stages/dird/dird_extractor.hpp"
 
 namespace loopgate {
 
 class Dataset;
+
+// A finished run's odometry and loops, for correcting its trajectory after the run (compare's loop
+// correction, correct_after_run in loop_closer.hpp).
+struct RunTrack {
+  std::size_t first_frame = 0, last_frame = 0;                         // the run's frame range [first, last)
+  std::vector<std::pair<std::size_t, Eigen::Isometry3d>> frame_poses;  // frame, usable odometry pose
+  std::vector<StampedPose> tracked_poses;                              // status tracking (the ATE's poses)
+  std::vector<Detection> loops;                                        // as loops.csv, dataset frames
+};
 
 struct RunResult {
   std::size_t frames_in = 0;         // presented by the source: processed + dropped (+ lost on failure)
@@ -74,6 +85,7 @@ struct RunResult {
   // A descriptor for the plots' picture (DIRD methods: the first loop's query frame, else the middle
   // frame), with its dataset frame index.
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor;
+  RunTrack track;
 };
 
 // Every file a run may write into its output folder (frames.csv, ..., summary.json).

@@ -15,6 +15,13 @@ namespace loopgate {
 namespace {
 constexpr std::size_t kMinPairs = 3;  // alignment needs three non-collinear pairs
 
+// The alignment applied to the estimate, row-major 3x4 [R | t] (the plots draw the aligned trajectories).
+std::vector<std::vector<double>> matrix_rows(const Eigen::Isometry3d& T) {
+  std::vector<std::vector<double>> rows;
+  for (int r = 0; r < 3; ++r) rows.push_back({T(r, 0), T(r, 1), T(r, 2), T(r, 3)});
+  return rows;
+}
+
 // The gravity axis of the world: from the IMU and the ground truth when there is an IMU (z for EuRoC,
 // y for KITTI camera-frame worlds), else the world axis nearest the normal of the best-fit plane of the
 // ground-truth positions (real KITTI).
@@ -63,7 +70,8 @@ nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_
           {"path_length_m", ate.path_length_m},
           {"final_error_m", ate.final_error_m},
           {"drift_per_100m", ate.drift_per_100m},
-          {"se3_rmse_m", ate_se3.rmse_m}};
+          {"se3_rmse_m", ate_se3.rmse_m},
+          {"T_gt_est", matrix_rows(ate.T_gt_est)}};
 }
 
 }  // namespace loopgate

@@ -100,6 +100,10 @@ void RunOutputs::open() {
   for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
   timing_columns.emplace_back("latency_ms");
   timing_columns.emplace_back("total_ms");
+  if (method_.detects() && geometry_column()) {  // off the frame's path: not in total_ms
+    timing_columns.emplace_back("loop_verify_ms");
+    timing_columns.emplace_back("loop_optimize_ms");
+  }
   timing_csv_.open(out_dir_ / "timing.csv", timing_columns);
   trajectory_.open(out_dir_ / "trajectory.tum");
 }
@@ -128,7 +132,10 @@ void RunOutputs::sink(FrameRecord& r) {
   }
   if (r.has_pose) {
     const PoseEstimate& pose = r.odometry.pose;
-    if (pose.status != OdometryStatus::kLost) trajectory_.write(r.t_ns, pose.T_w_b);
+    if (pose.status != OdometryStatus::kLost) {
+      trajectory_.write(r.t_ns, pose.T_w_b);
+      frame_poses_.emplace_back(r.frame, pose.T_w_b);
+    }
     if (pose.status == OdometryStatus::kTracking) tracked_poses_.push_back({r.t_ns, pose.T_w_b});
   }
   counters_.count(r, status, reason);
@@ -172,6 +179,19 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
   profiler_.add_latency(latency_ms);
   cells.push_back(format_fixed(latency_ms, 4));
   cells.push_back(format_fixed(total_ms, 4));
+  if (method_.detects() && geometry_column() && !held_.empty() && held_.back().seq == r.seq) {
+    held_.back().timing = std::move(cells);  // written with its frames.csv row, after its verification
+  } else {
+    write_timing_row(std::move(cells), r.frame);
+  }
+}
+
+void RunOutputs::write_timing_row(std::vector<std::string> cells, std::size_t frame) {
+  if (method_.detects() && geometry_column()) {
+    const LoopCloser::FrameMs ms = closer_->frame_ms(frame);
+    cells.push_back(format_fixed(ms.verify_ms, 4));
+    cells.push_back(format_fixed(ms.optimize_ms, 4));
+  }
   timing_csv_.write_row(cells);
 }
 
@@ -196,6 +216,7 @@ void RunOutputs::write_ready_rows(bool end_of_stream) {
     add_detection_cells(verdict, held.row);
     if (geometry_column()) held.row.add("geometry", geometry.value_or(""));
     frames_csv_.write_row(held.row.values());
+    if (!held.timing.empty()) write_timing_row(std::move(held.timing), held.frame);
     held_.pop_front();
   }
 }

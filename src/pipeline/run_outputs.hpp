@@ -40,6 +40,8 @@ class RunOutputs {
   const RunCounters& counters() const { return counters_; }
   const StageProfiler& profiler() const { return profiler_; }
   const std::vector<StampedPose>& tracked_poses() const { return tracked_poses_; }
+  // Every frame's usable odometry pose (not lost), in frame order.
+  const std::vector<std::pair<std::size_t, Eigen::Isometry3d>>& frame_poses() const { return frame_poses_; }
   std::uint64_t frames_through() const { return next_seq_; }
 
  private:
@@ -49,6 +51,8 @@ class RunOutputs {
   bool geometry_column() const { return closer_ && closer_->active(); }
   void write_ready_rows(bool end_of_stream);
   void timing(FrameRecord& r, std::int64_t exit_ns);
+  // A timing.csv row; with loop closure active, the frame's verify/optimize cells are appended.
+  void write_timing_row(std::vector<std::string> cells, std::size_t frame);
   void show_progress(bool final);
 
   const PipelineConfig& config_;
@@ -69,6 +73,7 @@ class RunOutputs {
   StageProfiler profiler_;
   RunCounters counters_;
   std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
+  std::vector<std::pair<std::size_t, Eigen::Isometry3d>> frame_poses_;
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection
     std::size_t seq = 0;
@@ -76,6 +81,7 @@ class RunOutputs {
     CsvRow row;
     bool final = false;                   // the method's detection is known (asked once per seq)
     std::optional<FrameVerdict> verdict;  // then: the method's detection
+    std::vector<std::string> timing;      // its timing.csv row when loops are verified (waits with it)
   };
   std::deque<HeldRow> held_;
 };

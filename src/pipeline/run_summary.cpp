@@ -156,18 +156,8 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
     method.erase("detection");
   }
   summary["detection"] = std::move(detection);
-  if (parts.closer && parts.closer->active()) {
-    nlohmann::json closure = parts.closer->summary();
-    summary["loops_verified"] = closure["verified"];
-    summary["loops_rejected_geometry"] = closure["rejected_geometry"];
-    summary["loops_skipped_geometry"] = closure["skipped"];
-    nlohmann::json corrected =
-        trajectory_accuracy_json(parts.closer->corrected(parts.outputs.tracked_poses()), dataset);
-    if (corrected.value("available", false))
-      corrected["poses"] = "odometry poses with status tracking, corrected by the pose graph";
-    summary["trajectory_accuracy_corrected"] = std::move(corrected);
-    summary["loop_closure"] = std::move(closure);
-  }
+  if (parts.closer && parts.closer->active())
+    summary.update(parts.closer->summary_fields(parts.outputs.tracked_poses()));
   summary.update(method);
   return summary;
 }
