@@ -1,0 +1,152 @@
+// The floor of loop correction on a route (issue 13): a finished run's odometry (trajectory.tum) in the pose
+// graph the loop closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance -
+// at every ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). No
+// verifier can give better edges or more of them, so the ATE printed is the best any loop closure reaches
+// on this odometry and route with this graph; a target below it needs better odometry (or a Sim(3) graph),
+// not better loops. Prints figures; not a timed benchmark.
+//
+//   build/release/bench_pipeline_loop_oracle RUN_DIR DATASET [--every N] [--sigma-position-m S]
+//       [--sigma-rotation-rad R]
+#include <spdlog/fmt/fmt.h>
+
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "io/dataset.hpp"
+#include "io/trajectory_io.hpp"
+#include "pipeline/run_metrics.hpp"
+#include "stages/ekf/vio_ekf.hpp"
+#include "stages/posegraph/pose_graph.hpp"
+
+namespace {
+
+using namespace loopgate;
+namespace fs = std::filesystem;
+
+struct Options {
+  fs::path run_dir, dataset;
+  int every = 5;
+  double sigma_position_m = 0.1;
+  double sigma_rotation_rad = 0.005;
+};
+
+// truth_loops.csv as the run writes it: header "i,j", then one pair per line.
+std::vector<std::pair<std::size_t, std::size_t>> read_truth_loops(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) throw DataError(file, "cannot be read (a run with ground truth writes it)");
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;
+  std::string line;
+  for (std::size_t line_no = 1; std::getline(in, line); ++line_no) {
+    if (line_no == 1 && line == "i,j") continue;
+    std::size_t i = 0, j = 0;
+    if (std::sscanf(line.c_str(), "%zu,%zu", &i, &j) != 2)
+      throw DataError(file, fmt::format("line {}: expected 'i,j', got '{}'", line_no, line));
+    pairs.emplace_back(i, j);
+  }
+  return pairs;
+}
+
+double rmse(const nlohmann::json& accuracy) {
+  return accuracy.value("available", false) ? accuracy.at("rmse_m").get<double>() : -1.0;
+}
+
+int run(const Options& o) {
+  const auto dataset = open_dataset(o.dataset);
+  if (!dataset->has_ground_truth()) throw DataError(o.dataset, "the oracle needs ground truth");
+  const std::vector<StampedPose> odometry = read_tum(o.run_dir / "trajectory.tum");
+  std::map<Timestamp, std::size_t> frame_of;
+  for (std::size_t f = 0; f < dataset->frame_count(); ++f) frame_of[dataset->frame_t_ns(f)] = f;
+  PoseGraphConfig config;
+  PoseGraph graph(config);
+  std::map<std::size_t, std::size_t> node_of;  // frame -> node
+  for (const StampedPose& pose : odometry) {
+    const auto it = frame_of.lower_bound(pose.t_ns - 1000);  // TUM keeps 1 ns; allow its rounding
+    if (it == frame_of.end() || it->first > pose.t_ns + 1000) continue;
+    node_of[it->second] = graph.add_node(pose.T_w_b);
+  }
+  if (node_of.size() < 2) throw DataError(o.run_dir / "trajectory.tum", "fewer than 2 poses at frame times");
+  for (std::size_t n = 1; n < graph.node_count(); ++n) {
+    const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
+    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.odometry_cov(T_a_b));
+  }
+  Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+  cov.diagonal() << Eigen::Vector3d::Constant(o.sigma_position_m * o.sigma_position_m),
+      Eigen::Vector3d::Constant(o.sigma_rotation_rad * o.sigma_rotation_rad);
+  const auto gt_pose = [&](std::size_t frame) {
+    const auto state = ground_truth_state_at(dataset->ground_truth(), dataset->frame_t_ns(frame));
+    if (!state) throw DataError(o.dataset, fmt::format("no ground truth at frame {}", frame));
+    return state->T_w_b;
+  };
+  const std::vector<std::pair<std::size_t, std::size_t>> pairs =
+      read_truth_loops(o.run_dir / "truth_loops.csv");
+  std::size_t loops = 0;
+  long long last_i = -1'000'000;
+  for (const auto& [i, j] : pairs) {
+    if (static_cast<long long>(i) - last_i < o.every || !node_of.count(i) || !node_of.count(j)) continue;
+    last_i = static_cast<long long>(i);
+    graph.add_edge(node_of[j], node_of[i], EdgeKind::kLoop, gt_pose(j).inverse() * gt_pose(i), cov);
+    ++loops;
+  }
+  const SolveReport report = graph.optimize(true, 0.0);
+  std::vector<StampedPose> corrected;
+  std::size_t n = 0;
+  for (const auto& [frame, node] : node_of) {
+    (void)node;
+    corrected.push_back({dataset->frame_t_ns(frame), graph.pose(n++)});
+  }
+  std::vector<StampedPose> before;
+  for (std::size_t k = 0; k < graph.node_count(); ++k)
+    before.push_back({corrected[k].t_ns, graph.initial_pose(k)});
+  std::printf(
+      "%s: %zu nodes, %zu perfect loop edges (one per %d query frames of %zu ground-truth pairs; %zu "
+      "switched "
+      "off), %d iterations\nATE odometry %.3f m -> oracle-corrected %.3f m (posyaw alignment, as "
+      "summary.json)\n",
+      o.run_dir.c_str(), graph.node_count(), loops, o.every, pairs.size(), report.outliers, report.iterations,
+      rmse(trajectory_accuracy_json(before, *dataset)), rmse(trajectory_accuracy_json(corrected, *dataset)));
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  std::vector<std::string> args(argv + 1, argv + argc);
+  std::vector<std::string> positional;
+  try {
+    for (std::size_t k = 0; k < args.size(); ++k) {
+      const auto value = [&]() -> const std::string& {
+        if (k + 1 >= args.size()) throw ConfigError(args[k] + ": needs a value");
+        return args[++k];
+      };
+      if (args[k] == "--every") {
+        o.every = std::stoi(value());
+      } else if (args[k] == "--sigma-position-m") {
+        o.sigma_position_m = std::stod(value());
+      } else if (args[k] == "--sigma-rotation-rad") {
+        o.sigma_rotation_rad = std::stod(value());
+      } else {
+        positional.push_back(args[k]);
+      }
+    }
+    if (positional.size() != 2 || o.every < 1 || o.sigma_position_m <= 0 || o.sigma_rotation_rad <= 0) {
+      std::fprintf(
+          stderr,
+          "usage: %s RUN_DIR DATASET [--every N>=1] [--sigma-position-m S>0] [--sigma-rotation-rad R>0]\n",
+          argv[0]);
+      return 2;
+    }
+    o.run_dir = positional[0];
+    o.dataset = positional[1];
+    return run(o);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_pipeline_loop_oracle: error: %s\n", e.what());
+    return 1;
+  }
+}
