@@ -323,6 +323,17 @@ def detection_groups(run, true_colour):
     return [(correct, true_colour, "detections, true"), (~correct, "tab:red", "detections, false")]
 
 
+def finish_plane_axes(fig, ax, axes, title, path, written):
+    """Labels, equal aspect, legend and grid of a top view in world axes `axes`, then saves it."""
+    ax.set_xlabel(f"{AXES[axes[0]]} [m]")
+    ax.set_ylabel(f"{AXES[axes[1]]} [m]")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(alpha=0.3)
+    save(fig, path, written)
+
+
 def plot_trajectory(run, path, written, title):
     clouds = [p for p in (run.est, run.gt) if p is not None and np.isfinite(p).any()]
     if not clouds:
@@ -346,13 +357,7 @@ def plot_trajectory(run, path, written, title):
             ax.add_collection(LineCollection(seg[mask], colors=colour, lw=1.0, zorder=4))
             ax.plot(seg[mask, 0, 0], seg[mask, 0, 1], "o", ms=3.5, color=colour, zorder=5,
                     label=f"{label} ({int(mask.sum())})")
-    ax.set_xlabel(f"{AXES[a]} [m]")
-    ax.set_ylabel(f"{AXES[b]} [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize=8)
-    ax.grid(alpha=0.3)
-    save(fig, path, written)
+    finish_plane_axes(fig, ax, (a, b), title, path, written)
 
 
 def aligned_xyz(path, accuracy):
@@ -384,13 +389,7 @@ def plot_correction(gt_path, odometry, corrected, path, written, title):
     for k, (label, xyz, ate) in enumerate(corrected):
         ax.plot(xyz[:, a], xyz[:, b], color=colours[k % len(colours)], lw=0.9,
                 label=f"{label}: ATE {ate:.3f} m")
-    ax.set_xlabel(f"{AXES[a]} [m]")
-    ax.set_ylabel(f"{AXES[b]} [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize=8)
-    ax.grid(alpha=0.3)
-    save(fig, path, written)
+    finish_plane_axes(fig, ax, (a, b), title, path, written)
 
 
 def correction_lines(run_dir, summary, corrected_fields, label):
