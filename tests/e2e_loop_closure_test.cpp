@@ -177,6 +177,14 @@ TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
   EXPECT_EQ(edges_without_timing(out / "dird-seqslam"), edges_without_timing(ran));
   EXPECT_EQ(read_file(out / "dird-seqslam" / "trajectory_corrected.tum"),
             read_file(ran / "trajectory_corrected.tum"));
+  // The plots draw the trajectories before and after correction beside the ground truth.
+  std::string plot_output;
+  ASSERT_EQ(testing::run_command("/usr/bin/python3 " + std::string(LOOPGATE_SOURCE_DIR) +
+                                     "/scripts/plot.py compare " + out.string(),
+                                 &plot_output),
+            0)
+      << plot_output;
+  EXPECT_TRUE(fs::is_regular_file(out / "plots" / "correction.png")) << plot_output;
 }
 
 TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {
