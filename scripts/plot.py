@@ -648,7 +648,9 @@ def cmd_aggregate(agg_dir, out):
     ap = table.numbers("average_precision", allow_empty=True)
     wall_s = table.numbers("wall_s", allow_empty=True)
     # Full runs decode every frame in the decode stage, gated ones inside describe: with decode is the fair sum.
-    detect_column = "describe_match_decode_ms" if table.has("describe_match_decode_ms") else "describe_match_ms"
+    detect_column = "describe_match_ms"
+    if table.has("describe_match_decode_ms"):
+        detect_column = "describe_match_decode_ms"
     detect_s = table.numbers(detect_column, allow_empty=True) / 1000.0
     runs = list(dict.fromkeys(runs_col))
     methods = list(dict.fromkeys(methods_col))
