@@ -74,7 +74,10 @@ class Job:
 
     def references(self):
         """Names of the jobs this one reads (@NAME in the dataset column or as an option value)."""
-        words = [self.value("dataset") or ""] + self.tokens("options")
+        try:
+            words = [self.value("dataset") or ""] + self.tokens("options")
+        except ValueError:  # bad quotes: check_job reports them
+            return []
         return [w[1:] for w in words if w.startswith("@")]
 
     def phase(self):
@@ -132,23 +135,23 @@ def check_job(job):
                   "starting with a letter or digit: it is the output folder ROOT/NAME")
     if command not in COMMANDS:
         fail(job, f"command '{command}': expected one of {', '.join(COMMANDS)}")
+    try:
+        overrides, options = job.tokens("set"), job.tokens("options")
+    except ValueError as e:
+        fail(job, f"set/options: {e} (quotes must be balanced)")
     dataset = job.value("dataset")
     if command == "simulate":
         if not dataset:
             fail(job, "dataset: a simulate line needs the preset to render (demo, aliasing, FILE.yaml, ...)")
         if dataset.startswith("@"):
             fail(job, f"dataset '{dataset}': a simulate line renders a preset, it reads no other job")
-    elif not dataset and "--reference" not in job.tokens("options"):
+    elif not dataset and "--reference" not in options:
         fail(job, f"dataset: a {command} line needs a dataset folder or @NAME of a simulate line "
                   "('-' only with --reference/--query in options)")
     config = job.value("config")
     if config and not Path(config).is_file():
         fail(job, f"config '{config}': file not found (relative paths are relative to the directory "
                   f"batch runs in, {Path.cwd()})")
-    try:
-        overrides, options = job.tokens("set"), job.tokens("options")
-    except ValueError as e:
-        fail(job, f"set/options: unbalanced quotes ({e})")
     for item in overrides:
         if not SET_RE.match(item):
             fail(job, f"set: '{item}' is not section.key=value")
