@@ -4,6 +4,7 @@
 Usage:
   /usr/bin/python3 scripts/plot.py run RUN_DIR [--out DIR]          (default out: RUN_DIR/plots)
   /usr/bin/python3 scripts/plot.py compare COMPARE_DIR [--out DIR]  (default out: COMPARE_DIR/plots)
+  /usr/bin/python3 scripts/plot.py aggregate AGG_DIR [--out DIR]    (default out: AGG_DIR)
 Prints the paths written, one per line, on stdout. Bad input: a message naming the file (and line) on
 stderr, exit 2. A missing optional input skips the plot that needs it, with a note on stderr.
 
@@ -24,6 +25,8 @@ NAME, cells may be empty; frame indices are dataset frame indices):
   descriptor.csv       "frame,v0,...,v3455" one DIRD descriptor (54 x 64 bytes)       (optional)
   compare.json         {"full": summary, "gated": summary, "seqslam": summary} (any subset), with the
                        run directories COMPARE_DIR/full, COMPARE_DIR/gated, COMPARE_DIR/seqslam.
+  aggregate.csv        (`loopgate aggregate`) run,method,...,average_precision,...,wall_s,
+                       describe_match_ms,...: one row per run and method, empty cells where a run has no value
 
 Pictures:
   run      trajectory.png  estimated (and ground-truth) trajectory in the two axes of largest extent,
@@ -42,6 +45,9 @@ Pictures:
            plane.png, trajectory.png  of the gated run
            correction.png  with loop correction (compare.json's "loop_correction"): ground truth, the
                            odometry and every method's corrected trajectory, ATE RMSE in the legend
+  aggregate aggregate.png  per run (groups) and method (bars): average precision above; below the
+                           describe+match+decode time summed over frames (bars; describe+match without
+                           a describe_match_decode_ms column) and the wall time (black ticks), in seconds
 A detection is true when the ground-truth positions of i and j are within config.eval.accept_radius_m
 (in config.eval.plane when given, else 3-D), else when (i, j) is listed in truth_loops.csv. Without
 truth_loops.csv, true loops are computed from ground truth: j <= i - gap_frames within radius_m.
@@ -631,18 +637,72 @@ def cmd_compare(compare_dir, out):
     return written
 
 
+def cmd_aggregate(agg_dir, out):
+    """aggregate.png of `loopgate aggregate`'s table: AP and time per run and method."""
+    written = []
+    table = Table(agg_dir / "aggregate.csv",
+                  required=("run", "method", "average_precision", "wall_s", "describe_match_ms"))
+    if not table.rows:
+        raise InputError(f"{table.path}:2: no rows (expected one per run and method)")
+    runs_col, methods_col = table.text("run"), table.text("method")
+    ap = table.numbers("average_precision", allow_empty=True)
+    wall_s = table.numbers("wall_s", allow_empty=True)
+    # Full runs decode every frame in the decode stage, gated ones inside describe: with decode is the fair sum.
+    detect_column = "describe_match_ms"
+    if table.has("describe_match_decode_ms"):
+        detect_column = "describe_match_decode_ms"
+    detect_s = table.numbers(detect_column, allow_empty=True) / 1000.0
+    runs = list(dict.fromkeys(runs_col))
+    methods = list(dict.fromkeys(methods_col))
+    width = 0.8 / len(methods)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(max(8.0, 1.2 + 0.35 * len(runs) * len(methods)), 8),
+                                      sharex=True)
+    colours = plt.get_cmap("tab10")
+    for m, method in enumerate(methods):
+        rows = [k for k, name in enumerate(methods_col) if name == method]
+        x = np.array([runs.index(runs_col[k]) for k in rows]) + (m - (len(methods) - 1) / 2) * width
+        colour = colours(m % 10)
+        top.bar(x, np.nan_to_num(ap[rows]), width, color=colour, label=METHOD_LABELS.get(method, method))
+        for xk, value in zip(x, ap[rows]):
+            if np.isnan(value):  # no ground truth: no AP, said rather than drawn as 0
+                top.text(xk, 0.01, "n/a", ha="center", va="bottom", fontsize=7, rotation=90)
+        bottom.bar(x, np.nan_to_num(detect_s[rows]), width, color=colour)
+        bottom.plot(x, wall_s[rows], linestyle="none", marker="_", markersize=10, color="black")
+    top.set_ylim(0, 1.05)
+    top.set_ylabel("average precision")
+    name = agg_dir.resolve().name
+    if name == "aggregate":  # loopgate aggregate's default folder: the batch ROOT's name says more
+        name = agg_dir.resolve().parent.name
+    legend_rows = (len(methods) + 3) // 4
+    top.set_title(f"{name}: average precision and time per run and method", pad=12 + 14 * legend_rows)
+    top.legend(loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=min(4, len(methods)), fontsize=8,
+               frameon=False)
+    what = "describe+match+decode" if detect_column == "describe_match_decode_ms" else "describe+match"
+    bottom.set_ylabel(f"time [s]: {what} summed\nover frames (bars), wall (ticks)")
+    positive = np.concatenate([detect_s[detect_s > 0], wall_s[wall_s > 0]])
+    if len(positive) and positive.max() / positive.min() > 100:
+        bottom.set_yscale("log")
+    bottom.set_xticks(range(len(runs)))
+    bottom.set_xticklabels(runs, rotation=30, ha="right", fontsize=8)
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3, axis="y")
+    save(fig, out / "aggregate.png", written)
+    return written
+
+
 def main():
     parser = argparse.ArgumentParser(description="Pictures of a loopgate run or compare (PNG).")
-    parser.add_argument("what", choices=["run", "compare"])
-    parser.add_argument("dir", type=Path, help="RUN_DIR or COMPARE_DIR")
-    parser.add_argument("--out", type=Path, help="output directory (default: DIR/plots)")
+    parser.add_argument("what", choices=["run", "compare", "aggregate"])
+    parser.add_argument("dir", type=Path, help="RUN_DIR, COMPARE_DIR or AGG_DIR (loopgate aggregate's --out)")
+    parser.add_argument("--out", type=Path, help="output directory (default: DIR/plots; aggregate: DIR)")
     args = parser.parse_args()
     try:
         if not args.dir.is_dir():
             raise InputError(f"{args.dir}: not a directory")
-        out = args.out or args.dir / "plots"
+        out = args.out or (args.dir if args.what == "aggregate" else args.dir / "plots")
         out.mkdir(parents=True, exist_ok=True)
-        written = (cmd_run if args.what == "run" else cmd_compare)(args.dir, out)
+        command = {"run": cmd_run, "compare": cmd_compare, "aggregate": cmd_aggregate}[args.what]
+        written = command(args.dir, out)
     except (InputError, OSError) as e:
         print(f"plot.py: error: {e}", file=sys.stderr)
         return 2

@@ -8,6 +8,7 @@ packages=(
   libyaml-cpp-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev
   python3-matplotlib python3-numpy
+  parallel
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -244,5 +244,35 @@ TEST_F(E2ePlot, MalformedLinesExit2NamingFileAndLine) {
   }
 }
 
+// `loopgate aggregate`'s table (aggregate.csv): the AP and time figure; an empty cell (no ground truth) is
+// drawn as "n/a", a missing column or a bad number is exit 2 naming file and line.
+TEST_F(E2ePlot, AggregateDrawsApAndTimePerRunAndMethod) {
+  const fs::path dir = testing::make_temp_dir("plot-aggregate");
+  const std::string header =
+      "run,method,average_precision,wall_s,describe_match_ms,describe_match_decode_ms\n";
+  std::ofstream(dir / "aggregate.csv") << header << "demo,full,0.1,2.0,900,1200\n"
+                                       << "demo,gated,0.95,0.8,300,310\n"
+                                       << "aliasing,gated,,0.5,100,110\n";
+  const Result r = plot("aggregate", dir, dir);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find((dir / "aggregate.png").string() + "\n"), std::string::npos) << r.output;
+  expect_png(dir / "aggregate.png");
+
+  std::ofstream(dir / "aggregate.csv") << "run,method,wall_s\ndemo,full,2.0\n";
+  Result bad = plot("aggregate", dir, dir);
+  EXPECT_EQ(bad.status, 2) << bad.output;
+  EXPECT_NE(bad.output.find((dir / "aggregate.csv").string() + ":1: missing column(s) average_precision"),
+            std::string::npos)
+      << bad.output;
+  std::ofstream(dir / "aggregate.csv")
+      << header << "demo,full,0.1,2.0,900,1200\ndemo,gated,high,0.8,300,310\n";
+  bad = plot("aggregate", dir, dir);
+  EXPECT_EQ(bad.status, 2) << bad.output;
+  EXPECT_NE(bad.output.find((dir / "aggregate.csv").string() +
+                            ":3: column 'average_precision': expected a number, got 'high'"),
+            std::string::npos)
+      << bad.output;
+}
+
 }  // namespace
 }  // namespace loopgate

@@ -19,7 +19,9 @@
 #include <vector>
 
 #include "app/commands.hpp"
+#include "app/compare_methods.hpp"
 #include "app/stop_signals.hpp"
+#include "app/summary_fields.hpp"
 #include "core/error.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
@@ -50,29 +52,6 @@ struct CompareOptions {
   bool force = false;
   std::string plot_script;
   std::vector<std::string> overrides;
-};
-
-// The methods compare runs, by name: detector, mode and the DIRD DP's descriptor standardisation
-// (standardize.mode; dird-seqslam takes its own descriptors from section dird_seqslam). Everything else is
-// the shared configuration. One table: a new method is one line here.
-struct CompareMethod {
-  const char* name;
-  Detector detector;
-  RunMode mode;
-  const char* standardize;  // standardize.mode
-  const char* what;
-};
-constexpr CompareMethod kCompareMethods[] = {
-    {"full", Detector::kDird, RunMode::kFull, "off", "DIRD on every frame (the paper's baseline)"},
-    {"gated", Detector::kDird, RunMode::kGated, "off", "DIRD in the pose gate's candidate areas (the paper)"},
-    {"seqslam", Detector::kSeqSlam, RunMode::kFull, "off", "SeqSLAM on every frame"},
-    {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas"},
-    {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame"},
-    {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas"},
-    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
-     "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame"},
-    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
-     "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)"},
 };
 
 // The methods of a two-sequence compare (no poses: no gate).
@@ -139,33 +118,10 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   return config;
 }
 
-double stage_total_ms(const json& summary, const char* stage) {
-  const auto& stages = summary.at("stages");
-  return stages.contains(stage) ? stages.at(stage).at("total_ms").get<double>() : 0.0;
-}
-
-// Time of the loop-detection work: describe + match + the end-of-stream step, and the same with decode
-// (the full run decodes every frame for describe; the gated one reads its frames inside describe).
-double detection_ms(const json& s) {
-  return stage_total_ms(s, "describe") + stage_total_ms(s, "match") + s.value("end_of_stream_ms", 0.0);
-}
-double detection_with_decode_ms(const json& s) {
-  return detection_ms(s) + stage_total_ms(s, "decode");
-}
-
 std::string number(const json& value, int decimals = 0) {
   if (value.is_null()) return "-";
   if (value.is_number_integer() || value.is_number_unsigned()) return std::to_string(value.get<long long>());
   return fmt::format("{:.{}f}", value.get<double>(), decimals);
-}
-
-const json* find_path(const json& root, const std::vector<std::string>& path) {
-  const json* node = &root;
-  for (const auto& key : path) {
-    if (!node->is_object() || !node->contains(key)) return nullptr;
-    node = &node->at(key);
-  }
-  return node;
 }
 
 std::string table(const std::vector<std::string>& methods, const std::map<std::string, json>& summaries,

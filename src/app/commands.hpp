@@ -17,5 +17,6 @@ void add_describe_command(CLI::App& app, int& exit_code);
 void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_run_command(CLI::App& app, int& exit_code);
 void add_compare_command(CLI::App& app, int& exit_code);
+void add_aggregate_command(CLI::App& app, int& exit_code);
 
 }  // namespace loopgate::app

@@ -1,0 +1,191 @@
+// scripts/batch.sh (GNU parallel) and scripts/slurm/loopgate-array.sbatch end to end on a tiny manifest the
+// test writes: a rendered aliasing excerpt, a run and a compare on it. A second batch.sh redoes nothing; a
+// job whose outputs were removed is redone alone; a failing line makes batch.sh exit non-zero naming it, and
+// the next batch.sh retries only that line; a bad manifest line is an error naming file and line; the Slurm
+// template run by hand for one index does that job (or skips it when done). Skipped without GNU parallel.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "test_support.hpp"
+
+namespace loopgate {
+namespace {
+
+namespace fs = std::filesystem;
+
+const fs::path kSource = LOOPGATE_SOURCE_DIR;
+
+bool have_gnu_parallel() {
+  std::string output;
+  return testing::run_command("parallel --version", &output) == 0 &&
+         output.find("GNU parallel") != std::string::npos;
+}
+
+struct Result {
+  int status = -1;
+  std::string output;
+};
+
+Result batch(const fs::path& manifest, const fs::path& root, const std::string& extra = "") {
+  Result r;
+  r.status = testing::run_command((kSource / "scripts" / "batch.sh").string() + " " + manifest.string() +
+                                      " -j 2 --out " + root.string() + " --loopgate " +
+                                      testing::loopgate_binary().string() + extra,
+                                  &r.output);
+  return r;
+}
+
+Result slurm_task(int index, const fs::path& manifest, const fs::path& root) {
+  Result r;
+  r.status = testing::run_command("env -u SLURM_JOB_ID SLURM_ARRAY_TASK_ID=" + std::to_string(index) +
+                                      " LOOPGATE=" + testing::loopgate_binary().string() + " bash " +
+                                      (kSource / "scripts" / "slurm" / "loopgate-array.sbatch").string() +
+                                      " " + manifest.string() + " --out " + root.string(),
+                                  &r.output);
+  return r;
+}
+
+// How many times batch started the job: one "===" header per attempt in its console log.
+int attempts(const fs::path& root, const std::string& name) {
+  const std::string log = testing::read_file(root / "_batch" / "logs" / (name + ".log"));
+  int count = 0;
+  for (std::size_t at = log.find("=== "); at != std::string::npos; at = log.find("\n=== ", at + 1)) ++count;
+  return count;
+}
+
+std::size_t lines(const fs::path& file) {
+  const std::string text = testing::read_file(file);
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+}
+
+fs::path write_manifest(const fs::path& dir, const std::string& name, const std::string& jobs) {
+  const fs::path file = dir / name;
+  std::ofstream(file) << "# a test manifest\nname\tcommand\tdataset\tconfig\tset\toptions\n" << jobs;
+  return file;
+}
+
+const std::string kConfig = (kSource / "configs" / "aliasing.yaml").string();
+
+std::string tiny_jobs() {
+  const std::string set = "output.progress=off match.margin=50";
+  return "sim\tsimulate\taliasing\t-\t-\t--frames 120\n"
+         "\n"
+         "gated\trun\t@sim\t" +
+         kConfig + "\t" + set + "\t--mode gated\n" + "cmp\tcompare\t@sim\t" + kConfig + "\t" + set +
+         "\t--methods gated,seqslam --no-plots\n";
+}
+
+TEST(E2eBatch, ResumesWithoutRedoingFinishedRuns) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch");
+  const fs::path manifest = write_manifest(dir, "tiny.tsv", tiny_jobs());
+  const fs::path root = dir / "out";
+
+  Result r = batch(manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(root / "sim" / "simulation.json"));
+  EXPECT_TRUE(fs::is_regular_file(root / "gated" / "summary.json"));
+  EXPECT_TRUE(fs::is_regular_file(root / "cmp" / "compare.json"));
+  EXPECT_TRUE(fs::is_regular_file(root / "_batch" / "joblog-simulate.tsv"));
+  EXPECT_EQ(lines(root / "_batch" / "joblog-runs.tsv"), 3u) << "header + 2 jobs";
+  for (const char* name : {"sim", "gated", "cmp"}) EXPECT_EQ(attempts(root, name), 1) << name;
+
+  // Again: the job logs say everything succeeded, nothing starts.
+  r = batch(manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* name : {"sim", "gated", "cmp"}) EXPECT_EQ(attempts(root, name), 1) << name;
+  EXPECT_EQ(lines(root / "_batch" / "joblog-runs.tsv"), 3u);
+
+  // The Slurm template by hand on a finished job: skipped.
+  r = slurm_task(2, manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("job 2 'gated'"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("done already"), std::string::npos) << r.output;
+  EXPECT_EQ(attempts(root, "gated"), 1);
+
+  // Outputs removed: that job alone is redone (the job log no longer agrees with the outputs).
+  fs::remove_all(root / "cmp");
+  r = batch(manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(root / "cmp" / "compare.json"));
+  EXPECT_EQ(attempts(root, "cmp"), 2);
+  EXPECT_EQ(attempts(root, "gated"), 1);
+  EXPECT_EQ(attempts(root, "sim"), 1);
+  EXPECT_NE(r.output.find("its outputs are gone"), std::string::npos) << r.output;
+}
+
+TEST(E2eBatch, SlurmTemplateRunsOneIndexByHand) {
+  const fs::path dir = testing::make_temp_dir("e2e-batch-slurm");
+  const fs::path manifest = write_manifest(dir, "tiny.tsv", tiny_jobs());
+  const fs::path root = dir / "out";
+  Result r = slurm_task(2, manifest, root);  // the run before its dataset: a clear error
+  EXPECT_NE(r.status, 0);
+  EXPECT_NE(r.output.find(manifest.string() + ":5: 'gated' reads @sim, which is not rendered yet"),
+            std::string::npos)
+      << r.output;
+  r = slurm_task(1, manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(root / "sim" / "simulation.json"));
+  r = slurm_task(2, manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(root / "gated" / "summary.json"));
+  r = slurm_task(4, manifest, root);
+  EXPECT_EQ(r.status, 2);
+  EXPECT_NE(r.output.find("job number '4': expected 1..3"), std::string::npos) << r.output;
+}
+
+TEST(E2eBatch, FailedLineIsNamedAndRetriedAlone) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch-fail");
+  const fs::path data = dir / "data";
+  ASSERT_EQ(testing::run_command(testing::loopgate_binary().string() +
+                                 " --log-level warn simulate --preset aliasing --frames 100 --out " +
+                                 data.string()),
+            0);
+  const std::string set = "output.progress=off";
+  const fs::path manifest = write_manifest(
+      dir, "fail.tsv",
+      "good\trun\t" + data.string() + "\t" + kConfig + "\t" + set + "\t--mode odometry\n" + "bad\trun\t" +
+          (dir / "no-such-dataset").string() + "\t" + kConfig + "\t" + set + "\t--mode odometry\n");
+  const fs::path root = dir / "out";
+  Result r = batch(manifest, root);
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("batch: FAILED " + manifest.string() + ":4: job 2 'bad' (run): exit status 1"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("no-such-dataset"), std::string::npos) << r.output;  // the log's tail
+  EXPECT_EQ(r.output.find("'good' (run): exit"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::is_regular_file(root / "good" / "summary.json"));
+
+  r = batch(manifest, root);  // retries the failed line only
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_EQ(attempts(root, "good"), 1);
+  EXPECT_EQ(attempts(root, "bad"), 2);
+}
+
+TEST(E2eBatch, BadManifestLinesAreNamed) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch-manifest");
+  const fs::path manifest = write_manifest(dir, "bad.tsv",
+                                           "a\trun\t/data\t-\t-\n"
+                                           "b\tcompute\t/data\t-\t-\t-\n"
+                                           "c\trun\t@nothing\t-\t-\t--out /tmp/x\n"
+                                           "d\trun\t/data\t-\tnot-a-key\t-\n"
+                                           "b\trun\t/data\t-\t-\t-\n");
+  const Result r = batch(manifest, dir / "out");
+  EXPECT_EQ(r.status, 2) << r.output;
+  const std::string m = manifest.string();
+  for (const std::string& expected :
+       {m + ":3: expected 6 tab-separated fields", m + ":4: command 'compute': expected one of",
+        m + ":5: options: --out is not allowed here", m + ":6: set: 'not-a-key' is not section.key=value",
+        m + ":7: name 'b' already used on line 4"})
+    EXPECT_NE(r.output.find(expected), std::string::npos) << expected << "\n" << r.output;
+  EXPECT_FALSE(fs::exists(dir / "out" / "_batch")) << "nothing run or prepared";
+}
+
+}  // namespace
+}  // namespace loopgate
