@@ -60,7 +60,8 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
   int status = -1;
   const std::string output =
       run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
-              dataset.string() + " --out " + out.string() + " --set run.decode=all --threads 2 --trace",
+              dataset.string() + " --out " + out.string() +
+              " --set run.decode=all --set match.margin=20 --threads 2 --trace",
           &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows = read_csv(out / "frames.csv");
@@ -92,7 +93,9 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
 TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
   const fs::path dataset = make_kitti_dataset(30);
   const fs::path out = testing::make_temp_dir("e2e-run-refuse");
-  const std::string base = "run --dataset " + dataset.string() + " --out " + out.string();
+  // A margin the 30 frames exceed: a run that cannot compare any pair fails (issue 14).
+  const std::string base =
+      "run --dataset " + dataset.string() + " --out " + out.string() + " --set match.margin=20";
   int status = -1;
   std::string output = run(base + " --mode full", &status);
   ASSERT_EQ(status, 0) << output;
@@ -112,7 +115,7 @@ TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
 
   const fs::path compare_out = testing::make_temp_dir("e2e-compare-refuse");
   const std::string compare = "compare --dataset " + dataset.string() + " --out " + compare_out.string() +
-                              " --no-plots --methods full";
+                              " --no-plots --methods full --set match.margin=20";
   ASSERT_EQ((run(compare, &status), status), 0);
   output = run(compare, &status);
   EXPECT_EQ(status, 1) << output;
@@ -161,7 +164,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   ASSERT_EQ(status, 0) << output;
   const fs::path out = testing::make_temp_dir("e2e-run-sim-out");
   output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-                   sim.string() + " --out " + out.string() + " --set run.decode=all",
+                   sim.string() + " --out " + out.string() + " --set run.decode=all --set match.margin=20",
                &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows = read_csv(out / "frames.csv");
@@ -201,7 +204,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   damaged.close();
   const fs::path out2 = testing::make_temp_dir("e2e-run-sim-bad");
   output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-                   sim.string() + " --out " + out2.string(),
+                   sim.string() + " --out " + out2.string() + " --set match.margin=20",
                &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows2 = read_csv(out2 / "frames.csv");

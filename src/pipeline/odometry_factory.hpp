@@ -28,6 +28,10 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
 // sequence, rotated into the world by the ground truth. nullopt without IMU or ground truth.
 std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset);
 
+// What the configured source needs from `dataset` and its inputs, naming the file (odometry.file, the
+// dataset) and the times they cover: the run's checks say it when no frame got a pose (issue 14).
+std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset);
+
 // The source `config.source` resolves to for `dataset`: "auto" becomes "ekf" or "drift" (see
 // stages/odometry/odometry_source.hpp).
 std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
