@@ -226,6 +226,8 @@ class Run:
         self.radius_m = radius_m if radius_m > 0 else DEFAULT_RADIUS_M  # <= 0: the default
         self.accept_m = accept_m if accept_m > 0 else self.radius_m  # <= 0: r_accept = r_true
         self.plane = ev.get("plane") if ev.get("plane") in ("xy", "xz", "yz", "xyz") else "xyz"
+        # eval.truth_pairs_file: the listed pairs are the truth, even when the dataset has poses.
+        self.pairs_truth = "pairs_file" in (section(self.summary, "evaluation", "truth") or {})
 
         f = Table(run_dir / "frames.csv", ["frame", "x_m", "y_m", "z_m"])
         self.frames_table = f
@@ -276,7 +278,7 @@ class Run:
 
     def loop_correct(self, i, j):
         """Boolean array (is each (i, j) a true loop), or None without any ground truth."""
-        if self.gt is not None:
+        if self.gt is not None and not (self.pairs_truth and self.truth is not None):
             return distances(self.gt[i], self.gt[j], self.plane) <= self.accept_m
         if self.truth is not None:
             listed = set(map(tuple, self.truth.tolist()))

@@ -282,6 +282,62 @@ TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
     EXPECT_NEAR(std::stod(tum_times[k]), std::stod(tracking_times[k]), 1e3) << k;  // TUM: seconds, 9 decimals
 }
 
+// eval.truth_pairs_file (issue 14): the published (query, reference) pairs are the run's loop ground truth;
+// the key is printed at start and echoed in summary.json; a pair naming a frame the dataset does not have is
+// an error naming the file and line, before anything is written.
+TEST(E2eRun, TruthPairsFileIsTheGroundTruth) {
+  const fs::path dataset = make_kitti_dataset(60);
+  for (int i = 40; i < 60; ++i) {  // frames 40..59 revisit 0..19 (the same pixels)
+    char from[32], to[32];
+    std::snprintf(from, sizeof(from), "%06d.png", i - 40);
+    std::snprintf(to, sizeof(to), "%06d.png", i);
+    fs::copy_file(dataset / "image_0" / from, dataset / "image_0" / to, fs::copy_options::overwrite_existing);
+  }
+  const fs::path dir = testing::make_temp_dir("e2e-run-pairs");
+  {
+    std::ofstream pairs(dir / "gt.csv");
+    pairs << "query_index0,match_index0,query_file,match_file\n";
+    for (int i = 40; i < 60; ++i) pairs << i << "," << i - 40 << ",q.png,r.png\n";
+  }
+  const std::string base =
+      "run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
+      dataset.string() +
+      " --mode full --set match.margin=20 --set output.progress=off --set eval.truth_pairs_file=";
+  int status = -1;
+  std::string output = run(base + (dir / "gt.csv").string() + " --out " + (dir / "out").string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find("eval.truth_pairs_file = '" + (dir / "gt.csv").string() + "'"), std::string::npos)
+      << output;
+  const auto summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary["config"]["eval"]["truth_pairs_file"], (dir / "gt.csv").string());
+  const auto& evaluation = summary["evaluation"];
+  ASSERT_TRUE(evaluation["available"].get<bool>()) << evaluation.dump();
+  EXPECT_EQ(evaluation["truth"]["pairs_file"], (dir / "gt.csv").string());
+  EXPECT_EQ(evaluation["truth"]["pairs"], 20);
+  EXPECT_EQ(evaluation["truth"]["pairs_in_run"], 20);
+  EXPECT_EQ(evaluation["truth"]["positives"], 20);
+  const auto& truth = evaluation["loop_truth"];
+  EXPECT_EQ(truth["loops"].get<int>(), truth["loops_true"].get<int>() + truth["loops_false"].get<int>());
+  const auto truth_loops = read_csv(dir / "out" / "truth_loops.csv");
+  ASSERT_EQ(truth_loops.size(), 20u);
+  EXPECT_EQ(truth_loops[0], (std::vector<std::string>{"40", "0"}));
+  // --frames 30: leaves out the pairs whose frames the run does not have, and says how many it used.
+  output =
+      run(base + (dir / "gt.csv").string() + " --frames 0:50 --out " + (dir / "out-range").string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto ranged = nlohmann::json::parse(read_file(dir / "out-range" / "summary.json"));
+  EXPECT_EQ(ranged["evaluation"]["truth"]["pairs_in_run"], 10);
+
+  std::ofstream(dir / "other.csv") << "40,0\n75,3\n";
+  output = run(base + (dir / "other.csv").string() + " --out " + (dir / "bad").string(), &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find((dir / "other.csv").string() +
+                        ":2: frame 75 is not a frame of the dataset (its frames are numbered 0..59)"),
+            std::string::npos)
+      << output;
+  EXPECT_FALSE(fs::exists(dir / "bad" / "frames.csv"));
+}
+
 TEST(E2eRun, KittiThumbsEveryFrameOnceInOrder) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs");
   const fs::path out = testing::make_temp_dir("e2e-run-thumbs");

@@ -446,10 +446,16 @@ int compare_command(const CompareOptions& options) {
     std::string header =
         fmt::format("compare on {} ({} frames)", base.run.dataset, any.value("frames_processed", 0));
     if (const json* truth = find_path(any, {"evaluation", "truth"})) {
-      header +=
-          fmt::format("; ground-truth loops within {} m ({}), gap {} frames, detections true within {} m",
-                      number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
-                      number(truth->at("gap_frames")), number(truth->at("accept_radius_m"), 2));
+      if (truth->contains("pairs_file")) {
+        header += fmt::format("; ground-truth loops: the {} pairs of {} ({} in the run's frames)",
+                              number(truth->at("pairs")), truth->at("pairs_file").get<std::string>(),
+                              number(truth->at("pairs_in_run")));
+      } else {
+        header +=
+            fmt::format("; ground-truth loops within {} m ({}), gap {} frames, detections true within {} m",
+                        number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
+                        number(truth->at("gap_frames")), number(truth->at("accept_radius_m"), 2));
+      }
     }
     std::printf("%s\n%s%s", header.c_str(), table(ran, summaries, false).c_str(), ratios.c_str());
   }

@@ -41,6 +41,7 @@ class PipelineRun {
         out_dir_(out_dir),
         stop_(stop),
         range_(config.run.frame_range(dataset.frame_count())),
+        truth_pairs_(load_truth_pairs(config.eval, dataset)),
         seqs_(range_.second - range_.first),
         images_(dataset, seqs_),
         method_(make_detection_method({config, seqs_, images_, loops_, seqs_.capacity()},
@@ -111,6 +112,7 @@ class PipelineRun {
   std::filesystem::path out_dir_;
   const std::atomic<bool>* stop_;
   std::pair<std::size_t, std::size_t> range_;  // dataset frames [first, last)
+  std::optional<TruthPairs> truth_pairs_;      // eval.truth_pairs_file, read before the run starts
   RunClock clock_;
   SeqIndex seqs_;
   ImageSource images_;
@@ -327,6 +329,7 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
                  outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
                  end_of_stream_ms, std::nullopt, &closer_};
+  parts.truth_pairs = truth_pairs_ ? &*truth_pairs_ : nullptr;
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
   // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
   const std::size_t processed = outputs_.frames_through();

@@ -129,6 +129,13 @@ struct EvalConfig {
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
+  // Loop ground truth as published (KITTI, EuRoC, RTAB-Map samples): a file of (query, reference) pairs of
+  // 0-based frame numbers, the numbers frames.csv shows (eval/loop_files.hpp read_truth_pairs). When set, it
+  // replaces the positions rule above (truth_radius_m, truth_gap_frames, plane, accept_radius_m): query i is
+  // positive when it has a listed pair, a detection is true when its pair is listed; it needs no ground-truth
+  // poses (appearance-only datasets). Relative paths are relative to the working directory. Empty =
+  // positions.
+  std::string truth_pairs_file;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is EvalConfig or const EvalConfig).
   template <class Self, class V>
@@ -138,6 +145,7 @@ struct EvalConfig {
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
     v("aligned_tolerance_frames", self.aligned_tolerance_frames);
+    v("truth_pairs_file", self.truth_pairs_file);
   }
   void validate() const;
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
