@@ -141,6 +141,31 @@ TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   EXPECT_EQ(run.frame_range(15), (std::pair<std::size_t, std::size_t>{10, 15}));
 }
 
+// odometry.source none (issue 14): appearance only, with run.mode full; what needs poses is an error naming
+// the key and the way out.
+TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
+  EXPECT_EQ(error_of({"odometry.source=none", "run.mode=full"}), "");
+  EXPECT_EQ(error_of({"odometry.source=none", "run.mode=full", "run.method=seqslam"}), "");
+  EXPECT_EQ(
+      error_of({"odometry.source=none"}),
+      "run.mode: 'gated' needs poses for the pose gate, and odometry.source is none (appearance only): use "
+      "run.mode full (--mode full), or an odometry source");
+  EXPECT_NE(
+      error_of({"odometry.source=none", "run.mode=odometry"}).find("run.mode: 'odometry' estimates poses"),
+      std::string::npos);
+  EXPECT_NE(error_of({"odometry.source=none", "run.mode=full", "verify.enabled=true"})
+                .find("verify.enabled: geometric verification triangulates with the odometry poses"),
+            std::string::npos);
+  EXPECT_NE(error_of({"odometry.source=nothing"})
+                .find("odometry.source: 'nothing' is not one of "
+                      "drift|file|ekf|none|auto"),
+            std::string::npos);
+  const auto shipped = load_config<PipelineConfig>(config_file("rtabmap-samples"));
+  EXPECT_EQ(shipped.odometry.source, "none");
+  EXPECT_EQ(shipped.run.mode, RunMode::kFull);
+  EXPECT_FALSE(shipped.eval.truth_pairs_file.empty());
+}
+
 TEST(PipelineConfig, EchoHasEverySection) {
   PipelineConfig config;
   const auto json = config_to_json(config);

@@ -25,6 +25,7 @@
 #include "io/file_guard.hpp"
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
 
@@ -355,7 +356,7 @@ int compare_two_sequences(const CompareOptions& options) {
 
 int compare_command(const CompareOptions& options) {
   if (!options.reference.empty() || !options.query.empty()) return compare_two_sequences(options);
-  const std::vector<std::string> methods = split_methods(options.methods);
+  std::vector<std::string> methods = split_methods(options.methods);
   std::vector<FlagValue> flags;
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
   if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
@@ -378,6 +379,25 @@ int compare_command(const CompareOptions& options) {
       out_dir);               // --force: the previous compare's folders go, none is taken for this one's
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
+  // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
+  // by default they are left out, asked for by name they are an error.
+  if (resolve_odometry_source(base.odometry, base.ekf, *dataset) == "none") {
+    std::vector<std::string> full;
+    for (const std::string& method : methods) {
+      if (find_method(method).mode != RunMode::kGated) {
+        full.push_back(method);
+      } else if (options.methods_given) {
+        throw ConfigError("--methods: '" + method +
+                          "' runs inside the pose gate's candidate areas, and this run has no poses "
+                          "(odometry.source " +
+                          base.odometry.source + " for " + base.run.dataset +
+                          "): choose full methods (full, seqslam, std-full, dird-seqslam)");
+      }
+    }
+    spdlog::info("compare: no poses (odometry.source {} for {}): the full methods only ({})",
+                 base.odometry.source, base.run.dataset, fmt::format("{}", fmt::join(full, ", ")));
+    methods = full;
+  }
 
   std::map<std::string, json> summaries;
   json compare = json::object();

@@ -35,7 +35,8 @@ std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfi
   const bool ekf_inputs = dataset.has_images() && dataset.has_imu() && dataset.camera().has_value() &&
                           dataset.imu_calibration().has_value();
   const bool ekf_init = ekf.init_mode == "standstill" || dataset.has_ground_truth();
-  return ekf_inputs && ekf_init ? "ekf" : "drift";
+  if (ekf_inputs && ekf_init) return "ekf";
+  return dataset.has_ground_truth() ? "drift" : "none";
 }
 
 std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset) {
@@ -76,7 +77,28 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
     return fmt::format("ground truth of {} at the frame times (its ground truth covers {}; the dataset's {})",
                        dataset.root().string(), truth, frames);
   }
+  if (source == "none") return "no poses (odometry.source none: appearance only)";
   return "poses from odometry.source " + source;
+}
+
+void require_poses_if_needed(const PipelineConfig& config, const Dataset& dataset) {
+  if (resolve_odometry_source(config.odometry, config.ekf, dataset) != "none") return;
+  const std::string why =
+      config.odometry.source == "none"
+          ? std::string("odometry.source is none (appearance only)")
+          : "odometry.source auto found no odometry for dataset " + dataset.root().string() +
+                " (no ground truth for drift; no IMU, calibration and images for the ekf)";
+  if (config.run.mode == RunMode::kGated) {
+    throw ConfigError("run.mode: 'gated' needs poses for the pose gate, and " + why +
+                      ": use run.mode full (--mode full), or odometry.source file with a trajectory");
+  }
+  if (config.run.mode == RunMode::kOdometry) {
+    throw ConfigError("run.mode: 'odometry' estimates poses only, and " + why + ": nothing to do");
+  }
+  if (config.verify.enabled) {
+    throw ConfigError("verify.enabled: geometric verification triangulates with the odometry poses, and " +
+                      why + ": set verify.enabled=false");
+  }
 }
 
 namespace {
@@ -128,6 +150,10 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
   const std::string source = resolve_odometry_source(config, ekf, dataset);
   if (config.source == "auto") spdlog::info("odometry: source auto -> {}", source);
   if (source == "ekf") return make_ekf_source(config, ekf, dataset);
+  if (source == "none") {
+    spdlog::info("odometry: none (appearance only): frames carry no pose");
+    return std::make_unique<NoOdometry>();
+  }
   if (source == "file") {
     auto poses = read_tum(config.file);
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
@@ -151,8 +177,9 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
     return std::make_unique<FileOdometry>(config, std::move(poses));
   }
   if (!dataset.has_ground_truth()) {
-    throw ConfigError("odometry.source: 'drift' needs ground truth, and dataset " + dataset.root().string() +
-                      " has none (use source: file)");
+    throw ConfigError(
+        "odometry.source: 'drift' needs ground truth, and dataset " + dataset.root().string() +
+        " has none (use source: file with a trajectory, or none for an appearance-only run.mode full)");
   }
   Eigen::Vector3d axis_w = Eigen::Vector3d::UnitZ();
   if (config.heading_axis != "auto") axis_w = axis_vector(config.heading_axis);

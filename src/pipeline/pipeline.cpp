@@ -417,6 +417,7 @@ std::vector<std::string> PipelineRun::missing_outputs() const {
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
   if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
+  require_poses_if_needed(config, dataset);
   refuse_outputs_over_inputs(config, out_dir);
   PipelineRun run(config, dataset, out_dir, stop);
   return run.run();

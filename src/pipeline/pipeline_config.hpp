@@ -246,6 +246,9 @@ struct PipelineConfig {
     v("eval", self.eval);
     v("output", self.output);
   }
+  // odometry.source none gives no poses: the modes and options that need them are errors (the same check
+  // for `auto` resolving to none is made when the dataset is known, pipeline/odometry_factory.hpp).
+  void validate_odometry_none() const;
   void validate() const {
     run.validate();
     sync.validate();
@@ -261,6 +264,7 @@ struct PipelineConfig {
     verify.validate();
     posegraph.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
+    validate_odometry_none();
     eval.validate();
     output.validate();
   }
