@@ -81,7 +81,7 @@ TEST(PipelineConfig, EveryParameterIsBounded) {
         "seqslam.velocity_max=1e300", "seqslam.sequence_length_frames=200000", "run.max_in_flight=100000000",
         "run.image_cache_frames=2000000000", "output.flush_every=2000000000", "ekf.image_blur_sigma_px=1e6",
         "ekf.max_features=2000000000", "sync.max_gap_ms=1e300", "eval.truth_radius_m=1e300",
-        "odometry.initial_sigma_m=1e300"}) {
+        "eval.min_travel_m=1e300", "eval.min_travel_m=-1", "odometry.initial_sigma_m=1e300"}) {
     SCOPED_TRACE(set);
     const std::string error = error_of({set});
     EXPECT_NE(error.find(set.substr(set.find('.') + 1, set.find('=') - set.find('.') - 1)), std::string::npos)

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <limits>
 
+#include "core/geometry.hpp"
 #include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
@@ -13,6 +14,7 @@
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/loop_closer.hpp"
 #include "pipeline/loops_writer.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/run_metrics.hpp"
 #include "pipeline/run_outputs.hpp"
 
@@ -32,6 +34,20 @@ std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset
     spdlog::warn("eval: {} lists no pair: every detection will count as false", eval.truth_pairs_file);
   }
   return pairs;
+}
+
+std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w) {
+  std::optional<Eigen::Vector3d> up_w = world_up_axis_from_imu(dataset);
+  if (!up_w && dataset.layout() == "kitti") up_w = Eigen::Vector3d(0.0, -1.0, 0.0);
+  if (!up_w) {
+    std::vector<Eigen::Vector3d> finite;
+    for (const Eigen::Vector3d& p : p_w)
+      if (p.allFinite()) finite.push_back(p);
+    if (finite.size() >= 3) up_w = plane_normal(finite);
+  }
+  if (!up_w) return "xy";
+  const int axis = dominant_axis(*up_w);
+  return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
 }
 
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
@@ -82,6 +98,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   input.truth.gap_frames = eval.truth_gap_frames;
   input.truth.plane = eval.plane != "auto" ? eval.plane : dataset.layout() == "kitti" ? "xz" : "xyz";
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
+  input.truth.min_travel_m = eval.min_travel_m;
   const MethodEvaluation method = parts.method.evaluation();
   const auto within_range = [first](const std::vector<Detection>& detections) {
     std::vector<Detection> out;
@@ -93,6 +110,22 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   input.ranked = method.ranked ? within_range(*method.ranked) : input.loops;
   input.score_order = method.score_order;
   SequenceEvaluation evaluation = evaluate_sequence(input);
+  if (!input.pairs) {
+    // How the truth depends on the rule (compare prints these): positives in 3-D and in the ground plane, and
+    // before eval.min_travel_m took out the revisits without travel (hovering, standing still).
+    const auto positives = [&](const std::string& plane, double min_travel_m) {
+      GroundTruthConfig truth = input.truth;
+      truth.plane = plane;
+      truth.min_travel_m = min_travel_m;
+      return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
+    };
+    const std::string horizontal = horizontal_plane(dataset, input.p_w);
+    nlohmann::json& truth = evaluation.json["truth"];
+    truth["positives_3d"] = positives("xyz", input.truth.min_travel_m);
+    truth["horizontal_plane"] = horizontal;
+    truth["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
+    truth["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
+  }
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : evaluation.truth_pairs) {
     truth_loops.write_row(

@@ -2,10 +2,13 @@
 // ground truth (eval/run_evaluation.hpp), writing ground_truth.tum and truth_loops.csv for the plots.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <string>
+#include <vector>
 
 #include "eval/loop_files.hpp"
 #include "pipeline/detection_method.hpp"
@@ -40,6 +43,11 @@ struct RunParts {
   // truth comes from the ground-truth positions.
   const TruthPairs* truth_pairs = nullptr;
 };
+
+// The dataset world's ground plane ("xy", "xz" or "yz"): normal to its up axis, from the IMU and the ground
+// truth when it has an IMU, -y for KITTI's camera world, else the axis nearest the normal of the positions'
+// best-fit plane; "xy" when nothing tells.
+std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w);
 
 // eval.truth_pairs_file read and checked against the dataset's frame numbers (DataError naming the file and
 // line), before the run starts; nullopt when the key is empty.
