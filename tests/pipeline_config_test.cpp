@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -127,7 +129,8 @@ TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   EXPECT_NE(error_of({"run.rate=1e300"}).find("out of range"), std::string::npos);
   EXPECT_EQ(error_of({"run.rate=0.5"}), "");
   EXPECT_EQ(error_of({"run.frames=500:100"}),
-            "run.frames: '500:100' is empty: A (500) must be below B (100); B is exclusive");
+            "run.frames: '500:100' is empty: A (500) must be below B (100); B is exclusive (--set "
+            "run.frames=500:100)");
   RunConfig run;
   run.frames = "5000:";
   try {
@@ -164,6 +167,24 @@ TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
   EXPECT_EQ(shipped.odometry.source, "none");
   EXPECT_EQ(shipped.run.mode, RunMode::kFull);
   EXPECT_FALSE(shipped.eval.truth_pairs_file.empty());
+}
+
+// A bound error names where the key was set (issue 14): the file and line, or the --set.
+TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / "loopgate-bound-origin.yaml";
+  std::ofstream(file) << "eval:\n  truth_radius_m: 2\n  min_travel_m: -1\n";
+  try {
+    load_config<PipelineConfig>(file);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got -1) (" + file.string() +
+                  ":3)");
+  }
+  std::filesystem::remove(file);
+  EXPECT_EQ(error_of({"eval.min_travel_m=1e9"}),
+            "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got 1e+09) (--set "
+            "eval.min_travel_m=1e9)");
 }
 
 TEST(PipelineConfig, EchoHasEverySection) {
