@@ -49,8 +49,9 @@ Pictures:
                            describe+match+decode time summed over frames (bars; describe+match without
                            a describe_match_decode_ms column) and the wall time (black ticks), in seconds
 A detection is true when the ground-truth positions of i and j are within config.eval.accept_radius_m
-(in config.eval.plane when given, else 3-D), else when (i, j) is listed in truth_loops.csv. Without
-truth_loops.csv, true loops are computed from ground truth: j <= i - gap_frames within radius_m.
+(in config.eval.plane when given, else 3-D) and at least min_travel_m of ground-truth path apart, else (or with
+eval.truth_pairs_file) when (i, j) is listed in truth_loops.csv. Without truth_loops.csv, true loops are
+computed from ground truth: j <= i - gap_frames within radius_m, min_travel_m of path apart.
 """
 import argparse
 import csv
@@ -237,6 +238,12 @@ class Run:
         self.radius_m = radius_m if radius_m > 0 else DEFAULT_RADIUS_M  # <= 0: the default
         self.accept_m = accept_m if accept_m > 0 else self.radius_m  # <= 0: r_accept = r_true
         self.plane = ev.get("plane") if ev.get("plane") in ("xy", "xz", "yz", "xyz") else "xyz"
+        try:  # eval.min_travel_m: a revisit needs this much ground-truth path in between (absent: none)
+            self.min_travel_m = float(ev.get("min_travel_m", 0) or 0)
+        except (TypeError, ValueError):
+            raise InputError(f"{run_dir / 'summary.json'}: min_travel_m must be a number") from None
+        # eval.truth_pairs_file: the listed pairs are the truth, even when the dataset has poses.
+        self.pairs_truth = "pairs_file" in (section(self.summary, "evaluation", "truth") or {})
 
         f = Table(run_dir / "frames.csv", ["frame", "x_m", "y_m", "z_m"])
         self.frames_table = f
@@ -271,6 +278,13 @@ class Run:
             k = np.where(np.abs(t_gt[k - 1] - t) <= np.abs(t_gt[k] - t), k - 1, k)
             matched = np.where(np.isfinite(t)[:, None], xyz_gt[k], np.nan)
             self.gt = frame_array(frame, matched, self.size)
+            # Ground-truth path length from the first frame (3-D; straight across frames without ground truth).
+            finite = np.isfinite(self.gt).all(axis=1)
+            steps = np.zeros(self.size)
+            idx = np.flatnonzero(finite)
+            if len(idx) > 1:
+                steps[idx[1:]] = np.linalg.norm(np.diff(self.gt[idx], axis=0), axis=1)
+            self.travel = np.cumsum(steps)
 
         areas_path = run_dir / "candidate_areas.csv"
         self.areas = None
@@ -287,8 +301,9 @@ class Run:
 
     def loop_correct(self, i, j):
         """Boolean array (is each (i, j) a true loop), or None without any ground truth."""
-        if self.gt is not None:
-            return distances(self.gt[i], self.gt[j], self.plane) <= self.accept_m
+        if self.gt is not None and not (self.pairs_truth and self.truth is not None):
+            travelled = np.abs(self.travel[i] - self.travel[j]) >= self.min_travel_m
+            return (distances(self.gt[i], self.gt[j], self.plane) <= self.accept_m) & travelled
         if self.truth is not None:
             listed = set(map(tuple, self.truth.tolist()))
             return np.array([(a, b) in listed for a, b in zip(i.tolist(), j.tolist())], bool)
@@ -309,6 +324,7 @@ class Run:
             rows = np.arange(start, min(start + chunk, self.size))
             d = distances(self.gt[rows][:, None, :], self.gt[None, :, :], self.plane)
             ok = (d <= self.radius_m) & (np.arange(self.size)[None, :] <= rows[:, None] - self.gap)
+            ok &= self.travel[rows][:, None] - self.travel[None, :] >= self.min_travel_m
             r, c = np.nonzero(ok)
             pairs.append(np.stack([rows[r], c], 1))
         return np.concatenate(pairs)

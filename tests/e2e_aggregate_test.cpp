@@ -156,8 +156,9 @@ TEST(E2eAggregate, ReadsWhatRunAndCompareWrite) {
   ASSERT_EQ(r.status, 0) << r.output;
   const fs::path root = testing::make_temp_dir("e2e-aggregate-real");
   const std::string config = (fs::path(LOOPGATE_SOURCE_DIR) / "configs" / "aliasing.yaml").string();
-  const std::string common = " --config " + config + " --dataset " + data.string() +
-                             " --set output.progress=off --set match.margin=50";
+  const std::string common =
+      " --config " + config + " --dataset " + data.string() +
+      " --set output.progress=off --set match.margin=50 --set seqslam.exclusion_margin_frames=50";
   r = loopgate("run" + common + " --mode gated --method seqslam --out " + (root / "run-gated").string());
   ASSERT_EQ(r.status, 0) << r.output;
   r = loopgate("compare" + common + " --methods full,dird-seqslam-gated --no-plots --out " +

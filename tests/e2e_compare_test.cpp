@@ -63,6 +63,15 @@ TEST(E2eCompare, EveryMethodSideBySide) {
   EXPECT_GT(compare["comparison"]["full_over_gated_descriptors"].get<double>(), 1.0);
   EXPECT_TRUE(fs::exists(out / "gated" / "candidate_areas.csv"));
   EXPECT_TRUE(fs::exists(out / "gated" / "descriptor.csv"));
+  // Issue 14: the truth counted in 3-D, in the ground plane and before eval.min_travel_m, printed and stored.
+  EXPECT_NE(output.find("ground-truth loop query frames: "), std::string::npos) << output;
+  const auto& counts = compare["truth_counts"];
+  EXPECT_EQ(counts["horizontal_plane"], "xy");  // the simulator's world is z up
+  EXPECT_EQ(counts["min_travel_m"], 2.0);
+  EXPECT_EQ(counts["positives"], full["evaluation"]["truth"]["positives"]);
+  EXPECT_GT(counts["positives_3d"].get<int>(), 0);
+  EXPECT_GE(counts["positives_horizontal"].get<int>(), counts["positives_3d"].get<int>());
+  EXPECT_GE(counts["positives_without_min_travel"].get<int>(), counts["positives"].get<int>());
 }
 
 TEST(E2eCompare, UnknownMethodIsAClearError) {
@@ -72,7 +81,9 @@ TEST(E2eCompare, UnknownMethodIsAClearError) {
                                      " --dataset /nonexistent --methods full,bogus --out " + out.string(),
                                  &status);
   EXPECT_NE(status, 0);
-  EXPECT_NE(output.find("'bogus' is not one of full,gated,seqslam,seqslam-gated,std-full,std-gated"), std::string::npos) << output;
+  EXPECT_NE(output.find("'bogus' is not one of full,gated,seqslam,seqslam-gated,std-full,std-gated"),
+            std::string::npos)
+      << output;
 }
 
 }  // namespace

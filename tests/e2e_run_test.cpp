@@ -60,7 +60,8 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
   int status = -1;
   const std::string output =
       run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
-              dataset.string() + " --out " + out.string() + " --set run.decode=all --threads 2 --trace",
+              dataset.string() + " --out " + out.string() +
+              " --set run.decode=all --set match.margin=20 --threads 2 --trace",
           &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows = read_csv(out / "frames.csv");
@@ -92,7 +93,9 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
 TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
   const fs::path dataset = make_kitti_dataset(30);
   const fs::path out = testing::make_temp_dir("e2e-run-refuse");
-  const std::string base = "run --dataset " + dataset.string() + " --out " + out.string();
+  // A margin the 30 frames exceed: a run that cannot compare any pair fails (issue 14).
+  const std::string base =
+      "run --dataset " + dataset.string() + " --out " + out.string() + " --set match.margin=20";
   int status = -1;
   std::string output = run(base + " --mode full", &status);
   ASSERT_EQ(status, 0) << output;
@@ -112,7 +115,7 @@ TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
 
   const fs::path compare_out = testing::make_temp_dir("e2e-compare-refuse");
   const std::string compare = "compare --dataset " + dataset.string() + " --out " + compare_out.string() +
-                              " --no-plots --methods full";
+                              " --no-plots --methods full --set match.margin=20";
   ASSERT_EQ((run(compare, &status), status), 0);
   output = run(compare, &status);
   EXPECT_EQ(status, 1) << output;
@@ -161,7 +164,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   ASSERT_EQ(status, 0) << output;
   const fs::path out = testing::make_temp_dir("e2e-run-sim-out");
   output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-                   sim.string() + " --out " + out.string() + " --set run.decode=all",
+                   sim.string() + " --out " + out.string() + " --set run.decode=all --set match.margin=20",
                &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows = read_csv(out / "frames.csv");
@@ -201,7 +204,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   damaged.close();
   const fs::path out2 = testing::make_temp_dir("e2e-run-sim-bad");
   output = run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-                   sim.string() + " --out " + out2.string(),
+                   sim.string() + " --out " + out2.string() + " --set match.margin=20",
                &status);
   ASSERT_EQ(status, 0) << output;
   const auto rows2 = read_csv(out2 / "frames.csv");
@@ -218,6 +221,121 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   EXPECT_EQ(summary2["data_issues"]["imu_gaps"].get<int>(), gap_frames);
   EXPECT_GE(summary2["data_issues"]["dataset_issue_count"].get<int>(), 1) << summary2["data_issues"].dump();
   EXPECT_EQ(summary2["frames_processed"].get<int>(), 30);
+}
+
+// trajectory.tum holds only the poses the odometry estimated (issue 14): the EKF initialises from ground
+// truth, which here begins at frame 10, so frames 0-9 are "initialising" and had been written as identity
+// poses (evo then failed on a short EuRoC excerpt). Every row of trajectory.tum is a tracking frame's pose.
+TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
+  const fs::path sim = testing::make_temp_dir("e2e-run-ekf");
+  int status = -1;
+  std::string output =
+      run("--log-level warn simulate --preset demo --frames 40 --force --out " + sim.string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  std::vector<std::string> frame_times;
+  {
+    std::istringstream cam(read_file(sim / "mav0/cam0/data.csv"));
+    for (std::string line; std::getline(cam, line);)
+      if (!line.empty() && line[0] != '#') frame_times.push_back(line.substr(0, line.find(',')));
+  }
+  ASSERT_EQ(frame_times.size(), 40u);
+  // Ground truth from frame 10's time on.
+  const fs::path truth = sim / "mav0/state_groundtruth_estimate0/data.csv";
+  std::istringstream in(read_file(truth));
+  std::string kept;
+  for (std::string line; std::getline(in, line);) {
+    if (line.empty() || line[0] == '#' ||
+        std::stoll(line.substr(0, line.find(','))) >= std::stoll(frame_times[10])) {
+      kept += line + "\n";
+    }
+  }
+  std::ofstream(truth, std::ios::trunc) << kept;
+
+  const fs::path out = testing::make_temp_dir("e2e-run-ekf-out");
+  output = run("--log-level warn run --dataset " + sim.string() + " --mode odometry --out " + out.string() +
+                   " --set odometry.source=ekf --set output.progress=off",
+               &status);
+  ASSERT_EQ(status, 0) << output;
+  std::vector<std::string> header;
+  const auto rows = read_csv(out / "frames.csv", &header);
+  ASSERT_EQ(rows.size(), 40u);
+  const std::size_t t_column = testing::column_index(header, "t_ns");
+  const std::size_t odom_column = testing::column_index(header, "odom_status");
+  std::vector<std::string> tracking_times;
+  for (std::size_t i = 0; i < rows.size(); ++i) {
+    if (i < 10) {
+      EXPECT_EQ(rows[i][odom_column], "initialising") << i;
+    }
+    if (rows[i][odom_column] == "tracking") tracking_times.push_back(rows[i][t_column]);
+  }
+  ASSERT_GT(tracking_times.size(), 20u) << output;
+  std::vector<std::string> tum_times;
+  std::istringstream tum(read_file(out / "trajectory.tum"));
+  for (std::string line; std::getline(tum, line);) {
+    std::istringstream row(line);
+    double t_s = 0, x = 0, y = 0, z = 0;
+    row >> t_s >> x >> y >> z;
+    tum_times.push_back(std::to_string(std::llround(t_s * 1e9)));
+  }
+  ASSERT_EQ(tum_times.size(), tracking_times.size());
+  for (std::size_t k = 0; k < tum_times.size(); ++k)
+    EXPECT_NEAR(std::stod(tum_times[k]), std::stod(tracking_times[k]), 1e3) << k;  // TUM: seconds, 9 decimals
+}
+
+// eval.truth_pairs_file (issue 14): the published (query, reference) pairs are the run's loop ground truth;
+// the key is printed at start and echoed in summary.json; a pair naming a frame the dataset does not have is
+// an error naming the file and line, before anything is written.
+TEST(E2eRun, TruthPairsFileIsTheGroundTruth) {
+  const fs::path dataset = make_kitti_dataset(60);
+  for (int i = 40; i < 60; ++i) {  // frames 40..59 revisit 0..19 (the same pixels)
+    char from[32], to[32];
+    std::snprintf(from, sizeof(from), "%06d.png", i - 40);
+    std::snprintf(to, sizeof(to), "%06d.png", i);
+    fs::copy_file(dataset / "image_0" / from, dataset / "image_0" / to, fs::copy_options::overwrite_existing);
+  }
+  const fs::path dir = testing::make_temp_dir("e2e-run-pairs");
+  {
+    std::ofstream pairs(dir / "gt.csv");
+    pairs << "query_index0,match_index0,query_file,match_file\n";
+    for (int i = 40; i < 60; ++i) pairs << i << "," << i - 40 << ",q.png,r.png\n";
+  }
+  const std::string base =
+      "run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/kitti00-thumbs.yaml --dataset " +
+      dataset.string() +
+      " --mode full --set match.margin=20 --set output.progress=off --set eval.truth_pairs_file=";
+  int status = -1;
+  std::string output = run(base + (dir / "gt.csv").string() + " --out " + (dir / "out").string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(output.find("eval.truth_pairs_file = '" + (dir / "gt.csv").string() + "'"), std::string::npos)
+      << output;
+  const auto summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
+  EXPECT_EQ(summary["config"]["eval"]["truth_pairs_file"], (dir / "gt.csv").string());
+  const auto& evaluation = summary["evaluation"];
+  ASSERT_TRUE(evaluation["available"].get<bool>()) << evaluation.dump();
+  EXPECT_EQ(evaluation["truth"]["pairs_file"], (dir / "gt.csv").string());
+  EXPECT_EQ(evaluation["truth"]["pairs"], 20);
+  EXPECT_EQ(evaluation["truth"]["pairs_in_run"], 20);
+  EXPECT_EQ(evaluation["truth"]["positives"], 20);
+  const auto& truth = evaluation["loop_truth"];
+  EXPECT_EQ(truth["loops"].get<int>(), truth["loops_true"].get<int>() + truth["loops_false"].get<int>());
+  const auto truth_loops = read_csv(dir / "out" / "truth_loops.csv");
+  ASSERT_EQ(truth_loops.size(), 20u);
+  EXPECT_EQ(truth_loops[0], (std::vector<std::string>{"40", "0"}));
+  // --frames 30: leaves out the pairs whose frames the run does not have, and says how many it used.
+  output =
+      run(base + (dir / "gt.csv").string() + " --frames 0:50 --out " + (dir / "out-range").string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto ranged = nlohmann::json::parse(read_file(dir / "out-range" / "summary.json"));
+  EXPECT_EQ(ranged["evaluation"]["truth"]["pairs_in_run"], 10);
+
+  std::ofstream(dir / "other.csv") << "40,0\n75,3\n";
+  output = run(base + (dir / "other.csv").string() + " --out " + (dir / "bad").string(), &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find((dir / "other.csv").string() +
+                        ":2: frame 75 is not a frame of the dataset (its frames are numbered 0..59)"),
+            std::string::npos)
+      << output;
+  EXPECT_FALSE(fs::exists(dir / "bad" / "frames.csv"));
 }
 
 TEST(E2eRun, KittiThumbsEveryFrameOnceInOrder) {

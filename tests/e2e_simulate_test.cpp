@@ -179,4 +179,76 @@ TEST(E2eSimulate, TumTrajectoryWithSynthesisedImu) {
   EXPECT_NEAR(std::stod(mid[4]), 0.0, 0.2);
 }
 
+// Issue 14: an EuRoC ground truth without cam0/data.csv beside it makes simulate invent the frame times, and
+// it says so loudly; --frame-times gives them, as an EuRoC cam0/data.csv or a plain list (integer ns or
+// decimal seconds), and a bad list is an error naming its file and line.
+TEST(E2eSimulate, FrameTimesAreGivenOrLoudlyInvented) {
+  const fs::path root = make_temp_dir("e2e-simulate-times");
+  const fs::path truth = root / "mav0" / "state_groundtruth_estimate0" / "data.csv";
+  fs::create_directories(truth.parent_path());
+  {
+    // 3 s from t = 1 s at 100 Hz, a straight 5 m/s drive along z (a KITTI-like camera world, up = -y).
+    std::ofstream gt(truth);
+    gt << "#timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z,v_x,v_y,v_z,bw_x,bw_y,bw_z,ba_x,ba_y,ba_z\n";
+    for (int i = 0; i <= 300; ++i)
+      gt << 1'000'000'000LL + i * 10'000'000LL << ",0,0," << i * 0.05 << ",1,0,0,0,0,0,5,0,0,0,0,0,0\n";
+  }
+  const std::string base =
+      "--preset kitti00 --trajectory " + truth.string() +
+      " --set camera.width_px=160 --set camera.height_px=48 --set camera.cx=80 "
+      "--set camera.cy=24 --set camera.fx=90 --set camera.fy=90 --set simulation.frame_rate_hz=10";
+  int status = -1;
+  std::string out = simulate(base + " --out " + (root / "invented").string(), &status);
+  ASSERT_EQ(status, 0) << out;
+  EXPECT_NE(
+      out.find("[warning] simulate: no camera times for " + truth.string() +
+               " (no cam0/data.csv beside it, simulation.frame_times_file empty): INVENTING 31 frame times "
+               "every 1/10 s"),
+      std::string::npos)
+      << out;
+  EXPECT_NE(out.find("--frame-times FILE"), std::string::npos) << out;
+  const auto invented = nlohmann::json::parse(read_bytes(root / "invented" / "simulation.json"));
+  EXPECT_EQ(invented["frames"]["times"].get<std::string>().rfind("invented", 0), 0u) << invented["frames"];
+
+  // A plain list in seconds, and the same in nanoseconds: frames at exactly those times, no warning.
+  std::ofstream(root / "seconds.txt") << "# frame times\n1.5\n1.6\n\n1.75\n2.0\n";
+  std::ofstream(root / "ns.txt") << "1500000000\n1600000000\n1750000000\n2000000000\n";
+  for (const char* list : {"seconds.txt", "ns.txt"}) {
+    SCOPED_TRACE(list);
+    const fs::path dir = root / (std::string("from-") + list);
+    out = simulate(base + " --frame-times " + (root / list).string() + " --out " + dir.string(), &status);
+    ASSERT_EQ(status, 0) << out;
+    EXPECT_EQ(out.find("INVENTING"), std::string::npos) << out;
+    const auto rows = csv_rows(dir / "mav0/cam0/data.csv");
+    ASSERT_EQ(rows.size(), 4u);
+    EXPECT_EQ(rows[0][0], "1500000000");
+    EXPECT_EQ(rows[2][0], "1750000000");
+    EXPECT_EQ(rows[3][0], "2000000000");
+    const auto meta = nlohmann::json::parse(read_bytes(dir / "simulation.json"));
+    EXPECT_EQ(meta["frames"]["times"].get<std::string>(), (root / list).string());
+  }
+
+  // Mixed units and integer seconds: errors naming the file and line.
+  std::ofstream(root / "mixed.txt") << "1.5\n1.6\n1700000000\n";
+  out =
+      simulate(base + " --frame-times " + (root / "mixed.txt").string() + " --out " + (root / "bad").string(),
+               &status);
+  EXPECT_NE(status, 0);
+  EXPECT_NE(
+      out.find((root / "mixed.txt").string() + ":3: expected seconds with a decimal point like the first "
+                                               "time of the file, got '1700000000'"),
+      std::string::npos)
+      << out;
+  std::ofstream(root / "integers.txt") << "1\n2\n3\n";
+  out = simulate(
+      base + " --frame-times " + (root / "integers.txt").string() + " --out " + (root / "bad2").string(),
+      &status);
+  EXPECT_NE(status, 0);
+  EXPECT_NE(
+      out.find((root / "integers.txt").string() + ":2: frames less than 1 ms apart (above 1000 Hz): integer "
+                                                  "times are nanoseconds"),
+      std::string::npos)
+      << out;
+}
+
 }  // namespace

@@ -101,6 +101,39 @@ TEST(EvalGroundTruth, FramesWithoutGroundTruthAreSkipped) {
   EXPECT_TRUE(gt.is_positive(16));
 }
 
+// eval.min_travel_m (issue 14): hovering is not a loop. Out along x to x = 9 (frames 0..9), hovering there
+// with millimetre jitter for 40 frames (10..49), then back to x = 0 (frames 50..59).
+TEST(EvalGroundTruth, ARevisitNeedsTravelInBetween) {
+  std::vector<Eigen::Vector3d> p;
+  for (int i = 0; i < 10; ++i) p.emplace_back(i, 0.0, 0.0);
+  for (int k = 0; k < 40; ++k) p.emplace_back(9.0 + 0.001 * (k % 2), 0.0, 1.0);
+  for (int k = 0; k < 10; ++k) p.emplace_back(9 - k, 0.0, 1.0);
+  GroundTruthConfig config;
+  config.radius_m = 0.5;
+  config.gap_frames = 20;
+  config.plane = "xy";
+  const auto hovering = LoopGroundTruth::from_positions(p, config);
+  EXPECT_TRUE(hovering.is_positive(35));  // 20+ frames of hovering within 0.5 m: a "loop" without the rule
+  EXPECT_TRUE(hovering.is_true_match(35, 12));
+  config.min_travel_m = 2.0;
+  const auto gt = LoopGroundTruth::from_positions(p, config);
+  for (std::size_t i = 0; i < 50; ++i) EXPECT_FALSE(gt.is_positive(i)) << i;
+  EXPECT_FALSE(gt.is_true_match(35, 12));
+  // The way back revisits the way out (the hover's 1 m climb does not count in xy): 9 m and more of travel.
+  for (std::size_t i = 51; i < 60; ++i) {
+    ASSERT_TRUE(gt.is_positive(i)) << i;
+    EXPECT_EQ(gt.true_references(i), std::vector<std::size_t>{59 - i}) << i;
+  }
+  // Frame 50 (x = 9) only meets the hover and frame 9, less than 2 m of path back (1 m up, 1 m down and the
+  // jitter): not a loop.
+  EXPECT_FALSE(gt.is_positive(50));
+  EXPECT_TRUE(gt.is_true_match(55, 4));
+  EXPECT_TRUE(gt.is_true_match(4, 55));  // either order
+  // A frame without ground truth: the path crosses it in a straight line.
+  p[30].setConstant(std::numeric_limits<double>::quiet_NaN());
+  EXPECT_EQ(LoopGroundTruth::from_positions(p, config).true_references(55), std::vector<std::size_t>{4});
+}
+
 TEST(EvalGroundTruth, FromPairs) {
   const auto gt = LoopGroundTruth::from_pairs(10, {{5, 0}, {5, 1}, {7, 2}, {5, 0}});
   EXPECT_EQ(gt.positive_count(), 2u);

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <optional>
 
 #include "core/error.hpp"
 #include "eval/loop_files.hpp"
@@ -57,6 +58,44 @@ TEST(EvalLoopFiles, MalformedRowsNameFileAndLine) {
   EXPECT_THROW(read_loop_pairs("/nonexistent/pairs.csv"), DataError);
 }
 
+// eval.truth_pairs_file: the published forms (a header, file-name columns, blanks or commas, both halves of a
+// symmetric matrix), and errors naming the file and line.
+TEST(EvalLoopFiles, TruthPairsInThePublishedForms) {
+  const auto rtabmap = read_truth_pairs(write_file("gt.csv",
+                                                   "query_index0,match_index0,query_file,match_file\n40,0,"
+                                                   "images/41.jpg,images/1.jpg\n40,1,a.jpg,b.jpg\n"));
+  const std::vector<std::pair<std::size_t, std::size_t>> expected{{40, 0}, {40, 1}};
+  EXPECT_EQ(rtabmap.pairs, expected);
+  EXPECT_EQ(rtabmap.rows, 2u);
+  // Blanks, a comment, (reference, query) order and a duplicate from the other half of a symmetric matrix.
+  const auto symmetric = read_truth_pairs(write_file("sym.txt", "# i j\n0 40\n40\t0\n  41 1  \n"), 84);
+  const std::vector<std::pair<std::size_t, std::size_t>> once{{40, 0}, {41, 1}};
+  EXPECT_EQ(symmetric.pairs, once);
+  EXPECT_EQ(symmetric.rows, 3u);
+}
+
+TEST(EvalLoopFiles, BadTruthPairsNameFileAndLine) {
+  const auto expect_error = [](const std::string& text, std::size_t line, const std::string& message,
+                               std::optional<std::size_t> frames = std::nullopt) {
+    const auto file = write_file("bad.csv", text);
+    try {
+      read_truth_pairs(file, frames);
+      FAIL() << "expected DataError for " << text;
+    } catch (const DataError& e) {
+      EXPECT_EQ(e.file(), file);
+      EXPECT_EQ(e.line(), line) << e.what();
+      EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << e.what();
+    }
+  };
+  expect_error("q,r\n1,2\n3;4\n", 3, "expected two 0-based frame numbers (query, reference)");
+  expect_error("1.5,2\n", 1, "expected two 0-based frame numbers");  // not a header: a number
+  expect_error("5,-1\n", 1, "expected two 0-based frame numbers");
+  expect_error("7,7\n", 1, "frame 7 is paired with itself");
+  expect_error("40,0\n90,3\n", 2, "frame 90 is not a frame of the dataset (its frames are numbered 0..83)",
+               84);
+  EXPECT_THROW(read_truth_pairs("/nonexistent/pairs.csv"), DataError);
+}
+
 TEST(EvalLoopFiles, RealFiles) {
   LOOPGATE_REQUIRE_SHARED_DATA("reference/vio-dird/seqslam_kitti00_matches.csv");
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/loops-gt/botw_pairs.csv");
@@ -70,6 +109,7 @@ TEST(EvalLoopFiles, RealFiles) {
   const auto pairs = read_loop_pairs(data / "kitti/00/loops-gt/botw_pairs.csv");
   EXPECT_EQ(pairs.size(), 34648u);
   for (const auto& [q, r] : pairs) EXPECT_GT(q, r);
+  EXPECT_EQ(read_truth_pairs(data / "kitti/00/loops-gt/botw_pairs.csv", 4541).pairs, pairs);
   const auto det = read_vio_dird_detections(data / "reference/vio-dird/dird_mh05_loops_margin20.csv");
   EXPECT_EQ(det.size(), 996u);
   const auto pos = read_vio_dird_positions(data / "reference/vio-dird/msckf_mh05_positions.csv");

@@ -70,6 +70,35 @@ TEST(RunEvaluation, GateCoverageCountsReachablePositivesInsideAreas) {
   EXPECT_EQ(c["covered_query_frames"], 10);  // 80..89
 }
 
+// eval.truth_pairs_file: the listed pairs are the truth, with or without positions; a detection is true only
+// when its pair is listed (not by distance), and gate coverage counts the listed references beyond the
+// margin.
+TEST(RunEvaluation, PairsAreTheTruthWhenGiven) {
+  SequenceEvaluationInput input;
+  input.p_w = out_and_back();  // ignored: the pairs decide
+  input.truth = truth_config();
+  input.pairs = std::vector<std::pair<std::size_t, std::size_t>>{{80, 19}, {81, 18}, {82, 17}, {85, 70}};
+  input.frame_count = 100;
+  input.pairs_truth = {{"pairs_file", "gt.csv"}, {"pairs", 4}};
+  input.loops = {{80, 19, 5.0}, {81, 17, 4.0}, {85, 70, 3.0}};  // (81, 17) is 1 m off but not listed
+  input.ranked = input.loops;
+  input.score_order = "higher_is_better";
+  const SequenceEvaluation e = evaluate_sequence(input);
+  EXPECT_EQ(e.json["truth"]["pairs_file"], "gt.csv");
+  EXPECT_FALSE(e.json["truth"].contains("radius_m"));
+  EXPECT_EQ(e.json["truth"]["positives"], 4);
+  EXPECT_EQ(e.json["loop_truth"]["loops_true"], 2);
+  EXPECT_EQ(e.json["loop_truth"]["loops_false"], 1);
+  EXPECT_EQ(e.truth_pairs.size(), 4u);
+  // Coverage: only references at least 20 frames back count ((85, 70) is 15 back).
+  const auto all = [](std::size_t) { return true; };
+  const nlohmann::json c =
+      gate_coverage_json(e.truth, 20, all, [](std::size_t q, std::size_t) { return q == 80; });
+  EXPECT_EQ(c["gap_frames"], 20);
+  EXPECT_EQ(c["positive_query_frames"], 3);
+  EXPECT_EQ(c["covered_query_frames"], 1);
+}
+
 TEST(RunEvaluation, AlignedSequences) {
   const AlignedSequences s{10, 100, 0, 50, 2};
   EXPECT_TRUE(s.aligned(20, 8));   // query frame 20, reference frame 18

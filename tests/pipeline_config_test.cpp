@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -81,7 +83,7 @@ TEST(PipelineConfig, EveryParameterIsBounded) {
         "seqslam.velocity_max=1e300", "seqslam.sequence_length_frames=200000", "run.max_in_flight=100000000",
         "run.image_cache_frames=2000000000", "output.flush_every=2000000000", "ekf.image_blur_sigma_px=1e6",
         "ekf.max_features=2000000000", "sync.max_gap_ms=1e300", "eval.truth_radius_m=1e300",
-        "odometry.initial_sigma_m=1e300"}) {
+        "eval.min_travel_m=1e300", "eval.min_travel_m=-1", "odometry.initial_sigma_m=1e300"}) {
     SCOPED_TRACE(set);
     const std::string error = error_of({set});
     EXPECT_NE(error.find(set.substr(set.find('.') + 1, set.find('=') - set.find('.') - 1)), std::string::npos)
@@ -127,7 +129,8 @@ TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   EXPECT_NE(error_of({"run.rate=1e300"}).find("out of range"), std::string::npos);
   EXPECT_EQ(error_of({"run.rate=0.5"}), "");
   EXPECT_EQ(error_of({"run.frames=500:100"}),
-            "run.frames: '500:100' is empty: A (500) must be below B (100); B is exclusive");
+            "run.frames: '500:100' is empty: A (500) must be below B (100); B is exclusive (--set "
+            "run.frames=500:100)");
   RunConfig run;
   run.frames = "5000:";
   try {
@@ -139,6 +142,49 @@ TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   }
   run.frames = "10:20";
   EXPECT_EQ(run.frame_range(15), (std::pair<std::size_t, std::size_t>{10, 15}));
+}
+
+// odometry.source none (issue 14): appearance only, with run.mode full; what needs poses is an error naming
+// the key and the way out.
+TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
+  EXPECT_EQ(error_of({"odometry.source=none", "run.mode=full"}), "");
+  EXPECT_EQ(error_of({"odometry.source=none", "run.mode=full", "run.method=seqslam"}), "");
+  EXPECT_EQ(
+      error_of({"odometry.source=none"}),
+      "run.mode: 'gated' needs poses for the pose gate, and odometry.source is none (appearance only): use "
+      "run.mode full (--mode full), or an odometry source");
+  EXPECT_NE(
+      error_of({"odometry.source=none", "run.mode=odometry"}).find("run.mode: 'odometry' estimates poses"),
+      std::string::npos);
+  EXPECT_NE(error_of({"odometry.source=none", "run.mode=full", "verify.enabled=true"})
+                .find("verify.enabled: geometric verification triangulates with the odometry poses"),
+            std::string::npos);
+  EXPECT_NE(error_of({"odometry.source=nothing"})
+                .find("odometry.source: 'nothing' is not one of "
+                      "drift|file|ekf|none|auto"),
+            std::string::npos);
+  const auto shipped = load_config<PipelineConfig>(config_file("rtabmap-samples"));
+  EXPECT_EQ(shipped.odometry.source, "none");
+  EXPECT_EQ(shipped.run.mode, RunMode::kFull);
+  EXPECT_FALSE(shipped.eval.truth_pairs_file.empty());
+}
+
+// A bound error names where the key was set (issue 14): the file and line, or the --set.
+TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / "loopgate-bound-origin.yaml";
+  std::ofstream(file) << "eval:\n  truth_radius_m: 2\n  min_travel_m: -1\n";
+  try {
+    load_config<PipelineConfig>(file);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(std::string(e.what()),
+              "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got -1) (" + file.string() +
+                  ":3)");
+  }
+  std::filesystem::remove(file);
+  EXPECT_EQ(error_of({"eval.min_travel_m=1e9"}),
+            "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got 1e+09) (--set "
+            "eval.min_travel_m=1e9)");
 }
 
 TEST(PipelineConfig, EchoHasEverySection) {

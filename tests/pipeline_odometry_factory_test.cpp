@@ -72,7 +72,8 @@ TEST(PipelineOdometryFactory, DatasetWithoutImuIsRefusedClearly) {
   }
   const auto dataset = open_dataset(dir);
   ASSERT_FALSE(dataset->has_imu());
-  EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, *dataset), "drift");
+  EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, *dataset),
+            "none");  // no ground truth either
   EXPECT_FALSE(world_up_axis_from_imu(*dataset).has_value());
   try {
     make_odometry_source(source("ekf"), EkfConfig{}, *dataset);
@@ -156,7 +157,46 @@ TEST(PipelineOdometryFactory, FileSourceReadsTheTrajectory) {
 
 // Issue 15: a trajectory that does not overlap the dataset made every frame "odometry lost" with exit 0;
 // now it is an error naming the file and both time spans.
-TEST(PipelineOdometryFactory, FileSourceMustOverlapTheDataset) {
+// An image folder has no ground truth, IMU or calibration: auto resolves to none (appearance only), which
+// gives no poses; a run that needs them (the gate, odometry mode, verify) is refused, saying why.
+TEST(PipelineOdometryFactory, AutoOnAnImageFolderIsNoOdometry) {
+  const fs::path dir = testing::make_temp_dir("odometry-factory-folder");
+  for (int i = 0; i < 3; ++i)
+    cv::imwrite((dir / ("img" + std::to_string(i) + ".png")).string(),
+                cv::Mat(16, 32, CV_8UC1, cv::Scalar(i)));
+  const auto dataset = open_dataset(dir);
+  ASSERT_EQ(dataset->layout(), "folder");
+  EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, *dataset), "none");
+  const auto none = make_odometry_source(source("auto"), EkfConfig{}, *dataset);
+  EXPECT_STREQ(none->name(), "none");
+  EXPECT_FALSE(none->estimates_poses());
+  PipelineConfig config;
+  config.run.mode = RunMode::kFull;
+  EXPECT_NO_THROW(require_poses_if_needed(config, *dataset));
+  config.run.mode = RunMode::kGated;
+  try {
+    require_poses_if_needed(config, *dataset);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("run.mode: 'gated' needs poses for the pose gate, and odometry.source "
+                                   "auto found no odometry for dataset " +
+                                   dir.string()),
+        std::string::npos)
+        << e.what();
+  }
+  config.odometry.source = "drift";  // asked for: its own error, naming the dataset and the ways out
+  try {
+    make_odometry_source(config.odometry, EkfConfig{}, *dataset);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("or none for an appearance-only run.mode full"), std::string::npos);
+  }
+}
+
+// A trajectory that misses the dataset: the source is built (the run goes through its frames, every one
+// 'odometry lost', and fails at the end, run_checks.hpp), and what it expected names the file and both spans.
+TEST(PipelineOdometryFactory, FileSourceThatMissesTheDatasetIsExplained) {
   const testing::FakeDataset dataset(10);  // frames at 1.0 .. 1.9 s
   const fs::path dir = testing::make_temp_dir("odometry-factory-overlap");
   std::vector<StampedPose> poses;
@@ -165,17 +205,18 @@ TEST(PipelineOdometryFactory, FileSourceMustOverlapTheDataset) {
   write_tum(dir / "other.tum", poses);
   OdometryConfig config = source("file");
   config.file = (dir / "other.tum").string();
-  try {
-    make_odometry_source(config, dataset);
-    FAIL() << "expected DataError";
-  } catch (const DataError& e) {
-    EXPECT_EQ(e.file(), dir / "other.tum");
-    EXPECT_NE(
-        std::string(e.what()).find("its poses cover t = 500.000 .. 509.000 s, and the dataset's 10 frames "
-                                   "are at t = 1.000 .. 1.900 s"),
-        std::string::npos)
-        << e.what();
-  }
+  const auto odometry = make_odometry_source(config, dataset);
+  OdometryInput input;
+  input.t_ns = dataset.frame_t_ns(0);
+  EXPECT_EQ(odometry->process(input).pose.status, OdometryStatus::kLost);
+  const std::string expected = odometry_expectation(config, EkfConfig{}, dataset);
+  EXPECT_NE(expected.find("poses in " + config.file + " within odometry.file_max_gap_s = 0.5 s"),
+            std::string::npos)
+      << expected;
+  EXPECT_NE(
+      expected.find("poses at t = 500.000 .. 509.000 s, the dataset's 10 frames at t = 1.000 .. 1.900 s"),
+      std::string::npos)
+      << expected;
   // Half of the frames covered: accepted (the others are reported lost, frame by frame).
   poses.clear();
   for (int i = 0; i < 5; ++i)
@@ -184,6 +225,9 @@ TEST(PipelineOdometryFactory, FileSourceMustOverlapTheDataset) {
   write_tum(dir / "half.tum", poses);
   config.file = (dir / "half.tum").string();
   EXPECT_NO_THROW(make_odometry_source(config, dataset));
+  // Drift: the dataset's ground truth, and the span it covers.
+  EXPECT_NE(odometry_expectation(source("drift"), EkfConfig{}, dataset).find("ground truth of "),
+            std::string::npos);
 }
 
 }  // namespace

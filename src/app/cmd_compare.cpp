@@ -29,6 +29,7 @@
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loop_closer.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
 
@@ -347,7 +348,7 @@ int compare_two_sequences(const CompareOptions& options) {
 
 int compare_command(const CompareOptions& options) {
   if (!options.reference.empty() || !options.query.empty()) return compare_two_sequences(options);
-  const std::vector<std::string> methods = split_methods(options.methods);
+  std::vector<std::string> methods = split_methods(options.methods);
   std::vector<FlagValue> flags;
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
   if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
@@ -370,6 +371,25 @@ int compare_command(const CompareOptions& options) {
       out_dir);               // --force: the previous compare's folders go, none is taken for this one's
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
+  // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
+  // by default they are left out, asked for by name they are an error.
+  if (resolve_odometry_source(base.odometry, base.ekf, *dataset) == "none") {
+    std::vector<std::string> full;
+    for (const std::string& method : methods) {
+      if (find_method(method).mode != RunMode::kGated) {
+        full.push_back(method);
+      } else if (options.methods_given) {
+        throw ConfigError("--methods: '" + method +
+                          "' runs inside the pose gate's candidate areas, and this run has no poses "
+                          "(odometry.source " +
+                          base.odometry.source + " for " + base.run.dataset +
+                          "): choose full methods (full, seqslam, std-full, dird-seqslam)");
+      }
+    }
+    spdlog::info("compare: no poses (odometry.source {} for {}): the full methods only ({})",
+                 base.odometry.source, base.run.dataset, fmt::format("{}", fmt::join(full, ", ")));
+    methods = full;
+  }
 
   std::map<std::string, json> summaries;
   json compare = json::object();
@@ -430,6 +450,29 @@ int compare_command(const CompareOptions& options) {
                             100.0 * cov.at("covered_fraction").get<double>());
     }
   }
+  // The ground truth's loop query frames in 3-D and in the ground plane, and before eval.min_travel_m (issue
+  // 14): how much the counts depend on the rule (a drone's flight differs in 3-D; hovering is not a loop).
+  std::string truth_counts;
+  if (!ran.empty()) {
+    if (const json* truth = find_path(summaries.at(ran.front()), {"evaluation", "truth"});
+        truth && truth->contains("positives_3d")) {
+      compare["truth_counts"] = {{"plane", truth->at("plane")},
+                                 {"positives", truth->at("positives")},
+                                 {"positives_3d", truth->at("positives_3d")},
+                                 {"horizontal_plane", truth->at("horizontal_plane")},
+                                 {"positives_horizontal", truth->at("positives_horizontal")},
+                                 {"min_travel_m", truth->at("min_travel_m")},
+                                 {"positives_without_min_travel", truth->at("positives_without_min_travel")}};
+      truth_counts = fmt::format(
+          "ground-truth loop query frames: {} in 3-D, {} horizontal ({}); {} in the evaluation's plane ({}), "
+          "{} "
+          "before eval.min_travel_m = {} m took out revisits without travel\n",
+          number(truth->at("positives_3d")), number(truth->at("positives_horizontal")),
+          truth->at("horizontal_plane").get<std::string>(), number(truth->at("positives")),
+          truth->at("plane").get<std::string>(), number(truth->at("positives_without_min_travel")),
+          number(truth->at("min_travel_m"), 1));
+    }
+  }
   compare["comparison"] = comparison;
   compare["methods"] = ran;
   compare["provenance"] = provenance_json(config_to_json(base));
@@ -440,12 +483,21 @@ int compare_command(const CompareOptions& options) {
     std::string header =
         fmt::format("compare on {} ({} frames)", base.run.dataset, any.value("frames_processed", 0));
     if (const json* truth = find_path(any, {"evaluation", "truth"})) {
-      header +=
-          fmt::format("; ground-truth loops within {} m ({}), gap {} frames, detections true within {} m",
-                      number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
-                      number(truth->at("gap_frames")), number(truth->at("accept_radius_m"), 2));
+      if (truth->contains("pairs_file")) {
+        header += fmt::format("; ground-truth loops: the {} pairs of {} ({} in the run's frames)",
+                              number(truth->at("pairs")), truth->at("pairs_file").get<std::string>(),
+                              number(truth->at("pairs_in_run")));
+      } else {
+        header += fmt::format(
+            "; ground-truth loops within {} m ({}), gap {} frames, {} m of travel, detections true "
+            "within {} m",
+            number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
+            number(truth->at("gap_frames")), number(truth->value("min_travel_m", json(0.0)), 1),
+            number(truth->at("accept_radius_m"), 2));
+      }
     }
-    std::printf("%s\n%s%s", header.c_str(), table(ran, summaries, false).c_str(), ratios.c_str());
+    std::printf("%s\n%s%s%s", header.c_str(), truth_counts.c_str(), table(ran, summaries, false).c_str(),
+                ratios.c_str());
   }
 
   if (!options.no_plots && !ran.empty()) write_plots(options, out_dir);

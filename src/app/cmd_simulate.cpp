@@ -30,6 +30,7 @@ struct SimulateOptions {
   std::string trajectory;
   std::string trajectory_format;
   std::string imu;
+  std::string frame_times;
   std::string config_file;
   std::vector<std::string> overrides;
   bool force = false;
@@ -67,6 +68,7 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
     s.trajectory_file = file.string();
     if (s.trajectory_format == "kitti") {
       s.times_file = (file.parent_path() / "times.txt").string();
+      s.frame_times_file.clear();  // KITTI: times.txt gives each pose's time
     } else if (s.trajectory_format == "euroc") {
       // .../mav0/state_groundtruth_estimate0/data.csv -> .../mav0/cam0/data.csv and imu0/data.csv
       const std::filesystem::path mav0 = file.parent_path().parent_path();
@@ -86,6 +88,10 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
     }
   } else if (!opt.trajectory_format.empty()) {
     throw ConfigError("--trajectory-format needs --trajectory");
+  }
+  if (!opt.frame_times.empty()) {
+    require_regular_file(opt.frame_times, "the frame times file");
+    s.frame_times_file = opt.frame_times;
   }
   if (!opt.imu.empty()) {
     require_regular_file(opt.imu, "the IMU file");
@@ -110,7 +116,7 @@ int run_simulate(const SimulateOptions& opt) {
   for (const auto& [what, file] : std::vector<std::pair<std::string, std::string>>{
            {"--trajectory / simulation.trajectory_file", s.trajectory_file},
            {"simulation.times_file", s.times_file},
-           {"simulation.frame_times_file", s.frame_times_file},
+           {"--frame-times / simulation.frame_times_file", s.frame_times_file},
            {"--imu / simulation.imu_file", s.imu_file},
            {"--config", opt.config_file},
            {"--preset", opt.preset}}) {
@@ -167,6 +173,10 @@ void add_simulate_command(CLI::App& app, int& exit_code) {
                   "ground-truth .csv, or TUM)");
   cmd->add_option("--trajectory-format", opt->trajectory_format, "kitti|euroc|tum (default: detected)")
       ->check(CLI::IsMember({"kitti", "euroc", "tum"}));
+  cmd->add_option("--frame-times", opt->frame_times,
+                  "Frame times for an EuRoC or TUM --trajectory: an EuRoC cam0/data.csv or one time per line "
+                  "(integer ns or decimal seconds); sets simulation.frame_times_file (without it an EuRoC "
+                  "trajectory takes the cam0/data.csv beside it, else invents times, with a warning)");
   cmd->add_option("--imu", opt->imu,
                   "Real IMU csv (EuRoC imu0/data.csv) passed through instead of synthesis");
   cmd->add_option("--config", opt->config_file, "YAML file of parameters applied over the preset");

@@ -54,6 +54,7 @@ Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions) {
 Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, std::string_view plane) {
   if (plane == "xz") return {p.x(), 0.0, p.z()};
   if (plane == "xy") return {p.x(), p.y(), 0.0};
+  if (plane == "yz") return {0.0, p.y(), p.z()};
   return p;
 }
 

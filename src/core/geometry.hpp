@@ -65,7 +65,7 @@ Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, T
 Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions);
 
 // p projected onto a coordinate plane by name: "xz" zeroes y (KITTI camera-frame ground plane), "xy"
-// zeroes z; any other name ("xyz") returns p.
+// zeroes z, "yz" zeroes x; any other name ("xyz") returns p.
 Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, std::string_view plane);
 
 // v without its component along the unit vector up_w: its projection onto the horizontal plane.

@@ -38,10 +38,12 @@ CellKey cell_of(const Eigen::Vector3d& p, double cell_m) {
 void GroundTruthConfig::validate() const {
   if (!(radius_m > 0.0)) throw ConfigError("ground_truth.radius_m: must be > 0");
   if (gap_frames < 1) throw ConfigError("ground_truth.gap_frames: must be >= 1");
-  if (plane != "xz" && plane != "xy" && plane != "xyz") {
-    throw ConfigError("ground_truth.plane: '" + plane + "' is not one of: xz, xy, xyz");
+  if (plane != "xz" && plane != "xy" && plane != "yz" && plane != "xyz") {
+    throw ConfigError("ground_truth.plane: '" + plane + "' is not one of: xz, xy, yz, xyz");
   }
   if (!std::isfinite(accept_radius_m)) throw ConfigError("ground_truth.accept_radius_m: must be finite");
+  if (!(min_travel_m >= 0.0) || !std::isfinite(min_travel_m))
+    throw ConfigError("ground_truth.min_travel_m: must be finite and >= 0");
 }
 
 LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3d>& p_w,
@@ -53,6 +55,17 @@ LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3
   gt.positions_.reserve(n);
   for (const auto& p : p_w) gt.positions_.push_back(project_to_plane(p, config.plane));
   gt.accept_radius_m_ = config.effective_accept_radius_m();
+  gt.min_travel_m_ = config.min_travel_m;
+  gt.travel_m_.assign(n, 0.0);
+  const Eigen::Vector3d* last = nullptr;
+  double travel_m = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (p_w[i].allFinite()) {
+      if (last) travel_m += (p_w[i] - *last).norm();
+      last = &p_w[i];
+    }
+    gt.travel_m_[i] = travel_m;
+  }
   const double r = config.radius_m;
   const double r2 = r * r;
   const auto gap = static_cast<std::size_t>(config.gap_frames);
@@ -72,7 +85,9 @@ LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3
           const auto it = grid.find({c.x + dx, c.y + dy, c.z + dz});
           if (it == grid.end()) continue;
           for (const std::size_t j : it->second) {
-            if ((gt.positions_[j] - gt.positions_[i]).squaredNorm() <= r2) refs.push_back(j);
+            if ((gt.positions_[j] - gt.positions_[i]).squaredNorm() <= r2 &&
+                gt.travel_m_[i] - gt.travel_m_[j] >= config.min_travel_m)
+              refs.push_back(j);
           }
         }
     std::sort(refs.begin(), refs.end());
@@ -107,7 +122,8 @@ bool LoopGroundTruth::is_true_match(std::size_t query, std::size_t reference) co
   if (query >= references_.size() || reference >= references_.size()) return false;
   if (!positions_.empty()) {
     const double d = (positions_[query] - positions_[reference]).norm();
-    return std::isfinite(d) && d <= accept_radius_m_;
+    return std::isfinite(d) && d <= accept_radius_m_ &&
+           std::abs(travel_m_[query] - travel_m_[reference]) >= min_travel_m_;
   }
   const auto& refs = references_[query];
   return std::binary_search(refs.begin(), refs.end(), reference);

@@ -15,6 +15,10 @@ struct GroundTruthConfig {
   int gap_frames = 20;           // minimum frame gap of a true loop
   std::string plane = "xz";      // distances in: "xz" (KITTI camera frame), "xy", or "xyz" (3-D, EuRoC)
   double accept_radius_m = 0.0;  // r_accept for scoring a detection; <= 0 means r_true
+  // A revisit needs travel in between: a pair (query, reference) is a loop only when the ground-truth path
+  // between them (3-D, summed over consecutive frames) is at least this long. Hovering or standing still
+  // within r_true is not a loop. 0 = no such rule.
+  double min_travel_m = 0.0;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is GroundTruthConfig or const
   // GroundTruthConfig).
@@ -24,6 +28,7 @@ struct GroundTruthConfig {
     v("gap_frames", self.gap_frames);
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
+    v("min_travel_m", self.min_travel_m);
   }
   void validate() const;  // throws ConfigError naming the key
   double effective_accept_radius_m() const { return accept_radius_m > 0.0 ? accept_radius_m : radius_m; }
@@ -36,7 +41,8 @@ class LoopGroundTruth {
 
   // From one position per frame (world frame, metres). A uniform grid of cell r_true finds the
   // neighbours (about O(n) for trajectories, not O(n^2)). A non-finite position (NaN) marks a frame
-  // without ground truth: it is never positive and never part of a true match.
+  // without ground truth: it is never positive and never part of a true match; the path across it is the
+  // straight line between the frames with ground truth on either side.
   static LoopGroundTruth from_positions(const std::vector<Eigen::Vector3d>& p_w,
                                         const GroundTruthConfig& config);
   // From explicit (query, reference) pairs, 0-based (e.g. botw_pairs.csv). A detection is a true
@@ -54,7 +60,7 @@ class LoopGroundTruth {
   // pairs.
   const std::vector<std::size_t>& true_references(std::size_t query) const { return references_.at(query); }
   // Positions: GT positions of query and reference within r_accept (in the configured plane), whatever
-  // their order or gap. Pairs: the pair is listed.
+  // their order or gap, and at least min_travel_m of ground-truth path apart. Pairs: the pair is listed.
   bool is_true_match(std::size_t query, std::size_t reference) const;
   bool uses_positions() const { return !positions_.empty(); }
   // All true loop pairs (query, reference), query ascending.
@@ -63,7 +69,9 @@ class LoopGroundTruth {
  private:
   std::vector<std::vector<std::size_t>> references_;
   std::vector<Eigen::Vector3d> positions_;  // projected (unused axis zeroed); empty for pairs
+  std::vector<double> travel_m_;            // ground-truth path length from frame 0 (3-D); empty for pairs
   double accept_radius_m_ = 0.0;
+  double min_travel_m_ = 0.0;
 };
 
 }  // namespace loopgate

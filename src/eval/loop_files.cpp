@@ -1,10 +1,13 @@
 #include "eval/loop_files.hpp"
 
+#include <algorithm>
 #include <cerrno>
+#include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <string_view>
 
 #include "core/error.hpp"
 
@@ -75,6 +78,77 @@ std::vector<std::pair<std::size_t, std::size_t>> read_loop_pairs(const std::file
     pairs.emplace_back(to_index(v[0], kZeroBased, file, line), to_index(v[1], kZeroBased, file, line));
   });
   return pairs;
+}
+
+TruthPairs read_truth_pairs(const std::filesystem::path& file, std::optional<std::size_t> frame_count) {
+  std::error_code ec;
+  if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
+    throw DataError(file, "not a regular file (a FIFO, socket, device or directory), expected a pairs file");
+  std::ifstream in(file);
+  if (!in) throw DataError(file, "cannot open the loop ground-truth pairs file");
+  TruthPairs out;
+  std::string line;
+  std::size_t line_no = 0;
+  bool first_row = true;
+  while (std::getline(in, line)) {
+    ++line_no;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    const auto begin = line.find_first_not_of(" \t");
+    if (begin == std::string::npos || line[begin] == '#') continue;
+    // The first two fields: comma-separated when the line has a comma, else blank-separated; trimmed.
+    std::vector<std::string> fields;
+    const bool commas = line.find(',') != std::string::npos;
+    std::size_t pos = begin;
+    while (fields.size() < 2 && pos <= line.size()) {
+      const std::size_t end = commas ? line.find(',', pos) : line.find_first_of(" \t", pos);
+      std::string field = line.substr(pos, end == std::string::npos ? std::string::npos : end - pos);
+      const auto a = field.find_first_not_of(" \t");
+      const auto b = field.find_last_not_of(" \t");
+      fields.push_back(a == std::string::npos ? std::string{} : field.substr(a, b - a + 1));
+      if (end == std::string::npos) break;
+      pos = commas ? end + 1 : line.find_first_not_of(" \t", end);
+      if (pos == std::string::npos) break;
+    }
+    const auto index = [&](const std::string& text, std::optional<std::size_t>* value) {
+      std::size_t v = 0;
+      const auto [ptr, err] = std::from_chars(text.data(), text.data() + text.size(), v);
+      if (err == std::errc{} && ptr == text.data() + text.size() && !text.empty()) *value = v;
+    };
+    std::optional<std::size_t> query, reference;
+    if (!fields.empty()) index(fields[0], &query);
+    if (fields.size() > 1) index(fields[1], &reference);
+    const bool words = !fields.empty() && !fields[0].empty() &&
+                       std::string_view("0123456789+-.").find(fields[0][0]) == std::string_view::npos;
+    if (first_row && words) {  // a header ("query_index0,match_index0,...")
+      first_row = false;
+      continue;
+    }
+    first_row = false;
+    if (!query || !reference) {
+      throw DataError(
+          file, line_no,
+          "expected two 0-based frame numbers (query, reference) separated by ',' or blanks, got " +
+              quote_excerpt(line));
+    }
+    if (*query == *reference) {
+      throw DataError(file, line_no,
+                      "frame " + std::to_string(*query) + " is paired with itself; a loop joins two frames");
+    }
+    for (const std::size_t f : {*query, *reference}) {
+      if (frame_count && f >= *frame_count) {
+        throw DataError(file, line_no,
+                        "frame " + std::to_string(f) +
+                            " is not a frame of the dataset (its frames are numbered 0.." +
+                            std::to_string(*frame_count == 0 ? 0 : *frame_count - 1) +
+                            "): pairs of another sequence, or 1-based numbers?");
+      }
+    }
+    ++out.rows;
+    out.pairs.emplace_back(std::max(*query, *reference), std::min(*query, *reference));
+  }
+  std::sort(out.pairs.begin(), out.pairs.end());
+  out.pairs.erase(std::unique(out.pairs.begin(), out.pairs.end()), out.pairs.end());
+  return out;
 }
 
 std::vector<std::pair<std::size_t, std::size_t>> read_vio_dird_true_loops(const std::filesystem::path& file,

@@ -8,6 +8,7 @@
 #include <Eigen/Core>
 #include <cstddef>
 #include <filesystem>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -17,6 +18,18 @@ namespace loopgate {
 
 // botw_pairs.csv: (query, reference) pairs, 0-based.
 std::vector<std::pair<std::size_t, std::size_t>> read_loop_pairs(const std::filesystem::path& file);
+
+// eval.truth_pairs_file: loop ground truth as published for KITTI, EuRoC, RTAB-Map's samples and others, one
+// (query, reference) pair of 0-based frame numbers per line. Fields separated by commas or blanks; further
+// columns (file names) are ignored; the first data line may be a header (its first field not a number); '#'
+// comments and blank lines are skipped. A pair is stored as (later, earlier) frame (a file listing both (i,
+// j) and (j, i) of a symmetric matrix gives one pair), duplicates once. DataError names the file and line: a
+// field that is not a frame number, a frame paired with itself, or (with `frame_count`) a frame number >= it.
+struct TruthPairs {
+  std::vector<std::pair<std::size_t, std::size_t>> pairs;  // (query, reference), query > reference, sorted
+  std::size_t rows = 0;                                    // data rows read (before removing duplicates)
+};
+TruthPairs read_truth_pairs(const std::filesystem::path& file, std::optional<std::size_t> frame_count = {});
 
 // kitti00_true_loops*.csv, mh05_true_loops.csv: "earlier,current" 1-based -> (query = current - 1 +
 // frame_offset, reference = earlier - 1 + frame_offset). mh05_true_loops.csv indexes the authors'

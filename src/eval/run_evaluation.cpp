@@ -49,17 +49,25 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
 }
 
 SequenceEvaluation evaluate_sequence(const SequenceEvaluationInput& input) {
-  const LoopGroundTruth truth = LoopGroundTruth::from_positions(input.p_w, input.truth);
   SequenceEvaluation out;
-  out.truth_pairs = truth.pairs();
-  out.json = {{"available", true},
-              {"truth",
-               {{"radius_m", input.truth.radius_m},
-                {"gap_frames", input.truth.gap_frames},
-                {"plane", input.truth.plane},
-                {"accept_radius_m", input.truth.effective_accept_radius_m()},
-                {"positives", truth.positive_count()}}}};
-  out.json.update(loop_evaluation_json(input.loops, input.ranked, truth, input.score_order));
+  if (input.pairs) {
+    out.truth = LoopGroundTruth::from_pairs(input.frame_count, *input.pairs);
+    nlohmann::json truth = input.pairs_truth.is_object() ? input.pairs_truth : nlohmann::json::object();
+    truth["positives"] = out.truth.positive_count();
+    out.json = {{"available", true}, {"truth", truth}};
+  } else {
+    out.truth = LoopGroundTruth::from_positions(input.p_w, input.truth);
+    out.json = {{"available", true},
+                {"truth",
+                 {{"radius_m", input.truth.radius_m},
+                  {"gap_frames", input.truth.gap_frames},
+                  {"plane", input.truth.plane},
+                  {"accept_radius_m", input.truth.effective_accept_radius_m()},
+                  {"min_travel_m", input.truth.min_travel_m},
+                  {"positives", out.truth.positive_count()}}}};
+  }
+  out.truth_pairs = out.truth.pairs();
+  out.json.update(loop_evaluation_json(input.loops, input.ranked, out.truth, input.score_order));
   return out;
 }
 
@@ -68,20 +76,30 @@ nlohmann::json gate_coverage_json(const std::vector<Eigen::Vector3d>& p_w, const
                                   const std::function<bool(std::size_t, std::size_t)>& covers) {
   GroundTruthConfig reachable_config = truth;
   reachable_config.gap_frames = std::max(truth.gap_frames, margin_frames);
-  const LoopGroundTruth reachable = LoopGroundTruth::from_positions(p_w, reachable_config);
+  return gate_coverage_json(LoopGroundTruth::from_positions(p_w, reachable_config),
+                            reachable_config.gap_frames, processed, covers);
+}
+
+nlohmann::json gate_coverage_json(const LoopGroundTruth& truth, int min_gap_frames,
+                                  const std::function<bool(std::size_t)>& processed,
+                                  const std::function<bool(std::size_t, std::size_t)>& covers) {
+  const auto gap = static_cast<std::size_t>(std::max(0, min_gap_frames));
   std::size_t positives = 0, covered = 0;
-  for (std::size_t q = 0; q < p_w.size(); ++q) {
-    if (!reachable.is_positive(q) || !processed(q)) continue;
+  for (std::size_t q = 0; q < truth.frame_count(); ++q) {
+    if (!truth.is_positive(q) || !processed(q)) continue;
+    const std::vector<std::size_t>& references = truth.true_references(q);
+    if (std::none_of(references.begin(), references.end(), [&](std::size_t r) { return r + gap <= q; }))
+      continue;
     ++positives;
-    for (const std::size_t r : reachable.true_references(q)) {
-      if (processed(r) && covers(q, r)) {
+    for (const std::size_t r : references) {
+      if (r + gap <= q && processed(r) && covers(q, r)) {
         ++covered;
         break;
       }
     }
   }
   return {
-      {"gap_frames", reachable_config.gap_frames},
+      {"gap_frames", min_gap_frames},
       {"positive_query_frames", positives},
       {"covered_query_frames", covered},
       {"covered_fraction", positives ? static_cast<double>(covered) / static_cast<double>(positives) : 0.0}};

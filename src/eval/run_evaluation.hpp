@@ -8,6 +8,7 @@
 #include <cstddef>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -27,20 +28,26 @@ namespace loopgate {
 nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
                                     const LoopGroundTruth& truth, const std::string& score_order);
 
-// A single-sequence run against ground-truth positions. Indices are within the run's frame range.
+// A single-sequence run against ground-truth positions, or against listed (query, reference) pairs. Indices
+// are within the run's frame range.
 struct SequenceEvaluationInput {
   std::vector<Eigen::Vector3d> p_w;  // ground-truth position per frame; NaN where there is none
   GroundTruthConfig truth;
-  std::vector<Detection> loops;   // reported loop closures
+  // When set, the truth: (query, reference) pairs of run indices in [0, frame_count) (p_w and truth unused).
+  std::optional<std::vector<std::pair<std::size_t, std::size_t>>> pairs;
+  std::size_t frame_count = 0;   // with pairs: the run's frames
+  nlohmann::json pairs_truth;    // with pairs: the "truth" block's description (file, pairs read, pairs used)
+  std::vector<Detection> loops;  // reported loop closures
   std::vector<Detection> ranked;  // what the PR sweep runs over
   std::string score_order;        // "higher_is_better" | "lower_is_better"
 };
 
 struct SequenceEvaluation {
-  // {"available": true, "truth": {radius_m, gap_frames, plane, accept_radius_m, positives}} + the
-  // loop_evaluation_json fields.
+  // {"available": true, "truth": {radius_m, gap_frames, plane, accept_radius_m, positives}} (pairs: the
+  // pairs_truth fields and positives) + the loop_evaluation_json fields.
   nlohmann::json json;
   std::vector<std::pair<std::size_t, std::size_t>> truth_pairs;  // (query, reference), query ascending
+  LoopGroundTruth truth;
 };
 SequenceEvaluation evaluate_sequence(const SequenceEvaluationInput& input);
 
@@ -50,6 +57,10 @@ SequenceEvaluation evaluate_sequence(const SequenceEvaluationInput& input);
 // `processed(q)`: frame q went through the run; `covers(q, r)`: a candidate-area cell holds (q, r).
 nlohmann::json gate_coverage_json(const std::vector<Eigen::Vector3d>& p_w, const GroundTruthConfig& truth,
                                   int margin_frames, const std::function<bool(std::size_t)>& processed,
+                                  const std::function<bool(std::size_t, std::size_t)>& covers);
+// The same for any truth (positions or pairs): the true references at least `min_gap_frames` back.
+nlohmann::json gate_coverage_json(const LoopGroundTruth& truth, int min_gap_frames,
+                                  const std::function<bool(std::size_t)>& processed,
                                   const std::function<bool(std::size_t, std::size_t)>& covers);
 
 // Aligned sequences (two-sequence runs, e.g. Nordland): query frame k and reference frame k show the same

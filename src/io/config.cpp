@@ -186,6 +186,24 @@ void throw_bad_word(const std::string& name, const RawConfigValue& value, const 
                     where(value.origin));
 }
 
+void rethrow_with_origin(const RawConfig& raw, const ConfigError& error) {
+  const std::string what = error.what();
+  const std::size_t colon = what.find(": ");
+  const std::string name = what.substr(0, colon);
+  const std::size_t dot = name.find('.');
+  if (colon != std::string::npos && dot != std::string::npos && name.find(' ') == std::string::npos) {
+    const auto section = raw.sections().find(name.substr(0, dot));
+    if (section != raw.sections().end()) {
+      const auto key = section->second.find(name.substr(dot + 1));
+      if (key != section->second.end() && !key->second.origin.empty() &&
+          what.find("(" + key->second.origin + ")") == std::string::npos) {
+        throw ConfigError(what + " (" + key->second.origin + ")");
+      }
+    }
+  }
+  throw error;
+}
+
 std::string format_value(bool value) {
   return value ? "true" : "false";
 }

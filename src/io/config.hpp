@@ -135,9 +135,16 @@ void apply_section(const std::string& section_name, const std::map<std::string, 
   }
 }
 
+namespace config_detail {
+// Rethrows `error` (from a validate()) with the origin of the key it names ("section.key: ..."), when that
+// key was set in `raw`: "... (FILE:LINE)" or "... (--set ...)". Errors about a default or about several keys
+// are rethrown as they are.
+[[noreturn]] void rethrow_with_origin(const RawConfig& raw, const ConfigError& error);
+}  // namespace config_detail
+
 // Applies every raw value to `config` (a struct with sections()), then validates it once: config.validate()
 // when the configuration has one (every section and the rules between sections), else every section's
-// validate().
+// validate(). A validation error names where the key it names was set (file:line, --set, a flag).
 template <class Config>
 void apply_config(const RawConfig& raw, Config& config) {
   for (const auto& [section_name, values] : raw.sections()) {
@@ -155,10 +162,14 @@ void apply_config(const RawConfig& raw, Config& config) {
       config_detail::throw_unknown("section", section_name, origin, names);
     }
   }
-  if constexpr (requires { config.validate(); }) {
-    config.validate();
-  } else {
-    Config::sections(config, [](std::string_view, const auto& section) { section.validate(); });
+  try {
+    if constexpr (requires { config.validate(); }) {
+      config.validate();
+    } else {
+      Config::sections(config, [](std::string_view, const auto& section) { section.validate(); });
+    }
+  } catch (const ConfigError& e) {
+    config_detail::rethrow_with_origin(raw, e);
   }
 }
 

@@ -556,6 +556,54 @@ std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& 
   return io_detail::read_euroc_camera_csv(csv_file, log);
 }
 
+std::vector<Timestamp> read_frame_times(const std::filesystem::path& file) {
+  const io_detail::TextFile text(file);
+  // A comma on the first data line: an EuRoC cam<i>/data.csv (t_ns, file name).
+  const std::string_view all = text.text();
+  for (std::size_t pos = 0; pos < all.size();) {
+    const std::size_t end = std::min(all.find('\n', pos), all.size());
+    const std::string_view line = all.substr(pos, end - pos);
+    pos = end + 1;
+    const std::size_t first = line.find_first_not_of(" \t\r");
+    if (first == std::string_view::npos || line[first] == '#') continue;
+    if (line.find(',') != std::string_view::npos) {
+      std::vector<Timestamp> times;
+      for (const EurocImageEntry& e : read_euroc_camera_csv(file)) times.push_back(e.t_ns);
+      return times;
+    }
+    break;
+  }
+  // A plain list: one time per line, integer nanoseconds or decimal seconds, one unit for the whole file.
+  constexpr Timestamp kMinStepNs = 1'000'000;  // 1 ms: simulation.frame_rate_hz is at most 1000 Hz
+  IssueLog log(true, nullptr);
+  std::vector<Timestamp> times;
+  int seconds = -1;  // unknown / 0: nanoseconds / 1: seconds
+  io_detail::for_each_row(text, io_detail::Delimiter::kWhitespace, log, [&](const io_detail::Row& row) {
+    row.expect_columns(1, "one time per line (integer nanoseconds, or seconds with a decimal point)");
+    const bool decimal = row.fields[0].find_first_of(".eE") != std::string_view::npos;
+    if (seconds < 0) seconds = decimal ? 1 : 0;
+    if (decimal != (seconds == 1)) {
+      throw io_detail::RowError{std::string("expected ") +
+                                (seconds == 1 ? "seconds with a decimal point" : "integer nanoseconds") +
+                                " like the first time of the file, got '" + std::string(row.fields[0]) + "'"};
+    }
+    const Timestamp t_ns = decimal ? row.seconds_ns(0, "t_s") : row.integer_ns(0, "t_ns");
+    if (!times.empty() && t_ns <= times.back()) {
+      throw io_detail::RowError{"times must strictly increase (" + std::string(row.fields[0]) +
+                                " is not after the previous time)"};
+    }
+    if (!times.empty() && t_ns - times.back() < kMinStepNs) {
+      throw io_detail::RowError{
+          "frames less than 1 ms apart (above 1000 Hz): integer times are nanoseconds; write seconds with a "
+          "decimal point (" +
+          std::string(row.fields[0]) + ".0)"};
+    }
+    times.push_back(t_ns);
+  });
+  if (times.empty()) throw DataError(file, "no times, expected one time per line");
+  return times;
+}
+
 void write_euroc_camera_csv(const std::filesystem::path& csv_file,
                             const std::vector<EurocImageEntry>& images) {
   std::string out = "#timestamp [ns],filename\n";

@@ -55,6 +55,12 @@ struct EurocImageEntry {
   std::size_t index = 0;  // the frame's number: its data row in the file, counting rows rejected before it
 };
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file);
+// Frame times (the simulator's simulation.frame_times_file): an EuRoC cam<i>/data.csv (a comma on the first
+// data line), or a plain list of one time per line, '#' comments and blank lines skipped: integer nanoseconds
+// (as EuRoC / TUM-VI stamp images) or seconds with a decimal point or exponent (as KITTI times.txt), one unit
+// for the whole file, strictly increasing, at most 1000 Hz (integer seconds would otherwise be read as
+// nanoseconds). DataError names the file and line.
+std::vector<Timestamp> read_frame_times(const std::filesystem::path& file);
 void write_euroc_camera_csv(const std::filesystem::path& csv_file,
                             const std::vector<EurocImageEntry>& images);
 

@@ -44,8 +44,10 @@ struct FrameRecord {
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
 
-  // A pose the gate and the outputs can use.
-  bool usable_pose() const { return has_pose && odometry.pose.status != OdometryStatus::kLost; }
+  // A pose the odometry estimated for this frame, which the gate, the loop closer and trajectory.tum use:
+  // status tracking. An initialising source's pose is a placeholder (the EKF's identity before it has a
+  // state), a lost frame's is the last good one.
+  bool usable_pose() const { return has_pose && odometry.pose.status == OdometryStatus::kTracking; }
 
   // The hand-over between nodes goes through TBB's scheduler, whose synchronisation ThreadSanitizer
   // cannot see (uninstrumented library); each node body starts with acquire() and ends with release()

@@ -81,6 +81,7 @@ void FrameSteps::decode(FrameRecord& r) {
 }
 
 void FrameSteps::odometry(FrameRecord& r) {
+  if (!odometry_->estimates_poses()) return;  // odometry.source none: no pose, nothing to report
   std::lock_guard lock(odometry_mutex_);
   OdometryInput input;
   input.frame = r.frame;

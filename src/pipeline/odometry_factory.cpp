@@ -35,7 +35,70 @@ std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfi
   const bool ekf_inputs = dataset.has_images() && dataset.has_imu() && dataset.camera().has_value() &&
                           dataset.imu_calibration().has_value();
   const bool ekf_init = ekf.init_mode == "standstill" || dataset.has_ground_truth();
-  return ekf_inputs && ekf_init ? "ekf" : "drift";
+  if (ekf_inputs && ekf_init) return "ekf";
+  return dataset.has_ground_truth() ? "drift" : "none";
+}
+
+std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset) {
+  const std::string source = resolve_odometry_source(config, ekf, dataset);
+  const auto seconds = [](Timestamp t) { return fmt::format("{:.3f}", ns_to_s(t)); };
+  const std::string frames =
+      dataset.frame_count() == 0
+          ? std::string("no frames")
+          : fmt::format("{} frames at t = {} .. {} s", dataset.frame_count(), seconds(dataset.frame_t_ns(0)),
+                        seconds(dataset.frame_t_ns(dataset.frame_count() - 1)));
+  if (source == "file") {
+    std::string covers = "no readable poses";
+    try {
+      const auto poses = read_tum(config.file);
+      if (!poses.empty())
+        covers = "poses at t = " + seconds(poses.front().t_ns) + " .. " + seconds(poses.back().t_ns) + " s";
+    } catch (const std::exception& e) {
+      covers = e.what();
+    }
+    return fmt::format(
+        "poses in {} within odometry.file_max_gap_s = {} s of the frame times; it has {}, the dataset's {}: "
+        "no frame within odometry.file_max_gap_s of the trajectory (another sequence, or times in another "
+        "unit?)",
+        config.file, config.file_max_gap_s, covers, frames);
+  }
+  if (source == "ekf") {
+    return fmt::format(
+        "the ekf to initialise ({}) and track the images and IMU of {} ({})",
+        ekf.init_mode == "ground_truth" ? "from ground truth at a frame time" : "at a standstill",
+        dataset.root().string(), frames);
+  }
+  if (source == "drift") {
+    std::string truth = "none";
+    if (!dataset.ground_truth().empty()) {
+      truth = "t = " + seconds(dataset.ground_truth().front().t_ns) + " .. " +
+              seconds(dataset.ground_truth().back().t_ns) + " s";
+    }
+    return fmt::format("ground truth of {} at the frame times (its ground truth covers {}; the dataset's {})",
+                       dataset.root().string(), truth, frames);
+  }
+  if (source == "none") return "no poses (odometry.source none: appearance only)";
+  return "poses from odometry.source " + source;
+}
+
+void require_poses_if_needed(const PipelineConfig& config, const Dataset& dataset) {
+  if (resolve_odometry_source(config.odometry, config.ekf, dataset) != "none") return;
+  const std::string why =
+      config.odometry.source == "none"
+          ? std::string("odometry.source is none (appearance only)")
+          : "odometry.source auto found no odometry for dataset " + dataset.root().string() +
+                " (no ground truth for drift; no IMU, calibration and images for the ekf)";
+  if (config.run.mode == RunMode::kGated) {
+    throw ConfigError("run.mode: 'gated' needs poses for the pose gate, and " + why +
+                      ": use run.mode full (--mode full), or odometry.source file with a trajectory");
+  }
+  if (config.run.mode == RunMode::kOdometry) {
+    throw ConfigError("run.mode: 'odometry' estimates poses only, and " + why + ": nothing to do");
+  }
+  if (config.verify.enabled) {
+    throw ConfigError("verify.enabled: geometric verification triangulates with the odometry poses, and " +
+                      why + ": set verify.enabled=false");
+  }
 }
 
 namespace {
@@ -87,6 +150,10 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
   const std::string source = resolve_odometry_source(config, ekf, dataset);
   if (config.source == "auto") spdlog::info("odometry: source auto -> {}", source);
   if (source == "ekf") return make_ekf_source(config, ekf, dataset);
+  if (source == "none") {
+    spdlog::info("odometry: none (appearance only): frames carry no pose");
+    return std::make_unique<NoOdometry>();
+  }
   if (source == "file") {
     auto poses = read_tum(config.file);
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
@@ -97,18 +164,12 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
       const Timestamp t = dataset.frame_t_ns(i);
       if (t >= poses.front().t_ns - gap_ns && t <= poses.back().t_ns + gap_ns) ++covered;
     }
-    const auto seconds = [](Timestamp t) { return fmt::format("{:.3f}", ns_to_s(t)); };
     if (covered == 0) {
-      throw DataError(
-          config.file,
-          "its poses cover t = " + seconds(poses.front().t_ns) + " .. " + seconds(poses.back().t_ns) +
-              " s, and the dataset's " + std::to_string(dataset.frame_count()) +
-              " frames are at t = " + seconds(dataset.frame_t_ns(0)) + " .. " +
-              seconds(dataset.frame_t_ns(dataset.frame_count() - 1)) +
-              " s: no frame within odometry.file_max_gap_s of the trajectory (another sequence, or "
-              "times in another unit?)");
-    }
-    if (covered < dataset.frame_count()) {
+      // Said now, and again when the run ends (it exits non-zero, run_checks.hpp); the run still goes
+      // through the frames so that its outputs show it frame by frame (issue 14).
+      spdlog::error("odometry: {}: every frame will be 'odometry lost'",
+                    odometry_expectation(config, ekf, dataset));
+    } else if (covered < dataset.frame_count()) {
       spdlog::warn("odometry: {} covers {} of the dataset's {} frames; the others are 'odometry lost'",
                    config.file, covered, dataset.frame_count());
     }
@@ -116,8 +177,9 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
     return std::make_unique<FileOdometry>(config, std::move(poses));
   }
   if (!dataset.has_ground_truth()) {
-    throw ConfigError("odometry.source: 'drift' needs ground truth, and dataset " + dataset.root().string() +
-                      " has none (use source: file)");
+    throw ConfigError(
+        "odometry.source: 'drift' needs ground truth, and dataset " + dataset.root().string() +
+        " has none (use source: file with a trajectory, or none for an appearance-only run.mode full)");
   }
   Eigen::Vector3d axis_w = Eigen::Vector3d::UnitZ();
   if (config.heading_axis != "auto") axis_w = axis_vector(config.heading_axis);

@@ -9,6 +9,7 @@
 #include <optional>
 #include <string>
 
+#include "pipeline/pipeline_config.hpp"
 #include "stages/ekf/ekf_config.hpp"
 #include "stages/odometry/odometry_source.hpp"
 
@@ -27,6 +28,14 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
 // The world axis (+-x, +-y or +-z) nearest the up direction: the mean specific force of the IMU over the
 // sequence, rotated into the world by the ground truth. nullopt without IMU or ground truth.
 std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset);
+
+// What the configured source needs from `dataset` and its inputs, naming the file (odometry.file, the
+// dataset) and the times they cover: the run's checks say it when no frame got a pose (issue 14).
+std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset);
+
+// ConfigError when the run needs poses (run.mode gated: the pose gate; run.mode odometry; verify.enabled) and
+// the source resolves to none for `dataset`, saying why and what to use instead.
+void require_poses_if_needed(const PipelineConfig& config, const Dataset& dataset);
 
 // The source `config.source` resolves to for `dataset`: "auto" becomes "ekf" or "drift" (see
 // stages/odometry/odometry_source.hpp).

@@ -20,6 +20,7 @@
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/parallel_handoff.hpp"
+#include "pipeline/run_checks.hpp"
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_outputs.hpp"
 #include "pipeline/run_resources.hpp"
@@ -40,6 +41,7 @@ class PipelineRun {
         out_dir_(out_dir),
         stop_(stop),
         range_(config.run.frame_range(dataset.frame_count())),
+        truth_pairs_(load_truth_pairs(config.eval, dataset)),
         seqs_(range_.second - range_.first),
         images_(dataset, seqs_),
         method_(make_detection_method({config, seqs_, images_, loops_, seqs_.capacity()},
@@ -91,6 +93,7 @@ class PipelineRun {
   bool stop_requested() const { return (stop_ && stop_->load()) || failed_.load(); }
   void produce(tbb::flow::queue_node<FrameMsg>& queue);
   std::vector<std::string> missing_outputs() const;
+  RunCheckInput check_input() const;
   void finish_stream(tbb::task_arena& arena, RunResult& result, double cpu_start_s);
   // Runs `write`, one output step after the drain: a failure (a full disk) is recorded, naming the file, and
   // the next outputs are still written.
@@ -109,6 +112,7 @@ class PipelineRun {
   std::filesystem::path out_dir_;
   const std::atomic<bool>* stop_;
   std::pair<std::size_t, std::size_t> range_;  // dataset frames [first, last)
+  std::optional<TruthPairs> truth_pairs_;      // eval.truth_pairs_file, read before the run starts
   RunClock clock_;
   SeqIndex seqs_;
   ImageSource images_;
@@ -321,6 +325,7 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
                  outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
                  end_of_stream_ms, std::nullopt, &closer_};
+  parts.truth_pairs = truth_pairs_ ? &*truth_pairs_ : nullptr;
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
   // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
   const std::size_t processed = outputs_.frames_through();
@@ -336,7 +341,17 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   nlohmann::json evaluation = {{"available", false}};
   write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
                [&] { evaluation = evaluate_run(parts, out_dir_); });
+  // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
+  std::vector<std::string> problems;
+  if (!result.failed && !result.interrupted) {
+    problems = run_problems(check_input());
+    if (!problems.empty()) {
+      result.failed = true;
+      result.error = fmt::format("{}", fmt::join(problems, "; "));
+    }
+  }
   result.summary = make_run_summary(parts, result, std::move(evaluation));
+  result.summary["problems"] = problems;
   result.track = {range_.first, range_.second, outputs_.frame_poses(), outputs_.tracked_poses(),
                   loops_.loops()};
   if (config_.output.trace) {
@@ -357,6 +372,26 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
       result.error = "outputs missing: " + fmt::format("{}", fmt::join(result.missing_outputs, ", "));
     spdlog::error("run failed: {}", result.error);
   }
+}
+
+RunCheckInput PipelineRun::check_input() const {
+  const RunCounters& c = outputs_.counters();
+  RunCheckInput in;
+  in.frames_processed = c.processed;
+  in.odometry_source = steps_.odometry_source().name();
+  in.odometry_expected = odometry_expectation(config_.odometry, config_.ekf, dataset_);
+  in.frames_with_pose = c.frames_with_pose;
+  in.first_odometry_problem = c.first_odometry_problem;
+  in.frames_needing_image = c.frames_needing_image;
+  in.frames_decoded = c.decoded;
+  in.first_image_error = c.first_image_error;
+  in.dataset_root = dataset_.root().string();
+  in.detects = method_->detects();
+  in.method = enum_name(config_.run.method);
+  const bool seqslam = config_.run.seqslam();
+  in.margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
+  in.margin_frames = seqslam ? config_.seqslam.exclusion_margin_frames : config_.match.margin;
+  return in;
 }
 
 std::vector<std::string> PipelineRun::missing_outputs() const {
@@ -380,6 +415,7 @@ std::vector<std::string> PipelineRun::missing_outputs() const {
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
                        const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
   if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
+  require_poses_if_needed(config, dataset);
   refuse_outputs_over_inputs(config, out_dir);
   PipelineRun run(config, dataset, out_dir, stop);
   return run.run();

@@ -89,6 +89,24 @@ void RunConfig::validate() const {
   if (!frames.empty()) frame_range(std::numeric_limits<std::size_t>::max());
 }
 
+void PipelineConfig::validate_odometry_none() const {
+  if (odometry.source != "none") return;
+  if (run.mode == RunMode::kGated) {
+    throw ConfigError(
+        "run.mode: 'gated' needs poses for the pose gate, and odometry.source is none (appearance only): use "
+        "run.mode full (--mode full), or an odometry source");
+  }
+  if (run.mode == RunMode::kOdometry) {
+    throw ConfigError(
+        "run.mode: 'odometry' estimates poses only, and odometry.source is none: nothing to do");
+  }
+  if (verify.enabled) {
+    throw ConfigError(
+        "verify.enabled: geometric verification triangulates with the odometry poses, and odometry.source is "
+        "none: set verify.enabled=false");
+  }
+}
+
 void DirdSeqSlamConfig::validate() const {
   require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
   require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
@@ -102,6 +120,7 @@ void EvalConfig::validate() const {
   require_in("eval.truth_gap_frames", truth_gap_frames, 0, 1'000'000, "frames");
   require_one_of("eval.plane", plane, {"auto", "xz", "xy", "xyz"});
   require_in("eval.accept_radius_m", accept_radius_m, 0.0, 1e4, "m (0 = eval.truth_radius_m)");
+  require_in("eval.min_travel_m", min_travel_m, 0.0, 1e5, "m (0 = no travel needed)");
   require_in("eval.aligned_tolerance_frames", aligned_tolerance_frames, -1, 1'000'000,
              "frames (-1 = not aligned)");
 }

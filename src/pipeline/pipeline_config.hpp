@@ -126,9 +126,23 @@ struct EvalConfig {
   // r_accept: a detection (i, j) is a true positive when the ground-truth positions of i and j are at
   // most this far apart (in `plane`); 0 = truth_radius_m.
   double accept_radius_m = 0.0;
+  // A revisit needs travel in between (issue 14): a true loop, and a true detection, also needs at least this
+  // much ground-truth path (3-D, summed frame to frame) between query and reference, so that hovering or
+  // standing still within truth_radius_m is not a loop (on an EuRoC flight many "positives" within 0.2 m and
+  // 20 frames are the drone hovering; on KITTI 00, 21 are the car stopped). 2 m: what the simulator's
+  // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (before issue
+  // 14). Not used with truth_pairs_file.
+  double min_travel_m = 2.0;
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
+  // Loop ground truth as published (KITTI, EuRoC, RTAB-Map samples): a file of (query, reference) pairs of
+  // 0-based frame numbers, the numbers frames.csv shows (eval/loop_files.hpp read_truth_pairs). When set, it
+  // replaces the positions rule above (truth_radius_m, truth_gap_frames, plane, accept_radius_m): query i is
+  // positive when it has a listed pair, a detection is true when its pair is listed; it needs no ground-truth
+  // poses (appearance-only datasets). Relative paths are relative to the working directory. Empty =
+  // positions.
+  std::string truth_pairs_file;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is EvalConfig or const EvalConfig).
   template <class Self, class V>
@@ -137,7 +151,9 @@ struct EvalConfig {
     v("truth_gap_frames", self.truth_gap_frames);
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
+    v("min_travel_m", self.min_travel_m);
     v("aligned_tolerance_frames", self.aligned_tolerance_frames);
+    v("truth_pairs_file", self.truth_pairs_file);
   }
   void validate() const;
   double effective_accept_radius_m() const { return accept_radius_m > 0 ? accept_radius_m : truth_radius_m; }
@@ -238,6 +254,9 @@ struct PipelineConfig {
     v("eval", self.eval);
     v("output", self.output);
   }
+  // odometry.source none gives no poses: the modes and options that need them are errors (the same check
+  // for `auto` resolving to none is made when the dataset is known, pipeline/odometry_factory.hpp).
+  void validate_odometry_none() const;
   void validate() const {
     run.validate();
     sync.validate();
@@ -253,6 +272,7 @@ struct PipelineConfig {
     verify.validate();
     posegraph.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
+    validate_odometry_none();
     eval.validate();
     output.validate();
   }

@@ -1,5 +1,7 @@
 #include "pipeline/run_counters.hpp"
 
+#include <string_view>
+
 namespace loopgate {
 
 void RunCounters::count(const FrameRecord& r, const std::string& status, const std::string& reason) {
@@ -8,6 +10,19 @@ void RunCounters::count(const FrameRecord& r, const std::string& status, const s
   if (r.decoded) ++decoded;
   if (r.needs_pixels && !r.decoded) ++image_errors;
   if (r.has_pose && r.odometry.pose.status == OdometryStatus::kLost) ++odometry_lost;
+  if (r.needs_pixels) ++frames_needing_image;
+  const auto first_message = [&r](std::string_view prefix) -> std::string {
+    for (const auto* list : {&r.errors, &r.warnings})
+      for (const std::string& m : *list)
+        if (m.starts_with(prefix)) return "frame " + std::to_string(r.label) + ": " + m;
+    return {};
+  };
+  if (r.usable_pose()) {
+    ++frames_with_pose;
+  } else if (first_odometry_problem.empty()) {
+    first_odometry_problem = first_message("odometry");
+  }
+  if (r.needs_pixels && !r.decoded && first_image_error.empty()) first_image_error = first_message("image");
   imu_gaps += static_cast<std::size_t>(r.imu.report.gaps);
   imu_out_of_order += static_cast<std::size_t>(r.imu.report.out_of_order);
   imu_duplicates += static_cast<std::size_t>(r.imu.report.duplicates);

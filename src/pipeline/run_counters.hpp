@@ -16,6 +16,10 @@ struct RunCounters {
   std::size_t processed = 0, frames_ok = 0, frames_warning = 0, frames_error = 0;
   std::size_t deadline_misses = 0, decoded = 0, odometry_lost = 0, image_errors = 0;
   std::size_t imu_gaps = 0, imu_out_of_order = 0, imu_duplicates = 0, imu_missing_frames = 0;
+  // For the run's checks (run_checks.hpp): frames with an estimated pose, frames whose pixels the decode
+  // stage needed, and the first frame's odometry and image problems ("frame N: ...").
+  std::size_t frames_with_pose = 0, frames_needing_image = 0;
+  std::string first_odometry_problem, first_image_error;
   bool have_first_t = false;
   Timestamp first_t_ns = 0, last_t_ns = 0;
   nlohmann::json problem_frames = nlohmann::json::array();  // the first kMaxListedProblems

@@ -130,13 +130,13 @@ void RunOutputs::sink(FrameRecord& r) {
   } else {
     frames_csv_.write_row(row.values());
   }
-  if (r.has_pose) {
+  // trajectory.tum holds only the poses the odometry estimated (issue 14): an initialising filter's
+  // placeholder (the identity) and a lost frame's last good pose are not estimates of this frame.
+  if (r.usable_pose()) {
     const PoseEstimate& pose = r.odometry.pose;
-    if (pose.status != OdometryStatus::kLost) {
-      trajectory_.write(r.t_ns, pose.T_w_b);
-      frame_poses_.emplace_back(r.frame, pose.T_w_b);
-    }
-    if (pose.status == OdometryStatus::kTracking) tracked_poses_.push_back({r.t_ns, pose.T_w_b});
+    trajectory_.write(r.t_ns, pose.T_w_b);
+    frame_poses_.emplace_back(r.frame, pose.T_w_b);
+    tracked_poses_.push_back({r.t_ns, pose.T_w_b});
   }
   counters_.count(r, status, reason);
   r.image.release();

@@ -1,8 +1,11 @@
 #include "pipeline/run_summary.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <limits>
 
+#include "core/geometry.hpp"
 #include "eval/run_evaluation.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
@@ -11,33 +14,91 @@
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/loop_closer.hpp"
 #include "pipeline/loops_writer.hpp"
+#include "pipeline/odometry_factory.hpp"
 #include "pipeline/run_metrics.hpp"
 #include "pipeline/run_outputs.hpp"
 
 namespace loopgate {
 
+std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset& dataset) {
+  if (eval.truth_pairs_file.empty()) return std::nullopt;
+  const std::size_t numbers =
+      dataset.frame_count() == 0 ? 0 : dataset.source_index(dataset.frame_count() - 1) + 1;
+  TruthPairs pairs = read_truth_pairs(eval.truth_pairs_file, numbers);
+  std::size_t queries = 0;
+  for (std::size_t k = 0; k < pairs.pairs.size(); ++k)
+    queries += (k == 0 || pairs.pairs[k].first != pairs.pairs[k - 1].first) ? 1 : 0;
+  spdlog::info("eval: loop ground truth from {}: {} pairs over {} query frames (eval.truth_pairs_file)",
+               eval.truth_pairs_file, pairs.pairs.size(), queries);
+  if (pairs.pairs.empty()) {
+    spdlog::warn("eval: {} lists no pair: every detection will count as false", eval.truth_pairs_file);
+  }
+  return pairs;
+}
+
+std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w) {
+  std::optional<Eigen::Vector3d> up_w = world_up_axis_from_imu(dataset);
+  if (!up_w && dataset.layout() == "kitti") up_w = Eigen::Vector3d(0.0, -1.0, 0.0);
+  if (!up_w) {
+    std::vector<Eigen::Vector3d> finite;
+    for (const Eigen::Vector3d& p : p_w)
+      if (p.allFinite()) finite.push_back(p);
+    if (finite.size() >= 3) up_w = plane_normal(finite);
+  }
+  if (!up_w) return "xy";
+  const int axis = dominant_axis(*up_w);
+  return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
+}
+
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
   const Dataset& dataset = parts.dataset;
-  if (!parts.method.detects() || !dataset.has_ground_truth()) return {{"available", false}};
+  if (!parts.method.detects() || (!dataset.has_ground_truth() && !parts.truth_pairs))
+    return {{"available", false}};
   const std::size_t first = parts.first_frame;
   const std::size_t end = std::min(parts.evaluated_end_frame.value_or(parts.last_frame), parts.last_frame);
   const std::size_t n = end - std::min(end, first);
   const double nan = std::numeric_limits<double>::quiet_NaN();
   SequenceEvaluationInput input;
   input.p_w.assign(n, Eigen::Vector3d::Constant(nan));
-  TumWriter truth_tum(out_dir / "ground_truth.tum");
-  for (std::size_t k = 0; k < n; ++k) {
-    if (const auto T_w_b = dataset.ground_truth_T_w_b(first + k)) {
-      input.p_w[k] = T_w_b->translation();
-      truth_tum.write(dataset.frame_t_ns(first + k), *T_w_b);
+  if (dataset.has_ground_truth()) {
+    TumWriter truth_tum(out_dir / "ground_truth.tum");
+    for (std::size_t k = 0; k < n; ++k) {
+      if (const auto T_w_b = dataset.ground_truth_T_w_b(first + k)) {
+        input.p_w[k] = T_w_b->translation();
+        truth_tum.write(dataset.frame_t_ns(first + k), *T_w_b);
+      }
     }
+    truth_tum.close();
   }
-  truth_tum.close();
+  if (parts.truth_pairs) {
+    // Frame numbers (as frames.csv shows them) -> indices within the evaluated frames; pairs with a frame
+    // outside them (another --frames range, a rejected row) cannot be detected and are left out, counted.
+    std::vector<std::size_t> labels(n);
+    for (std::size_t k = 0; k < n; ++k) labels[k] = dataset.source_index(first + k);
+    const auto index_of = [&labels](std::size_t label) -> std::optional<std::size_t> {
+      const auto it = std::lower_bound(labels.begin(), labels.end(), label);
+      if (it == labels.end() || *it != label) return std::nullopt;
+      return static_cast<std::size_t>(it - labels.begin());
+    };
+    std::vector<std::pair<std::size_t, std::size_t>> used;
+    for (const auto& [q, r] : parts.truth_pairs->pairs) {
+      const auto qi = index_of(q);
+      const auto ri = index_of(r);
+      if (qi && ri) used.emplace_back(*qi, *ri);
+    }
+    input.pairs_truth = {{"pairs_file", parts.config.eval.truth_pairs_file},
+                         {"pairs_file_rows", parts.truth_pairs->rows},
+                         {"pairs", parts.truth_pairs->pairs.size()},
+                         {"pairs_in_run", used.size()}};
+    input.pairs = std::move(used);
+    input.frame_count = n;
+  }
   const EvalConfig& eval = parts.config.eval;
   input.truth.radius_m = eval.truth_radius_m;
   input.truth.gap_frames = eval.truth_gap_frames;
   input.truth.plane = eval.plane != "auto" ? eval.plane : dataset.layout() == "kitti" ? "xz" : "xyz";
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
+  input.truth.min_travel_m = eval.min_travel_m;
   const MethodEvaluation method = parts.method.evaluation();
   const auto within_range = [first](const std::vector<Detection>& detections) {
     std::vector<Detection> out;
@@ -49,6 +110,22 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   input.ranked = method.ranked ? within_range(*method.ranked) : input.loops;
   input.score_order = method.score_order;
   SequenceEvaluation evaluation = evaluate_sequence(input);
+  if (!input.pairs) {
+    // How the truth depends on the rule (compare prints these): positives in 3-D and in the ground plane, and
+    // before eval.min_travel_m took out the revisits without travel (hovering, standing still).
+    const auto positives = [&](const std::string& plane, double min_travel_m) {
+      GroundTruthConfig truth = input.truth;
+      truth.plane = plane;
+      truth.min_travel_m = min_travel_m;
+      return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
+    };
+    const std::string horizontal = horizontal_plane(dataset, input.p_w);
+    nlohmann::json& truth = evaluation.json["truth"];
+    truth["positives_3d"] = positives("xyz", input.truth.min_travel_m);
+    truth["horizontal_plane"] = horizontal;
+    truth["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
+    truth["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
+  }
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : evaluation.truth_pairs) {
     truth_loops.write_row(
@@ -69,10 +146,14 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
       const std::size_t k = parts.seqs.frame(static_cast<std::int64_t>(seq)) - first;
       if (k < n) seq_of_index[k] = static_cast<std::int64_t>(seq);
     }
-    evaluation.json["gate_coverage"] = gate_coverage_json(
-        input.p_w, input.truth, parts.config.match.margin,
-        [&](std::size_t q) { return seq_of_index[q] >= 0; },
-        [&](std::size_t q, std::size_t r) { return method.covers(seq_of_index[q], seq_of_index[r]); });
+    const auto processed_frame = [&](std::size_t q) { return seq_of_index[q] >= 0; };
+    const auto covered = [&](std::size_t q, std::size_t r) {
+      return method.covers(seq_of_index[q], seq_of_index[r]);
+    };
+    evaluation.json["gate_coverage"] =
+        input.pairs
+            ? gate_coverage_json(evaluation.truth, parts.config.match.margin, processed_frame, covered)
+            : gate_coverage_json(input.p_w, input.truth, parts.config.match.margin, processed_frame, covered);
   }
   return evaluation.json;
 }

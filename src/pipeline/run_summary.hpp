@@ -2,11 +2,15 @@
 // ground truth (eval/run_evaluation.hpp), writing ground_truth.tum and truth_loops.csv for the plots.
 #pragma once
 
+#include <Eigen/Core>
 #include <cstddef>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <string>
+#include <vector>
 
+#include "eval/loop_files.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_counters.hpp"
@@ -35,12 +39,25 @@ struct RunParts {
   // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
   std::optional<std::size_t> evaluated_end_frame;
   const LoopCloser* closer = nullptr;
+  // eval.truth_pairs_file, read when the run was built (frame numbers as frames.csv shows them); null: the
+  // truth comes from the ground-truth positions.
+  const TruthPairs* truth_pairs = nullptr;
 };
 
-// Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not
-// detect loops; else positives from positions (r_true, gap, plane), the loops and the ranked detections
-// scored within r_accept, the PR curve, and for gated methods the gate coverage. Writes ground_truth.tum and
-// truth_loops.csv into `out_dir`. Only frames the run processed take part.
+// The dataset world's ground plane ("xy", "xz" or "yz"): normal to its up axis, from the IMU and the ground
+// truth when it has an IMU, -y for KITTI's camera world, else the axis nearest the normal of the positions'
+// best-fit plane; "xy" when nothing tells.
+std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w);
+
+// eval.truth_pairs_file read and checked against the dataset's frame numbers (DataError naming the file and
+// line), before the run starts; nullopt when the key is empty.
+std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset& dataset);
+
+// Evaluation block (evaluation.md): {"available": false} without ground truth (positions or pairs) or for a
+// method that does not detect loops; else positives from positions (r_true, gap, plane) or the listed pairs,
+// the loops and the ranked detections scored (within r_accept, or listed), the PR curve, and for gated
+// methods the gate coverage. Writes ground_truth.tum (with ground-truth poses) and truth_loops.csv into
+// `out_dir`. Only frames the run processed take part.
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir);
 
 nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, nlohmann::json evaluation);

@@ -758,6 +758,12 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
 TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset& reference,
                                     const Dataset& query, const std::filesystem::path& out_dir,
                                     const std::atomic<bool>* stop) {
+  if (!config.eval.truth_pairs_file.empty()) {
+    throw ConfigError(
+        "eval.truth_pairs_file: pairs of frame numbers within one sequence (single-sequence runs); two "
+        "sequences "
+        "are evaluated with eval.aligned_tolerance_frames");
+  }
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");
     if (!dataset->has_images()) throw DataError(dataset->root(), "two-sequence mode needs images");

@@ -82,6 +82,13 @@ void SimulationSettings::validate() const {
           std::to_string(png_compression));
   require(render_batch_frames >= 1 && render_batch_frames <= 10'000, "simulation.render_batch_frames",
           "in [1, 10000]", std::to_string(render_batch_frames));
+  if (!frame_times_file.empty() && trajectory_format != "euroc" && trajectory_format != "tum") {
+    throw ConfigError(
+        "simulation.frame_times_file: frame times replace the poses' times of an euroc or tum "
+        "trajectory; trajectory_format " +
+        trajectory_format + " has its own (" +
+        (trajectory_format == "kitti" ? "times_file, one per pose" : "the route's") + ")");
+  }
   if (trajectory_format == "procedural" && imu_source == "file") {
     throw ConfigError("simulation.imu_source: 'file' needs a recorded trajectory (not 'procedural')");
   }
@@ -312,32 +319,47 @@ SimulationPlan plan_simulation(SimulationConfig& config) {
   if (s.trajectory_format == "procedural") {
     samples = make_procedural_route(config.route);
     for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
+    plan.frame_times = "the procedural route";
   } else if (s.trajectory_format == "kitti") {
     require_file(s.trajectory_file, "KITTI poses file");
     require_file(s.times_file, "KITTI times file");
     samples = load_kitti_trajectory(s.trajectory_file, s.times_file);
     for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
+    plan.frame_times = s.times_file;
   } else if (s.trajectory_format == "tum") {
     require_file(s.trajectory_file, "TUM trajectory file");
     samples = load_tum_trajectory(s.trajectory_file);
-    for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
+    if (s.frame_times_file.empty()) {
+      for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
+      plan.frame_times = "the trajectory's poses";
+    }
   } else {  // euroc
     require_file(s.trajectory_file, "EuRoC ground-truth csv");
     recorded_states = read_euroc_groundtruth(s.trajectory_file);
     for (const GroundTruthState& st : recorded_states) samples.push_back(StampedPose{st.t_ns, st.T_w_b});
     if (samples.size() < 2) throw DataError(s.trajectory_file, "needs at least 2 ground-truth rows");
-    if (!s.frame_times_file.empty()) {
-      require_file(s.frame_times_file, "EuRoC cam0 data.csv (frame times)");
-      for (const EurocImageEntry& e : read_euroc_camera_csv(s.frame_times_file))
-        plan.frame_t_ns.push_back(e.t_ns);
-    } else {
+    if (s.frame_times_file.empty()) {
+      // No camera times: frames at simulation.frame_rate_hz over the ground truth's span. Said loudly (issue
+      // 14): the dataset then does not have the recording's frame times, and nothing else would show it.
       const double period_s = 1.0 / s.frame_rate_hz;
       for (std::int64_t k = 0;; ++k) {
         const Timestamp t = samples.front().t_ns + s_to_ns(static_cast<double>(k) * period_s);
         if (t > samples.back().t_ns) break;
         plan.frame_t_ns.push_back(t);
       }
+      plan.frame_times = fmt::format("invented: every 1/{} s over the ground truth", s.frame_rate_hz);
+      spdlog::warn(
+          "simulate: no camera times for {} (no cam0/data.csv beside it, simulation.frame_times_file empty): "
+          "INVENTING {} frame times every 1/{} s (simulation.frame_rate_hz) from its first to its last pose; "
+          "give the recording's times with --frame-times FILE (an EuRoC cam0/data.csv, or one time per line: "
+          "integer ns or decimal seconds)",
+          s.trajectory_file, plan.frame_t_ns.size(), s.frame_rate_hz);
     }
+  }
+  if (!s.frame_times_file.empty()) {  // euroc and tum (validate() refuses it with the other formats)
+    require_file(s.frame_times_file, "frame times file (EuRoC cam0/data.csv or one time per line)");
+    plan.frame_t_ns = read_frame_times(s.frame_times_file);
+    plan.frame_times = s.frame_times_file;
   }
   const std::string trajectory_name =
       s.trajectory_format == "procedural" ? std::string("<procedural>") : s.trajectory_file;
@@ -604,6 +626,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
     night.push_back(config.illumination.night_factor(plan.illumination_phase[f]));
   }
   meta["frames"] = {{"count", n},
+                    {"times", plan.frame_times},
                     {"total_in_sequence", plan.frame_t_ns.size()},
                     {"first_t_ns", plan.frame_t_ns.front()},
                     {"last_t_ns", plan.frame_t_ns[n - 1]},

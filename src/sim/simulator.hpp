@@ -30,10 +30,13 @@ struct SimulationSettings {
   std::int64_t max_frames = 0;  // 0 = every frame; N = the first N frames
   // Trajectory source: "procedural" | "kitti" | "euroc" | "tum".
   std::string trajectory_format = "procedural";
-  std::string trajectory_file;   // kitti poses.txt, euroc ground-truth csv or TUM file
-  std::string times_file;        // kitti times.txt
-  std::string frame_times_file;  // euroc cam0/data.csv: frames at these stamps (else at frame_rate_hz)
-  std::string camera_yaml;       // when set, the camera section is read from this EuRoC sensor.yaml
+  std::string trajectory_file;  // kitti poses.txt, euroc ground-truth csv or TUM file
+  std::string times_file;       // kitti times.txt
+  // euroc or tum trajectories: frames at these times instead of (euroc) frame_rate_hz over the ground truth,
+  // said loudly, or (tum) the poses' times; an EuRoC cam0/data.csv or one time per line (integer ns or
+  // decimal seconds; io/trajectory_io.hpp read_frame_times).
+  std::string frame_times_file;
+  std::string camera_yaml;  // when set, the camera section is read from this EuRoC sensor.yaml
   // IMU: "synthesised" (from the fitted trajectory) | "file" (a real EuRoC imu0/data.csv passed through).
   std::string imu_source = "synthesised";
   std::string imu_file;
@@ -236,6 +239,7 @@ std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& 
 // Inputs of a simulation before rendering: frames, fitted trajectory, IMU and ground truth.
 struct SimulationPlan {
   std::vector<Timestamp> frame_t_ns;           // all frames of the sequence (before max_frames)
+  std::string frame_times;                     // where they come from (simulation.json frames.times)
   std::size_t frames_used = 0;                 // frames written (max_frames applied)
   std::vector<Eigen::Isometry3d> T_w_c;        // camera pose per frame (all frames)
   std::size_t frames_outside_trajectory = 0;   // frames (of those used) before/after the trajectory span

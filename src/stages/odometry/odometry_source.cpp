@@ -14,7 +14,7 @@ void require_non_negative(const std::string& key, double value, double hi = 1e3)
 }  // namespace
 
 void OdometryConfig::validate() const {
-  require_one_of("odometry.source", source, {"drift", "file", "ekf", "auto"});
+  require_one_of("odometry.source", source, {"drift", "file", "ekf", "none", "auto"});
   require_one_of("odometry.heading_axis", heading_axis, {"auto", "x", "y", "z"});
   require_one_of("odometry.ekf_up_axis", ekf_up_axis, {"auto", "x", "-x", "y", "-y", "z", "-z"});
   require_non_negative("drift_position_sigma_m_per_sqrt_m", drift_position_sigma_m_per_sqrt_m);

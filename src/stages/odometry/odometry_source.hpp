@@ -3,8 +3,12 @@
 //          covariance of that drift model (for datasets without IMU and controlled experiments);
 //   file:  an external TUM trajectory, covariance from the growth model sigma^2 = a + b * distance;
 //   ekf:   the MSCKF visual-inertial filter of src/stages/ekf on the images and IMU (ekf_odometry.hpp);
+//   none:  no poses at all (appearance-only runs, issue 14): frames carry no pose, frames.csv says
+//          odom_status none, trajectory.tum is empty; only run.mode full can detect loops without poses (the
+//          pose gate, run.mode odometry and verify need them: config errors).
 //   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth unless
-//          ekf.init_mode is standstill), else drift. The default: EuRoC-layout data with IMU gets the ekf.
+//          ekf.init_mode is standstill), else drift when it has ground truth, else none. The default:
+//          EuRoC-layout data with IMU gets the ekf, an image folder none.
 // Every source emits one PoseEstimate per image. The sources take plain data (a trajectory, ground-truth
 // states, calibrations, an axis); pipeline/odometry_factory.hpp builds the configured one from a Dataset.
 #pragma once
@@ -26,7 +30,7 @@ class Mat;
 namespace loopgate {
 
 struct OdometryConfig {
-  std::string source = "auto";  // drift | file | ekf | auto (see above)
+  std::string source = "auto";  // drift | file | ekf | none | auto (see above)
   std::int64_t seed = 1;
   // drift: random walks driven by the distance travelled (per sqrt of metres).
   double drift_position_sigma_m_per_sqrt_m = 0.005;
@@ -92,10 +96,20 @@ class OdometrySource {
   virtual ~OdometrySource() = default;
   virtual const char* name() const = 0;
   virtual bool needs_ground_truth() const { return false; }
+  // False for `none`: process() is not called, frames carry no pose.
+  virtual bool estimates_poses() const { return true; }
   virtual bool needs_images() const { return false; }
   virtual bool needs_imu() const { return false; }
   // Called once per frame, in frame order (serially).
   virtual OdometryOutput process(const OdometryInput& input) = 0;
+};
+
+// odometry.source none: no poses (appearance-only runs).
+class NoOdometry final : public OdometrySource {
+ public:
+  const char* name() const override { return "none"; }
+  bool estimates_poses() const override { return false; }
+  OdometryOutput process(const OdometryInput& /*input*/) override { return {}; }
 };
 
 }  // namespace loopgate

@@ -1,0 +1,45 @@
+// The checks that keep a run from failing silently (issue 14): a run that went through every frame and
+// produced nothing usable says so on the console and exits non-zero, with its outputs written (they show
+// what happened frame by frame). Three cases, each judged from what the run saw, not predicted:
+//   - no odometry: an odometry source was configured and not one frame got a pose from it (a trajectory file
+//     of another sequence, ground truth that misses the frames, a filter that never initialised);
+//   - no image: frames needed their pixels and not one could be read;
+//   - no detection possible: a detecting run with no more frames than the margin a loop needs between query
+//     and reference, so no pair could ever be compared.
+// Plain data in, messages out: the pipeline fills the input after the drain.
+#pragma once
+
+#include <cstddef>
+#include <string>
+#include <vector>
+
+namespace loopgate {
+
+struct RunCheckInput {
+  std::size_t frames_processed = 0;
+  // Odometry: the source's name ("none" = appearance only, no poses expected), what it needed and did not
+  // find (names the file: "poses in FILE within ... of the frame times"), frames with an estimated pose, and
+  // the first frame's reason for having none.
+  std::string odometry_source;
+  std::string odometry_expected;
+  std::size_t frames_with_pose = 0;
+  std::string first_odometry_problem;
+  // Images: frames whose pixels the run needed in the decode stage, how many were read, the first error (it
+  // names the file).
+  std::size_t frames_needing_image = 0;
+  std::size_t frames_decoded = 0;
+  std::string first_image_error;
+  std::string dataset_root;
+  // Detection: whether the run detects loops, the method, and the separation a loop needs (the key and its
+  // value, e.g. match.margin = 200).
+  bool detects = false;
+  std::string method;
+  std::string margin_key;
+  int margin_frames = 0;
+};
+
+// One message per failed check, each starting with what is missing ("no odometry: ...", "no image: ...",
+// "no detection possible: ..."); empty when the run produced what it was asked for.
+std::vector<std::string> run_problems(const RunCheckInput& input);
+
+}  // namespace loopgate
