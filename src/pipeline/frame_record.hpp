@@ -43,6 +43,12 @@ struct FrameRecord {
   std::vector<std::string> warnings;
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
+  // The run's time accounting (docs/architecture.md § Time accounting): images decoded inside this frame's
+  // describe (past frames read again, or its own image when decode did not read it), summed over the threads
+  // that read them; and per stage the time other threads spent in the parallel loops of this frame's node
+  // body (parallel_handoff.hpp), which the body's own wall time does not hold.
+  std::atomic<std::int64_t> reread_ns{0};
+  std::array<std::atomic<std::int64_t>, kStageCount> parallel_ns{};
 
   // A pose the gate and the outputs can use.
   bool usable_pose() const { return has_pose && odometry.pose.status != OdometryStatus::kLost; }

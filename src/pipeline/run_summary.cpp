@@ -136,6 +136,8 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
       {"gate", {{"enabled", false}}},
       {"trajectory_accuracy", trajectory_accuracy_json(parts.outputs.tracked_poses(), dataset)},
       {"stages", parts.outputs.profiler().to_json()},
+      {"time_accounting", time_accounting_json(account_time(parts.outputs.measured_time(
+                              parts.end_of_stream_ms, parts.end_of_stream_time)))},
       {"data_issues",
        {{"dataset_issue_count", dataset.issues().size()},
         {"dataset_issues", issues},

@@ -10,6 +10,7 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_counters.hpp"
+#include "pipeline/time_accounting.hpp"
 
 namespace loopgate {
 
@@ -35,6 +36,7 @@ struct RunParts {
   // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
   std::optional<std::size_t> evaluated_end_frame;
   const LoopCloser* closer = nullptr;
+  EndOfStreamTime end_of_stream_time;  // the method's share of end_of_stream_ms (time accounting)
 };
 
 // Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not
