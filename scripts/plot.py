@@ -15,7 +15,9 @@ NAME, cells may be empty; frame indices are dataset frame indices):
   ground_truth.tum     "t x y z qx qy qz qw" per frame, matched to frames.csv by nearest t (optional)
   truth_loops.csv      i,j ground-truth loop pairs                                      (optional)
   candidate_areas.csv  id,row_begin,row_end,col_begin,col_end,... (rows = i, cols = j)  (optional)
-  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms                     (optional)
+  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms[,decode_in_describe_ms,parallel_ms]
+                       (optional; decode_in_describe_ms is part of describe_ms, parallel_ms is other
+                       threads' time in the frame's parallel loops, beside the stage columns)
   summary.json         "mode", "method", "score_order", "config": {"eval": {...}}, and with ground
                        truth "evaluation": {"truth": {radius_m, gap_frames, plane, accept_radius_m},
                        "precision_recall": {"curve": [{threshold, precision, recall}...],
@@ -388,8 +390,11 @@ def plot_plane(run, path, written, title):
     save(fig, path, written)
 
 
+NOT_STAGES = ("latency_ms", "total_ms", "decode_in_describe_ms", "parallel_ms")
+
+
 def stage_columns(table):
-    return [c for c in table.header if c.endswith("_ms") and c not in ("latency_ms", "total_ms")]
+    return [c for c in table.header if c.endswith("_ms") and c not in NOT_STAGES]
 
 
 def plot_timing(run, path, written):
@@ -482,10 +487,11 @@ def plot_pr(summaries, path, written, source):
 
 
 def plot_time_per_frame(runs, path, written):
-    """runs: {name: Run} with timing; describe + match (+ decode when present) per frame."""
+    """runs: {name: Run} with timing; describe + match (+ decode when present) per frame, plus the time other
+    threads spent in those stages' parallel loops (parallel_ms, thread time as in compare's table)."""
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 8), sharex=True)
     for name, run in runs.items():
-        parts = [c for c in ("decode_ms", "describe_ms", "match_ms") if run.timing.has(c)]
+        parts = [c for c in ("decode_ms", "describe_ms", "match_ms", "parallel_ms") if run.timing.has(c)]
         if not parts:
             raise InputError(f"{run.dir / 'timing.csv'}:1: no describe_ms/match_ms/decode_ms column")
         frame = run.timing.numbers("frame", integer=True)
