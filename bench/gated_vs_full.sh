@@ -1,6 +1,6 @@
 #!/bin/sh
 # Full DIRD vs gated DIRD, measured side by side by `loopgate compare` N times (default 5) on one dataset; prints
-# every run's figures and the medians of the ratios full / gated of the time accounting's parts (thread time,
+# every run's figures and the medians of the ratios full / gated of the time accounting's parts (thread CPU time,
 # summary.json "time_accounting"; docs/architecture.md § Time accounting):
 #   decode         the decode stage plus every image read inside describe (a gated re-read is a decode)
 #   describe       descriptors (SeqSLAM: preprocessing), without the reads

@@ -3,7 +3,7 @@
 # `loopgate run --method seqslam --mode full|gated` on one dataset; prints every run's times and the medians:
 #   wall        the whole run's wall time (decode, odometry, gate, describe, match, sink, end of stream)
 #   end         the end-of-stream time (SeqSLAM's difference matrix, contrast enhancement and search)
-#   detection   describe + match of the time accounting (thread time, summary.json "time_accounting":
+#   detection   describe + match of the time accounting (thread CPU time, summary.json "time_accounting":
 #               describe = SeqSLAM's preprocessing without the image reads, match = match + the end-of-stream
 #               search)
 #   +decode     the same plus decode (the decode stage and every image read inside describe, wherever read)

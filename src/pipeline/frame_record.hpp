@@ -43,12 +43,15 @@ struct FrameRecord {
   std::vector<std::string> warnings;
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
-  // The run's time accounting (docs/architecture.md § Time accounting): images decoded inside this frame's
-  // describe (past frames read again, or its own image when decode did not read it), summed over the threads
-  // that read them; and per stage the time other threads spent in the parallel loops of this frame's node
-  // body (parallel_handoff.hpp), which the body's own wall time does not hold.
-  std::atomic<std::int64_t> reread_ns{0};
-  std::array<std::atomic<std::int64_t>, kStageCount> parallel_ns{};
+  // The run's time accounting (time_accounting.hpp), in thread CPU time: each node body's on its thread
+  // (written by the body), other threads' in the parallel loops of the body (parallel_handoff.hpp), and the
+  // images decoded inside this frame's describe (past frames read again, or its own image when decode did not
+  // read it), summed over the threads that read them; and the similarities computed inside its describe
+  // (full DIRD computes most of a row there, where rows run in parallel), which are matching.
+  std::array<std::int64_t, kStageCount> cpu_ns{};
+  std::array<std::atomic<std::int64_t>, kStageCount> parallel_cpu_ns{};
+  std::atomic<std::int64_t> reread_cpu_ns{0};
+  std::int64_t match_in_describe_cpu_ns = 0;
 
   // A pose the gate and the outputs can use.
   bool usable_pose() const { return has_pose && odometry.pose.status != OdometryStatus::kLost; }

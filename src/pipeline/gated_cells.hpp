@@ -12,7 +12,6 @@
 
 #include <spdlog/fmt/fmt.h>
 
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -92,7 +91,7 @@ class PoseGatedCells {
 // The describe step of a gated method: work(seq, image) for every frame of `seqs` (several in parallel),
 // with the current frame's decoded image when decode has it and every other frame read again (recent ones
 // from the image cache); a frame that cannot be read gets work(seq, nullptr) and a warning on r. The time of
-// every read is added to r.reread_ns (the time accounting books it as decode).
+// every read (CPU) is added to r.reread_cpu_ns (the time accounting books it as decode).
 template <class Work>
 void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, const MethodContext& context,
                      Work work) {
@@ -104,12 +103,10 @@ void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, cons
       return;
     }
     cv::Mat image;
-    const auto start = std::chrono::steady_clock::now();
-    // The read is a decode wherever it runs: booked as decode, not describe (r.reread_ns).
+    const std::int64_t start_ns = thread_cpu_ns();
+    // The read is a decode wherever it runs: booked as decode, not describe (r.reread_cpu_ns).
     const auto book_read = [&] {
-      const auto elapsed = std::chrono::steady_clock::now() - start;
-      r.reread_ns.fetch_add(std::chrono::duration_cast<std::chrono::nanoseconds>(elapsed).count(),
-                            std::memory_order_relaxed);
+      r.reread_cpu_ns.fetch_add(thread_cpu_ns() - start_ns, std::memory_order_relaxed);
     };
     try {
       image = context.images.read_again(k);

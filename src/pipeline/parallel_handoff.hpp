@@ -10,17 +10,18 @@
 // (race_top).
 //
 // Time accounting: a loop started while a ParallelTimeScope is active on the calling thread adds to the
-// scope's counter the time that *other* threads spent in its tasks (the caller's own share is inside the
-// caller's wall time already), so that a node body's thread time is its wall time plus that counter.
+// scope's counter the CPU time that *other* threads spent in its tasks (the caller's own share is in the
+// caller's CPU time already), so that a node body's work is its own thread's CPU time plus that counter.
 #pragma once
 
 #include <tbb/parallel_for.h>
 
 #include <atomic>
-#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <thread>
+
+#include "pipeline/thread_cpu_time.hpp"
 
 namespace loopgate {
 
@@ -28,7 +29,7 @@ namespace loopgate {
 // sanitizer builds) into the program.
 void sanitizer_suppressions_anchor();
 
-// The counter that parallel loops started on this thread add their helpers' time to (nullptr: none).
+// The counter that parallel loops started on this thread add their helpers' CPU time to, ns (nullptr: none).
 inline thread_local std::atomic<std::int64_t>* t_parallel_time_ns = nullptr;
 
 // Sets the calling thread's counter for its lifetime (the pipeline: one per node body), restoring the
@@ -55,11 +56,9 @@ struct HandoffBody {
   void operator()(std::size_t index) const {
     static_cast<void>(handoff->load(std::memory_order_acquire));
     if (helpers_ns != nullptr && std::this_thread::get_id() != caller) {
-      const auto start = std::chrono::steady_clock::now();
+      const std::int64_t start_ns = thread_cpu_ns();
       (*work)(index);
-      const auto elapsed = std::chrono::steady_clock::now() - start;
-      helpers_ns->fetch_add(std::chrono::duration_cast<std::chrono::nanoseconds>(elapsed).count(),
-                            std::memory_order_relaxed);
+      helpers_ns->fetch_add(thread_cpu_ns() - start_ns, std::memory_order_relaxed);
     } else {
       (*work)(index);
     }

@@ -67,8 +67,9 @@ class PipelineRun {
       if (serial) lock.lock();
       r.stamps[stage].enter_ns = clock_.now_ns();
       r.stamps[stage].thread = thread_index();
+      const std::int64_t cpu_start_ns = thread_cpu_ns();
       try {
-        const ParallelTimeScope parallel_time(&r.parallel_ns[stage]);
+        const ParallelTimeScope parallel_time(&r.parallel_cpu_ns[stage]);
         call(r);
       } catch (const std::exception& e) {
         fail(fmt::format("stage '{}' failed on seq {} (frame {}, t = {:.6f} s): {}", kStageNames[stage],
@@ -76,7 +77,10 @@ class PipelineRun {
         r.release();
         throw;
       }
-      if (stage != kSink) r.stamps[stage].exit_ns = clock_.now_ns();
+      if (stage != kSink) {  // the sink stamps itself before it writes the frame's timing
+        r.stamps[stage].exit_ns = clock_.now_ns();
+        r.cpu_ns[stage] = thread_cpu_ns() - cpu_start_ns;
+      }
       r.release();
       return message;
     };
@@ -265,6 +269,7 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   const std::int64_t start_ns = clock_.now_ns();
   std::string aborted;
   std::atomic<std::int64_t> finish_parallel_ns{0};
+  const std::int64_t cpu_start_ns = thread_cpu_ns();
   if (method_->detects()) {
     try {
       arena.execute([&] {
@@ -283,12 +288,15 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   }
   // The method's end-of-stream work is matching (the matcher's flush, SeqSLAM's search) in the time
   // accounting; loops.csv and the loop closure below are the rest.
-  const double method_finish_ms = 1e-6 * static_cast<double>(clock_.now_ns() - start_ns);
+  const std::int64_t method_cpu_ns = thread_cpu_ns() - cpu_start_ns;
   if (method_->detects()) write_output("loops.csv", [&] { loops_.close(); });
   const std::int64_t closer_start_ns = clock_.now_ns();
   closer_.finish();  // the last loops' verification and the final pose-graph solve
   const double loop_closure_ms = 1e-6 * static_cast<double>(clock_.now_ns() - closer_start_ns);
   const double end_of_stream_ms = 1e-6 * static_cast<double>(clock_.now_ns() - start_ns);
+  const EndOfStreamTime end_of_stream_time{
+      1e-6 * static_cast<double>(method_cpu_ns), 1e-6 * static_cast<double>(finish_parallel_ns.load()),
+      1e-6 * static_cast<double>(thread_cpu_ns() - cpu_start_ns - method_cpu_ns)};
   {
     std::lock_guard failure_lock(failure_mutex_);
     result.failed = failed_.load();
@@ -330,20 +338,9 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
           result.realtime_factor) +
       closer_.profile_line() +
       (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
-  RunParts parts{config_,
-                 dataset_,
-                 range_.first,
-                 range_.second,
-                 *method_,
-                 outputs_,
-                 loops_,
-                 images_,
-                 steps_.synchronizer(),
-                 seqs_,
-                 end_of_stream_ms,
-                 std::nullopt,
-                 &closer_,
-                 EndOfStreamTime{method_finish_ms, 1e-6 * static_cast<double>(finish_parallel_ns.load())}};
+  RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
+                 outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
+                 end_of_stream_ms, std::nullopt, &closer_,     end_of_stream_time};
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
   // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
   const std::size_t processed = outputs_.frames_through();

@@ -100,15 +100,15 @@ void RunOutputs::open() {
   for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
   timing_columns.emplace_back("latency_ms");
   timing_columns.emplace_back("total_ms");
-  // The time accounting's per-frame parts (time_accounting.hpp): images decoded inside describe (part of
-  // describe_ms), other threads' time in the frame's parallel loops (beyond the stages' columns).
-  timing_columns.emplace_back("decode_in_describe_ms");
-  timing_columns.emplace_back("parallel_ms");
+  // The frame's parts of the time accounting (time_accounting.hpp, thread CPU time).
+  for (const char* part : {"decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms", "rest_cpu_ms"})
+    timing_columns.emplace_back(part);
   timing_csv_.open(out_dir_ / "timing.csv", timing_columns);
   trajectory_.open(out_dir_ / "trajectory.tum");
 }
 
 void RunOutputs::sink(FrameRecord& r) {
+  const std::int64_t cpu_start_ns = thread_cpu_ns();
   if (r.seq != next_seq_) {
     throw std::logic_error(fmt::format("sink received seq {} while expecting {}", r.seq, next_seq_));
   }
@@ -140,6 +140,7 @@ void RunOutputs::sink(FrameRecord& r) {
 
   const std::int64_t exit_ns = clock_.now_ns();
   r.stamps[kSink].exit_ns = exit_ns;
+  r.cpu_ns[kSink] = thread_cpu_ns() - cpu_start_ns;
   if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) ++counters_.deadline_misses;
   timing(r, exit_ns);
   if (counters_.processed % static_cast<std::size_t>(config_.output.flush_every) == 0) {
@@ -158,14 +159,9 @@ void RunOutputs::sink(FrameRecord& r) {
 void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
   std::vector<std::string> cells = {std::to_string(r.seq), std::to_string(r.label)};
   double total_ms = 0;
-  double parallel_ms = 0;
-  for (std::size_t s = 0; s < kStageCount; ++s) {
-    const double ms = 1e-6 * static_cast<double>(r.parallel_ns[s].load(std::memory_order_relaxed));
-    parallel_ms_[s] += ms;
-    parallel_ms += ms;
-  }
-  const double reread_ms = 1e-6 * static_cast<double>(r.reread_ns.load(std::memory_order_relaxed));
-  decode_in_describe_ms_ += reread_ms;
+  const StageTimes frame_times = stage_times(r);
+  frame_times_ += frame_times;
+  const TimeParts parts = account_time(frame_times);
   std::int64_t previous_exit_ns = r.release_ns;
   for (std::size_t s = 0; s < kStageCount; ++s) {
     const StageStamp& stamp = r.stamps[s];
@@ -185,8 +181,8 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
   profiler_.add_latency(latency_ms);
   cells.push_back(format_fixed(latency_ms, 4));
   cells.push_back(format_fixed(total_ms, 4));
-  cells.push_back(format_fixed(reread_ms, 4));
-  cells.push_back(format_fixed(parallel_ms, 4));
+  for (const double ms : {parts.decode_ms, parts.describe_ms, parts.match_ms, parts.rest_ms})
+    cells.push_back(format_fixed(ms, 4));
   timing_csv_.write_row(cells);
 }
 
@@ -237,16 +233,6 @@ std::vector<std::string> RunOutputs::finish(bool show_final_progress) {
   attempt("timing.csv", [&] { timing_csv_.close(); });
   attempt("trajectory.tum", [&] { trajectory_.close(); });
   return errors;
-}
-
-MeasuredTime RunOutputs::measured_time(double end_of_stream_ms, const EndOfStreamTime& end_of_stream) const {
-  MeasuredTime m;
-  for (std::size_t s = 0; s < kStageCount; ++s) m.service_ms[s] = profiler_.service(s).total_ms;
-  m.parallel_ms = parallel_ms_;
-  m.decode_in_describe_ms = decode_in_describe_ms_;
-  m.end_of_stream_ms = end_of_stream_ms;
-  m.end_of_stream = end_of_stream;
-  return m;
 }
 
 void RunOutputs::write_trace(const std::filesystem::path& file, int threads) {

@@ -43,8 +43,8 @@ class RunOutputs {
   const StageProfiler& profiler() const { return profiler_; }
   const std::vector<StampedPose>& tracked_poses() const { return tracked_poses_; }
   std::uint64_t frames_through() const { return next_seq_; }
-  // The sums of the time accounting over the frames through the sink, with the end of the stream's times.
-  MeasuredTime measured_time(double end_of_stream_ms, const EndOfStreamTime& end_of_stream) const;
+  // The time accounting's measurements summed over the frames through the sink.
+  const StageTimes& frame_times() const { return frame_times_; }
 
  private:
   void add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
@@ -72,8 +72,7 @@ class RunOutputs {
   TraceWriter trace_;
   StageProfiler profiler_;
   RunCounters counters_;
-  std::array<double, kStageCount> parallel_ms_{};  // time accounting: sums over the frames through the sink
-  double decode_in_describe_ms_ = 0;
+  StageTimes frame_times_;                  // time accounting: sums over the frames through the sink
   std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection

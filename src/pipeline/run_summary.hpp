@@ -36,7 +36,7 @@ struct RunParts {
   // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
   std::optional<std::size_t> evaluated_end_frame;
   const LoopCloser* closer = nullptr;
-  EndOfStreamTime end_of_stream_time;  // the method's share of end_of_stream_ms (time accounting)
+  EndOfStreamTime end_of_stream_time;  // the end of the stream's CPU time (time accounting)
 };
 
 // Evaluation block (evaluation.md): {"available": false} without ground truth or for a method that does not
