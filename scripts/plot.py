@@ -15,9 +15,8 @@ NAME, cells may be empty; frame indices are dataset frame indices):
   ground_truth.tum     "t x y z qx qy qz qw" per frame, matched to frames.csv by nearest t (optional)
   truth_loops.csv      i,j ground-truth loop pairs                                      (optional)
   candidate_areas.csv  id,row_begin,row_end,col_begin,col_end,... (rows = i, cols = j)  (optional)
-  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms[,decode_in_describe_ms,parallel_ms]
-                       (optional; decode_in_describe_ms is part of describe_ms, parallel_ms is other
-                       threads' time in the frame's parallel loops, beside the stage columns)
+  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms[,decode_cpu_ms,describe_cpu_ms,
+                       match_cpu_ms,rest_cpu_ms] (optional; the last four: the time accounting's parts)
   summary.json         "mode", "method", "score_order", "config": {"eval": {...}}, and with ground
                        truth "evaluation": {"truth": {radius_m, gap_frames, plane, accept_radius_m},
                        "precision_recall": {"curve": [{threshold, precision, recall}...],
@@ -390,7 +389,7 @@ def plot_plane(run, path, written, title):
     save(fig, path, written)
 
 
-NOT_STAGES = ("latency_ms", "total_ms", "decode_in_describe_ms", "parallel_ms")
+NOT_STAGES = ("latency_ms", "total_ms", "decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms", "rest_cpu_ms")
 
 
 def stage_columns(table):
@@ -488,15 +487,17 @@ def plot_pr(summaries, path, written, source):
 
 def plot_time_per_frame(runs, path, written):
     """runs: {name: Run} with timing; describe + match (+ decode when present) per frame, plus the time other
-    threads spent in those stages' parallel loops (parallel_ms, thread time as in compare's table)."""
+    threads spent in those stages' parallel loops: the time accounting's thread CPU time (decode_cpu_ms,
+    describe_cpu_ms, match_cpu_ms) as in compare's table, else the stages' service time."""
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 8), sharex=True)
     for name, run in runs.items():
-        parts = [c for c in ("decode_ms", "describe_ms", "match_ms", "parallel_ms") if run.timing.has(c)]
+        parts = [c for c in ("decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms") if run.timing.has(c)]
+        parts = parts or [c for c in ("decode_ms", "describe_ms", "match_ms") if run.timing.has(c)]
         if not parts:
             raise InputError(f"{run.dir / 'timing.csv'}:1: no describe_ms/match_ms/decode_ms column")
         frame = run.timing.numbers("frame", integer=True)
         total = sum(np.nan_to_num(run.timing.numbers(c, allow_empty=True)) for c in parts)
-        label = f"{METHOD_LABELS.get(name, name)}: {'+'.join(c[:-3] for c in parts)}"
+        label = f"{METHOD_LABELS.get(name, name)}: {'+'.join(c[:-3].replace('_cpu', '') for c in parts)}"
         top.plot(frame, total, lw=0.7, label=f"{label} (median {np.median(total):.3g} ms)")
         bottom.plot(frame, np.cumsum(total), lw=1.2, label=f"{label} (total {total.sum():.1f} ms)")
     top.set_ylabel("time per frame [ms]")
