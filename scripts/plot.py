@@ -4,6 +4,7 @@
 Usage:
   /usr/bin/python3 scripts/plot.py run RUN_DIR [--out DIR]          (default out: RUN_DIR/plots)
   /usr/bin/python3 scripts/plot.py compare COMPARE_DIR [--out DIR]  (default out: COMPARE_DIR/plots)
+  /usr/bin/python3 scripts/plot.py scaling BENCH_DIR [--out DIR]    (bench/scaling.sh's folder)
 Prints the paths written, one per line, on stdout. Bad input: a message naming the file (and line) on
 stderr, exit 2. A missing optional input skips the plot that needs it, with a note on stderr.
 
@@ -38,6 +39,8 @@ Pictures:
            time_per_frame.png  describe+match(+decode) time per frame and cumulative, full vs gated,
                            medians in the legend (paper Fig. 8/11)
            plane.png, trajectory.png  of the gated run
+  scaling  scaling.png     per-frame describe + match time against the frame index (p50/p99 per bin) and
+                           cumulative, of the largest run of each mode (paper Fig. 8 at scale)
 A detection is true when the ground-truth positions of i and j are within config.eval.accept_radius_m
 (in config.eval.plane when given, else 3-D), else when (i, j) is listed in truth_loops.csv. Without
 truth_loops.csv, true loops are computed from ground truth: j <= i - gap_frames within radius_m.
@@ -304,9 +307,9 @@ class Run:
         return np.concatenate(pairs)
 
 
-def save(fig, path, written):
+def save(fig, path, written, dpi=DPI):
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     written.append(path)
 
@@ -567,10 +570,61 @@ def cmd_compare(compare_dir, out):
     return written
 
 
+def frame_detection_ms(timing):
+    """Per-frame loop-detection time of a timing.csv, thread CPU time: describe (without the images decoded
+    inside it) + match, both with other threads' time in their parallel loops; and the per-frame decode time
+    (the decode stage + the images decoded inside describe)."""
+    def col(name):
+        return np.nan_to_num(timing.numbers(name, allow_empty=False))
+    return col("describe_cpu_ms") + col("match_cpu_ms"), col("decode_cpu_ms")
+
+
+def cmd_scaling(bench_dir, out):
+    """bench/scaling.sh's folder: MODE-FRAMES/run/timing.csv per run; the largest run of each mode is drawn
+    (paper Fig. 8): per-frame loop-detection time against the frame index (p50 and p99 per bin of frames) and
+    the cumulative time."""
+    written = []
+    runs = {}
+    for d in sorted(bench_dir.iterdir()):
+        name, _, frames = d.name.rpartition("-")
+        if d.is_dir() and name and frames.isdigit() and (d / "run" / "timing.csv").is_file():
+            if int(frames) > runs.get(name, (0, None))[0]:
+                runs[name] = (int(frames), d / "run")
+    if not runs:
+        raise InputError(f"{bench_dir}: no MODE-FRAMES/run/timing.csv (run bench/scaling.sh first)")
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for name in sorted(runs):
+        frames, run_dir = runs[name]
+        timing = Table(run_dir / "timing.csv", ["frame"])
+        frame = timing.numbers("frame", integer=True)
+        detection, _ = frame_detection_ms(timing)
+        bins = 200
+        edges = np.linspace(0, len(frame), bins + 1).astype(int)
+        centre = [frame[(a + b) // 2] for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        p50 = [np.percentile(detection[a:b], 50) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        p99 = [np.percentile(detection[a:b], 99) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        label = METHOD_LABELS.get(name, name)
+        line, = top.plot(centre, p99, lw=1.2, label=f"{label}: p99 per {len(frame) // bins} frames")
+        top.plot(centre, p50, lw=1.0, ls="--", color=line.get_color(), label=f"{label}: p50")
+        every = max(1, len(frame) // 2000)  # the cumulative curve is smooth: 2000 points are enough
+        bottom.plot(frame[::every], (np.cumsum(detection) / 1000.0)[::every], lw=1.2, color=line.get_color(),
+                    label=f"{label} (total {detection.sum() / 1000.0:.1f} s)")
+    top.set_yscale("log")
+    top.set_ylabel("loop detection per frame [ms]")
+    top.set_title("describe + match per frame as the map grows (thread CPU time; synthetic drive)")
+    bottom.set_ylabel("cumulative [s]")
+    bottom.set_xlabel("frame")
+    for ax in (top, bottom):
+        ax.legend(loc="upper left", fontsize=8)
+        ax.grid(alpha=0.3, which="both")
+    save(fig, out / "scaling.png", written, dpi=90)  # small enough for the README (docs/img)
+    return written
+
+
 def main():
     parser = argparse.ArgumentParser(description="Pictures of a loopgate run or compare (PNG).")
-    parser.add_argument("what", choices=["run", "compare"])
-    parser.add_argument("dir", type=Path, help="RUN_DIR or COMPARE_DIR")
+    parser.add_argument("what", choices=["run", "compare", "scaling"])
+    parser.add_argument("dir", type=Path, help="RUN_DIR, COMPARE_DIR or the folder of bench/scaling.sh")
     parser.add_argument("--out", type=Path, help="output directory (default: DIR/plots)")
     args = parser.parse_args()
     try:
@@ -578,7 +632,8 @@ def main():
             raise InputError(f"{args.dir}: not a directory")
         out = args.out or args.dir / "plots"
         out.mkdir(parents=True, exist_ok=True)
-        written = (cmd_run if args.what == "run" else cmd_compare)(args.dir, out)
+        command = {"run": cmd_run, "compare": cmd_compare, "scaling": cmd_scaling}[args.what]
+        written = command(args.dir, out)
     except (InputError, OSError) as e:
         print(f"plot.py: error: {e}", file=sys.stderr)
         return 2
