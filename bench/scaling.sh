@@ -80,11 +80,14 @@ for r in rows:
           f"| {r['max']:.1f} | {r['dec50']:.3f} / {r['dec99']:.3f} | {r['gate99']:.3f} | {r['sum_s']:.2f} "
           f"| {r['wall']:.1f} | {r['rss']:.0f} | {r['desc']} | {r['loops']} | {r['ap']:.3f} |")
 gated = {r["n"]: r for r in rows if r["mode"] == "gated"}
-if gated:
-    small, large = gated[min(gated)], gated[max(gated)]
-    print(f"gated p99 at {large['n']} frames: {large['p99']:.3f} ms (target < 1 ms: "
-          f"{'met' if large['p99'] < 1 else 'NOT met'}); p99 {large['n']} / {small['n']} = "
-          f"{large['p99'] / small['p99']:.2f} (target <= 2: {'met' if large['p99'] <= 2 * small['p99'] else 'NOT met'})")
+if gated:  # the targets are at 100 000 frames against 10 000; the largest run is checked too
+    small = gated[min(gated)]
+    for n in sorted({100000, max(gated)} & set(gated)):
+        large = gated[n]
+        print(f"gated p99 at {n} frames: {large['p99']:.3f} ms (target < 1 ms: "
+              f"{'met' if large['p99'] < 1 else 'NOT met'}); p99 {n} / {small['n']} = "
+              f"{large['p99'] / small['p99']:.2f} (target <= 2: "
+              f"{'met' if large['p99'] <= 2 * small['p99'] else 'NOT met'})")
     if 100000 in gated:
         r = gated[100000]
         print(f"gated peak RSS at 100000 frames: {r['rss']:.0f} MiB (target < 1024: "
