@@ -3,9 +3,10 @@
 # `loopgate run --method seqslam --mode full|gated` on one dataset; prints every run's times and the medians:
 #   wall        the whole run's wall time (decode, odometry, gate, describe, match, sink, end of stream)
 #   end         the end-of-stream time (SeqSLAM's difference matrix, contrast enhancement and search)
-#   detection   describe + match + end of stream (describe: SeqSLAM's preprocessing, summed over frames)
-#   +decode     the same plus decode (full SeqSLAM decodes every frame for describe; gated SeqSLAM reads its
-#               images inside describe)
+#   detection   describe + match of the time accounting (thread CPU time, summary.json "time_accounting":
+#               describe = SeqSLAM's preprocessing without the image reads, match = match + the end-of-stream
+#               search)
+#   +decode     the same plus decode (the decode stage and every image read inside describe, wherever read)
 #   cpu         process CPU time
 # then the work and the accuracy of the last run of each (they do not vary): frames preprocessed
 # (descriptors_computed), difference-matrix entries computed (similarities_computed), loops true / false, AP,
@@ -38,14 +39,11 @@ import json, statistics, sys
 out, n = sys.argv[1], int(sys.argv[2])
 
 
-def total(s, stage):
-    return s["stages"].get(stage, {}).get("total_ms", 0.0)
-
-
 def times(s):
-    detection = total(s, "describe") + total(s, "match") + s.get("end_of_stream_ms", 0.0)
+    t = s["time_accounting"]
+    detection = t["describe_ms"] + t["match_ms"]
     return {"wall": 1000 * s["wall_s"], "end": s.get("end_of_stream_ms", 0.0), "detection": detection,
-            "+decode": detection + total(s, "decode"), "cpu": 1000 * s["cpu_s"]}
+            "+decode": detection + t["decode_ms"], "cpu": 1000 * s["cpu_s"]}
 
 
 runs = {m: [json.load(open(f"{out}/{m}-{i}/summary.json")) for i in range(1, n + 1)] for m in ("full", "gated")}

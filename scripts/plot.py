@@ -5,6 +5,7 @@ Usage:
   /usr/bin/python3 scripts/plot.py run RUN_DIR [--out DIR]          (default out: RUN_DIR/plots)
   /usr/bin/python3 scripts/plot.py compare COMPARE_DIR [--out DIR]  (default out: COMPARE_DIR/plots)
   /usr/bin/python3 scripts/plot.py aggregate AGG_DIR [--out DIR]    (default out: AGG_DIR)
+  /usr/bin/python3 scripts/plot.py scaling BENCH_DIR [--out DIR]    (bench/scaling.sh's folder)
 Prints the paths written, one per line, on stdout. Bad input: a message naming the file (and line) on
 stderr, exit 2. A missing optional input skips the plot that needs it, with a note on stderr.
 
@@ -16,7 +17,8 @@ NAME, cells may be empty; frame indices are dataset frame indices):
   ground_truth.tum     "t x y z qx qy qz qw" per frame, matched to frames.csv by nearest t (optional)
   truth_loops.csv      i,j ground-truth loop pairs                                      (optional)
   candidate_areas.csv  id,row_begin,row_end,col_begin,col_end,... (rows = i, cols = j)  (optional)
-  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms                     (optional)
+  timing.csv           seq,frame,<stage>_ms...,latency_ms,total_ms[,decode_cpu_ms,describe_cpu_ms,
+                       match_cpu_ms,rest_cpu_ms] (optional; the last four: the time accounting's parts)
   summary.json         "mode", "method", "score_order", "config": {"eval": {...}}, and with ground
                        truth "evaluation": {"truth": {radius_m, gap_frames, plane, accept_radius_m},
                        "precision_recall": {"curve": [{threshold, precision, recall}...],
@@ -48,6 +50,8 @@ Pictures:
   aggregate aggregate.png  per run (groups) and method (bars): average precision above; below the
                            describe+match+decode time summed over frames (bars; describe+match without
                            a describe_match_decode_ms column) and the wall time (black ticks), in seconds
+  scaling  scaling.png     per-frame describe + match time against the frame index (p50/p99 per bin) and
+                           cumulative, of the largest run of each mode (paper Fig. 8 at scale)
 A detection is true when the ground-truth positions of i and j are within config.eval.accept_radius_m
 (in config.eval.plane when given, else 3-D) and at least min_travel_m of ground-truth path apart, else (or with
 eval.truth_pairs_file) when (i, j) is listed in truth_loops.csv. Without truth_loops.csv, true loops are
@@ -330,9 +334,9 @@ class Run:
         return np.concatenate(pairs)
 
 
-def save(fig, path, written):
+def save(fig, path, written, dpi=DPI):
     fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     written.append(path)
 
@@ -463,8 +467,11 @@ def plot_plane(run, path, written, title):
     save(fig, path, written)
 
 
+NOT_STAGES = ("latency_ms", "total_ms", "decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms", "rest_cpu_ms")
+
+
 def stage_columns(table):
-    return [c for c in table.header if c.endswith("_ms") and c not in ("latency_ms", "total_ms")]
+    return [c for c in table.header if c.endswith("_ms") and c not in NOT_STAGES]
 
 
 def plot_timing(run, path, written):
@@ -557,15 +564,18 @@ def plot_pr(summaries, path, written, source):
 
 
 def plot_time_per_frame(runs, path, written):
-    """runs: {name: Run} with timing; describe + match (+ decode when present) per frame."""
+    """runs: {name: Run} with timing; describe + match (+ decode when present) per frame, plus the time other
+    threads spent in those stages' parallel loops: the time accounting's thread CPU time (decode_cpu_ms,
+    describe_cpu_ms, match_cpu_ms) as in compare's table, else the stages' service time."""
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 8), sharex=True)
     for name, run in runs.items():
-        parts = [c for c in ("decode_ms", "describe_ms", "match_ms") if run.timing.has(c)]
+        parts = [c for c in ("decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms") if run.timing.has(c)]
+        parts = parts or [c for c in ("decode_ms", "describe_ms", "match_ms") if run.timing.has(c)]
         if not parts:
             raise InputError(f"{run.dir / 'timing.csv'}:1: no describe_ms/match_ms/decode_ms column")
         frame = run.timing.numbers("frame", integer=True)
         total = sum(np.nan_to_num(run.timing.numbers(c, allow_empty=True)) for c in parts)
-        label = f"{METHOD_LABELS.get(name, name)}: {'+'.join(c[:-3] for c in parts)}"
+        label = f"{METHOD_LABELS.get(name, name)}: {'+'.join(c[:-3].replace('_cpu', '') for c in parts)}"
         top.plot(frame, total, lw=0.7, label=f"{label} (median {np.median(total):.3g} ms)")
         bottom.plot(frame, np.cumsum(total), lw=1.2, label=f"{label} (total {total.sum():.1f} ms)")
     top.set_ylabel("time per frame [ms]")
@@ -706,10 +716,63 @@ def cmd_aggregate(agg_dir, out):
     return written
 
 
+def frame_detection_ms(timing):
+    """Per-frame loop-detection time of a timing.csv, thread CPU time: describe (without the images decoded
+    inside it) + match, both with other threads' time in their parallel loops; and the per-frame decode time
+    (the decode stage + the images decoded inside describe)."""
+    def col(name):
+        return np.nan_to_num(timing.numbers(name, allow_empty=False))
+    return col("describe_cpu_ms") + col("match_cpu_ms"), col("decode_cpu_ms")
+
+
+def cmd_scaling(bench_dir, out):
+    """bench/scaling.sh's folder: MODE-FRAMES/run/timing.csv per run; the largest run of each mode is drawn
+    (paper Fig. 8): per-frame loop-detection time against the frame index (p50 and p99 per bin of frames) and
+    the cumulative time."""
+    written = []
+    runs = {}
+    for d in sorted(bench_dir.iterdir()):
+        name, _, frames = d.name.rpartition("-")
+        if d.is_dir() and name and frames.isdigit() and (d / "run" / "timing.csv").is_file():
+            if int(frames) > runs.get(name, (0, None))[0]:
+                runs[name] = (int(frames), d / "run")
+    if not runs:
+        raise InputError(f"{bench_dir}: no MODE-FRAMES/run/timing.csv (run bench/scaling.sh first)")
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 7), sharex=True)
+    for name in sorted(runs):
+        frames, run_dir = runs[name]
+        timing = Table(run_dir / "timing.csv", ["frame"])
+        frame = timing.numbers("frame", integer=True)
+        detection, _ = frame_detection_ms(timing)
+        bins = 200
+        edges = np.linspace(0, len(frame), bins + 1).astype(int)
+        centre = [frame[(a + b) // 2] for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        p50 = [np.percentile(detection[a:b], 50) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        p99 = [np.percentile(detection[a:b], 99) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+        label = METHOD_LABELS.get(name, name)
+        line, = top.plot(centre, p99, lw=1.2, label=f"{label}: p99 per {len(frame) // bins} frames")
+        top.plot(centre, p50, lw=1.0, ls="--", color=line.get_color(), label=f"{label}: p50")
+        every = max(1, len(frame) // 2000)  # the cumulative curve is smooth: 2000 points are enough
+        bottom.plot(frame[::every], (np.cumsum(detection) / 1000.0)[::every], lw=1.2, color=line.get_color(),
+                    label=f"{label} (total {detection.sum() / 1000.0:.1f} s)")
+    top.set_yscale("log")
+    top.set_ylabel("loop detection per frame [ms]")
+    top.set_title("describe + match per frame as the map grows (thread CPU time; synthetic drive)")
+    bottom.set_ylabel("cumulative [s]")
+    bottom.set_xlabel("frame")
+    top.legend(loc="upper right", fontsize=8)  # full's curve rises on the left
+    bottom.legend(loc="upper left", fontsize=8)
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3, which="both")
+    save(fig, out / "scaling.png", written, dpi=90)  # small enough for the README (docs/img)
+    return written
+
+
 def main():
     parser = argparse.ArgumentParser(description="Pictures of a loopgate run or compare (PNG).")
-    parser.add_argument("what", choices=["run", "compare", "aggregate"])
-    parser.add_argument("dir", type=Path, help="RUN_DIR, COMPARE_DIR or AGG_DIR (loopgate aggregate's --out)")
+    parser.add_argument("what", choices=["run", "compare", "aggregate", "scaling"])
+    parser.add_argument("dir", type=Path, help="RUN_DIR, COMPARE_DIR, AGG_DIR (loopgate aggregate's --out) or "
+                        "the folder of bench/scaling.sh")
     parser.add_argument("--out", type=Path, help="output directory (default: DIR/plots; aggregate: DIR)")
     args = parser.parse_args()
     try:
@@ -717,7 +780,8 @@ def main():
             raise InputError(f"{args.dir}: not a directory")
         out = args.out or (args.dir if args.what == "aggregate" else args.dir / "plots")
         out.mkdir(parents=True, exist_ok=True)
-        command = {"run": cmd_run, "compare": cmd_compare, "aggregate": cmd_aggregate}[args.what]
+        command = {"run": cmd_run, "compare": cmd_compare, "aggregate": cmd_aggregate,
+                   "scaling": cmd_scaling}[args.what]
         written = command(args.dir, out)
     except (InputError, OSError) as e:
         print(f"plot.py: error: {e}", file=sys.stderr)

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <set>
 
@@ -270,6 +271,35 @@ TEST(PipelineGatedMode, ImageCacheServesRecentFramesWithIdenticalResults) {
   EXPECT_EQ(a.summary["images_read_for_description"].get<std::size_t>() +
                 a.summary["image_cache_hits"].get<std::size_t>(),
             b.summary["images_read_for_description"].get<std::size_t>());
+}
+
+// When decode reads every frame (the ekf source tracks images; here run.decode all), a frame's own
+// descriptor is computed from the image decode already holds: no frame is decoded a second time for its
+// own describe. Only the past frames a later area asks for are read again (no image cache here), so the
+// dataset's reads are one per frame plus one per descriptor requested by another frame.
+TEST(PipelineGatedMode, OwnFrameIsDescribedFromTheTrackersImage) {
+  RevisitDataset dataset = detour_dataset();
+  std::mutex mutex;  // decode and describe run on several threads
+  std::map<std::size_t, int> loads;
+  dataset.on_load = [&](std::size_t frame) {
+    const std::lock_guard lock(mutex);
+    ++loads[frame];
+  };
+  PipelineConfig config = gated_config();
+  config.run.decode = DecodePolicy::kAll;
+  config.run.image_cache_frames = 0;
+  const auto out = testing::make_temp_dir("pipeline-gated-own-image");
+  const RunResult result = run_pipeline(config, dataset, out);
+  ASSERT_FALSE(result.failed) << result.error;
+  std::size_t own = 0, other = 0;
+  for (const auto& row : read_csv(out / "descriptors.csv")) (row[0] == row[1] ? own : other) += 1;
+  ASSERT_GT(own, 0u);
+  ASSERT_GT(other, 0u);
+  EXPECT_EQ(result.summary["images_read_for_description"].get<std::size_t>(), other);
+  std::size_t total = 0;
+  for (const auto& [frame, count] : loads) total += static_cast<std::size_t>(count);
+  EXPECT_EQ(total, 3 * kPeriod + other);
+  EXPECT_EQ(result.summary["time_accounting"]["decode_in_describe_ms"].get<double>() > 0, other > 0);
 }
 
 TEST(PipelineGatedMode, UnreadablePastFrameIsReportedAndTheRunCompletes) {

@@ -24,12 +24,19 @@ inline double stage_total_ms(const nlohmann::json& summary, const char* stage) {
   return stages.contains(stage) ? stages.at(stage).at("total_ms").get<double>() : 0.0;
 }
 
-// Time of the loop-detection work: describe + match + the end-of-stream step, and the same with decode
-// (the full run decodes every frame for describe; the gated one reads its frames inside describe).
+// Time of the loop-detection work, as compare shows it: describe + match of the time accounting (thread CPU
+// time; images read inside describe are decode, the end-of-stream work is match; docs/architecture.md § Time
+// accounting), and the same with decode. Summaries written before the accounting existed: the stages' wall
+// times (describe + match + the end-of-stream step; decode as the decode stage).
 inline double detection_ms(const nlohmann::json& s) {
+  if (s.contains("time_accounting")) {
+    const auto& a = s.at("time_accounting");
+    return a.value("describe_ms", 0.0) + a.value("match_ms", 0.0);
+  }
   return stage_total_ms(s, "describe") + stage_total_ms(s, "match") + s.value("end_of_stream_ms", 0.0);
 }
 inline double detection_with_decode_ms(const nlohmann::json& s) {
+  if (s.contains("time_accounting")) return detection_ms(s) + s.at("time_accounting").value("decode_ms", 0.0);
   return detection_ms(s) + stage_total_ms(s, "decode");
 }
 

@@ -43,6 +43,15 @@ struct FrameRecord {
   std::vector<std::string> warnings;
   std::vector<std::string> errors;
   std::array<StageStamp, kStageCount> stamps{};
+  // The run's time accounting (time_accounting.hpp), in thread CPU time: each node body's on its thread
+  // (written by the body), other threads' in the parallel loops of the body (parallel_handoff.hpp), and the
+  // images decoded inside this frame's describe (past frames read again, or its own image when decode did not
+  // read it), summed over the threads that read them; and the similarities computed inside its describe
+  // (full DIRD computes most of a row there, where rows run in parallel), which are matching.
+  std::array<std::int64_t, kStageCount> cpu_ns{};
+  std::array<std::atomic<std::int64_t>, kStageCount> parallel_cpu_ns{};
+  std::atomic<std::int64_t> reread_cpu_ns{0};
+  std::int64_t match_in_describe_cpu_ns = 0;
 
   // A pose the odometry estimated for this frame, which the gate, the loop closer and trajectory.tum use:
   // status tracking. An initialising source's pose is a placeholder (the EKF's identity before it has a

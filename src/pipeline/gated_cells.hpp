@@ -90,7 +90,8 @@ class PoseGatedCells {
 
 // The describe step of a gated method: work(seq, image) for every frame of `seqs` (several in parallel),
 // with the current frame's decoded image when decode has it and every other frame read again (recent ones
-// from the image cache); a frame that cannot be read gets work(seq, nullptr) and a warning on r.
+// from the image cache); a frame that cannot be read gets work(seq, nullptr) and a warning on r. The time of
+// every read (CPU) is added to r.reread_cpu_ns (the time accounting books it as decode).
 template <class Work>
 void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, const MethodContext& context,
                      Work work) {
@@ -102,9 +103,16 @@ void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, cons
       return;
     }
     cv::Mat image;
+    const std::int64_t start_ns = thread_cpu_ns();
+    // The read is a decode wherever it runs: booked as decode, not describe (r.reread_cpu_ns).
+    const auto book_read = [&] {
+      r.reread_cpu_ns.fetch_add(thread_cpu_ns() - start_ns, std::memory_order_relaxed);
+    };
     try {
       image = context.images.read_again(k);
+      book_read();
     } catch (const DataError& e) {
+      book_read();
       problems[index] =
           fmt::format("describe: frame {} could not be read: {}", context.seqs.frame(seqs[index]), e.what());
       work(k, static_cast<const cv::Mat*>(nullptr));

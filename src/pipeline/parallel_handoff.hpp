@@ -8,12 +8,20 @@
 // The only access not covered is a task's read of the body object itself (two pointers TBB copied on the
 // spawning thread); the TSan suppressions (sanitizer_suppressions.cpp) name this file for exactly that
 // (race_top).
+//
+// Time accounting: a loop started while a ParallelTimeScope is active on the calling thread adds to the
+// scope's counter the CPU time that *other* threads spent in its tasks (the caller's own share is in the
+// caller's CPU time already), so that a node body's work is its own thread's CPU time plus that counter.
 #pragma once
 
 #include <tbb/parallel_for.h>
 
 #include <atomic>
 #include <cstddef>
+#include <cstdint>
+#include <thread>
+
+#include "pipeline/thread_cpu_time.hpp"
 
 namespace loopgate {
 
@@ -21,13 +29,39 @@ namespace loopgate {
 // sanitizer builds) into the program.
 void sanitizer_suppressions_anchor();
 
+// The counter that parallel loops started on this thread add their helpers' CPU time to, ns (nullptr: none).
+inline thread_local std::atomic<std::int64_t>* t_parallel_time_ns = nullptr;
+
+// Sets the calling thread's counter for its lifetime (the pipeline: one per node body), restoring the
+// previous one (a thread waiting in a loop may run another node's body meanwhile).
+class ParallelTimeScope {
+ public:
+  explicit ParallelTimeScope(std::atomic<std::int64_t>* counter_ns) : previous_(t_parallel_time_ns) {
+    t_parallel_time_ns = counter_ns;
+  }
+  ~ParallelTimeScope() { t_parallel_time_ns = previous_; }
+  ParallelTimeScope(const ParallelTimeScope&) = delete;
+  ParallelTimeScope& operator=(const ParallelTimeScope&) = delete;
+
+ private:
+  std::atomic<std::int64_t>* previous_;
+};
+
 template <class Work>
 struct HandoffBody {
   const Work* work;
   std::atomic<int>* handoff;
+  std::thread::id caller;
+  std::atomic<std::int64_t>* helpers_ns;  // nullptr: not timed
   void operator()(std::size_t index) const {
     static_cast<void>(handoff->load(std::memory_order_acquire));
-    (*work)(index);
+    if (helpers_ns != nullptr && std::this_thread::get_id() != caller) {
+      const std::int64_t start_ns = thread_cpu_ns();
+      (*work)(index);
+      helpers_ns->fetch_add(thread_cpu_ns() - start_ns, std::memory_order_relaxed);
+    } else {
+      (*work)(index);
+    }
     handoff->fetch_add(1, std::memory_order_release);
   }
 };
@@ -38,7 +72,8 @@ void parallel_for_with_handoff(std::size_t count, const Work& work) {
   sanitizer_suppressions_anchor();
   std::atomic<int> handoff{0};
   handoff.store(1, std::memory_order_release);
-  tbb::parallel_for(std::size_t{0}, count, HandoffBody<Work>{&work, &handoff});
+  tbb::parallel_for(std::size_t{0}, count,
+                    HandoffBody<Work>{&work, &handoff, std::this_thread::get_id(), t_parallel_time_ns});
   static_cast<void>(handoff.load(std::memory_order_acquire));
 }
 

@@ -69,7 +69,9 @@ class PipelineRun {
       if (serial) lock.lock();
       r.stamps[stage].enter_ns = clock_.now_ns();
       r.stamps[stage].thread = thread_index();
+      const std::int64_t cpu_start_ns = thread_cpu_ns();
       try {
+        const ParallelTimeScope parallel_time(&r.parallel_cpu_ns[stage]);
         call(r);
       } catch (const std::exception& e) {
         fail(fmt::format("stage '{}' failed on seq {} (frame {}, t = {:.6f} s): {}", kStageNames[stage],
@@ -77,7 +79,10 @@ class PipelineRun {
         r.release();
         throw;
       }
-      if (stage != kSink) r.stamps[stage].exit_ns = clock_.now_ns();
+      if (stage != kSink) {  // the sink stamps itself before it writes the frame's timing
+        r.stamps[stage].exit_ns = clock_.now_ns();
+        r.cpu_ns[stage] = thread_cpu_ns() - cpu_start_ns;
+      }
       r.release();
       return message;
     };
@@ -267,9 +272,14 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   std::scoped_lock lock(stage_mutex_[kGate], stage_mutex_[kMatch], stage_mutex_[kSink]);
   const std::int64_t start_ns = clock_.now_ns();
   std::string aborted;
+  std::atomic<std::int64_t> finish_parallel_ns{0};
+  const std::int64_t cpu_start_ns = thread_cpu_ns();
   if (method_->detects()) {
     try {
-      arena.execute([&] { method_->finish(); });
+      arena.execute([&] {
+        const ParallelTimeScope parallel_time(&finish_parallel_ns);
+        method_->finish();
+      });
     } catch (const Interrupted& e) {
       // A second stop signal during the end-of-stream work (SeqSLAM's search): no detections from it; every
       // output is still written, and the run is interrupted, not failed.
@@ -279,12 +289,18 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
     } catch (const std::exception& e) {
       fail(std::string("match flush at the end of the stream: ") + e.what());
     }
-    write_output("loops.csv", [&] { loops_.close(); });
   }
+  // The method's end-of-stream work is matching (the matcher's flush, SeqSLAM's search) in the time
+  // accounting; loops.csv and the loop closure below are the rest.
+  const std::int64_t method_cpu_ns = thread_cpu_ns() - cpu_start_ns;
+  if (method_->detects()) write_output("loops.csv", [&] { loops_.close(); });
   const std::int64_t closer_start_ns = clock_.now_ns();
   closer_.finish();  // the last loops' verification and the final pose-graph solve
   const double loop_closure_ms = 1e-6 * static_cast<double>(clock_.now_ns() - closer_start_ns);
   const double end_of_stream_ms = 1e-6 * static_cast<double>(clock_.now_ns() - start_ns);
+  const EndOfStreamTime end_of_stream_time{
+      1e-6 * static_cast<double>(method_cpu_ns), 1e-6 * static_cast<double>(finish_parallel_ns.load()),
+      1e-6 * static_cast<double>(thread_cpu_ns() - cpu_start_ns - method_cpu_ns)};
   {
     std::lock_guard failure_lock(failure_mutex_);
     result.failed = failed_.load();
@@ -324,7 +340,7 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
       (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
   RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
                  outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
-                 end_of_stream_ms, std::nullopt, &closer_};
+                 end_of_stream_ms, std::nullopt, &closer_,     end_of_stream_time};
   parts.truth_pairs = truth_pairs_ ? &*truth_pairs_ : nullptr;
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
   // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).

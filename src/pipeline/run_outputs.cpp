@@ -100,6 +100,9 @@ void RunOutputs::open() {
   for (const char* name : kStageNames) timing_columns.push_back(std::string(name) + "_ms");
   timing_columns.emplace_back("latency_ms");
   timing_columns.emplace_back("total_ms");
+  // The frame's parts of the time accounting (time_accounting.hpp, thread CPU time).
+  for (const char* part : {"decode_cpu_ms", "describe_cpu_ms", "match_cpu_ms", "rest_cpu_ms"})
+    timing_columns.emplace_back(part);
   if (method_.detects() && geometry_column()) {  // off the frame's path: not in total_ms
     timing_columns.emplace_back("loop_verify_ms");
     timing_columns.emplace_back("loop_optimize_ms");
@@ -109,6 +112,7 @@ void RunOutputs::open() {
 }
 
 void RunOutputs::sink(FrameRecord& r) {
+  const std::int64_t cpu_start_ns = thread_cpu_ns();
   if (r.seq != next_seq_) {
     throw std::logic_error(fmt::format("sink received seq {} while expecting {}", r.seq, next_seq_));
   }
@@ -143,6 +147,7 @@ void RunOutputs::sink(FrameRecord& r) {
 
   const std::int64_t exit_ns = clock_.now_ns();
   r.stamps[kSink].exit_ns = exit_ns;
+  r.cpu_ns[kSink] = thread_cpu_ns() - cpu_start_ns;
   if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) ++counters_.deadline_misses;
   timing(r, exit_ns);
   if (counters_.processed % static_cast<std::size_t>(config_.output.flush_every) == 0) {
@@ -156,10 +161,14 @@ void RunOutputs::sink(FrameRecord& r) {
   }
 }
 
-// timing.csv (service time per stage, end-to-end latency, their sum), the profiler and the trace.
+// timing.csv (service time per stage, end-to-end latency, their sum, the time accounting's per-frame parts),
+// the profiler, the time accounting's sums and the trace.
 void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
   std::vector<std::string> cells = {std::to_string(r.seq), std::to_string(r.label)};
   double total_ms = 0;
+  const StageTimes frame_times = stage_times(r);
+  frame_times_ += frame_times;
+  const TimeParts parts = account_time(frame_times);
   std::int64_t previous_exit_ns = r.release_ns;
   for (std::size_t s = 0; s < kStageCount; ++s) {
     const StageStamp& stamp = r.stamps[s];
@@ -179,6 +188,8 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
   profiler_.add_latency(latency_ms);
   cells.push_back(format_fixed(latency_ms, 4));
   cells.push_back(format_fixed(total_ms, 4));
+  for (const double ms : {parts.decode_ms, parts.describe_ms, parts.match_ms, parts.rest_ms})
+    cells.push_back(format_fixed(ms, 4));
   if (method_.detects() && geometry_column() && !held_.empty() && held_.back().seq == r.seq) {
     held_.back().timing = std::move(cells);  // written with its frames.csv row, after its verification
   } else {

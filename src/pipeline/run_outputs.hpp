@@ -4,6 +4,7 @@
 // calls finish() after the drain.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <deque>
 #include <filesystem>
@@ -18,6 +19,7 @@
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_counters.hpp"
 #include "pipeline/stage_profiler.hpp"
+#include "pipeline/time_accounting.hpp"
 
 namespace loopgate {
 
@@ -43,6 +45,8 @@ class RunOutputs {
   // Every frame's usable odometry pose (not lost), in frame order.
   const std::vector<std::pair<std::size_t, Eigen::Isometry3d>>& frame_poses() const { return frame_poses_; }
   std::uint64_t frames_through() const { return next_seq_; }
+  // The time accounting's measurements summed over the frames through the sink.
+  const StageTimes& frame_times() const { return frame_times_; }
 
  private:
   void add_frame_cells(const FrameRecord& r, const std::string& status, const std::string& reason,
@@ -72,6 +76,7 @@ class RunOutputs {
   TraceWriter trace_;
   StageProfiler profiler_;
   RunCounters counters_;
+  StageTimes frame_times_;                  // time accounting: sums over the frames through the sink
   std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
   std::vector<std::pair<std::size_t, Eigen::Isometry3d>> frame_poses_;
   std::uint64_t next_seq_ = 0;

@@ -14,6 +14,7 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_counters.hpp"
+#include "pipeline/time_accounting.hpp"
 
 namespace loopgate {
 
@@ -39,6 +40,7 @@ struct RunParts {
   // run's are fewer than [first_frame, last_frame)); nullopt = last_frame.
   std::optional<std::size_t> evaluated_end_frame;
   const LoopCloser* closer = nullptr;
+  EndOfStreamTime end_of_stream_time;  // the end of the stream's CPU time (time accounting)
   // eval.truth_pairs_file, read when the run was built (frame numbers as frames.csv shows them); null: the
   // truth comes from the ground-truth positions.
   const TruthPairs* truth_pairs = nullptr;
