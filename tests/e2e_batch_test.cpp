@@ -71,7 +71,7 @@ fs::path write_manifest(const fs::path& dir, const std::string& name, const std:
 const std::string kConfig = (kSource / "configs" / "aliasing.yaml").string();
 
 std::string tiny_jobs() {
-  const std::string set = "output.progress=off match.margin=50";
+  const std::string set = "output.progress=off match.margin=50 seqslam.exclusion_margin_frames=50";
   return "sim\tsimulate\taliasing\t-\t-\t--frames 120\n"
          "\n"
          "gated\trun\t@sim\t" +

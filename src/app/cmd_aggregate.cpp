@@ -27,6 +27,7 @@
 
 #include "app/commands.hpp"
 #include "app/compare_methods.hpp"
+#include "app/plot_script.hpp"
 #include "app/summary_fields.hpp"
 #include "core/error.hpp"
 #include "io/file_guard.hpp"
@@ -423,31 +424,9 @@ std::string make_markdown(const std::vector<Row>& rows) {
   return out;
 }
 
-fs::path find_plot_script(const std::string& option) {
-  if (!option.empty()) return option;
-  if (const char* env = std::getenv("LOOPGATE_PLOT_SCRIPT")) return env;
-  return fs::path(LOOPGATE_SOURCE_DIR) / "scripts" / "plot.py";
-}
-
-std::string shell_quote(const std::string& text) {
-  std::string out = "'";
-  for (const char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
 // scripts/plot.py aggregate DIR; a failure is a warning (the table stands).
 void write_plot(const AggregateOptions& options, const fs::path& out_dir) {
-  const fs::path script = find_plot_script(options.plot_script);
-  if (!fs::exists(script)) {
-    spdlog::warn("aggregate: no plot: {} not found (--plot-script PATH or LOOPGATE_PLOT_SCRIPT)",
-                 script.string());
-    return;
-  }
-  const std::string command =
-      "/usr/bin/python3 " + shell_quote(script.string()) + " aggregate " + shell_quote(out_dir.string());
-  std::fflush(stdout);
-  const int status = std::system(command.c_str());
-  if (status != 0) spdlog::warn("aggregate: plotting failed (exit status {}): {}", status, command);
+  run_plot_script(options.plot_script, {"aggregate", out_dir.string()}, "aggregate");
 }
 
 int aggregate_command(const AggregateOptions& options) {

@@ -20,6 +20,7 @@
 
 #include "app/commands.hpp"
 #include "app/compare_methods.hpp"
+#include "app/plot_script.hpp"
 #include "app/stop_signals.hpp"
 #include "app/summary_fields.hpp"
 #include "core/error.hpp"
@@ -283,36 +284,11 @@ void write_descriptor_example(const RunResult& result, const fs::path& run_dir) 
   out << '\n';
 }
 
-fs::path find_plot_script(const std::string& option) {
-  if (!option.empty()) return option;
-  if (const char* env = std::getenv("LOOPGATE_PLOT_SCRIPT")) return env;
-  return fs::path(LOOPGATE_SOURCE_DIR) / "scripts" / "plot.py";
-}
-
-std::string shell_quote(const std::string& text) {
-  std::string out = "'";
-  for (const char c : text) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
 // scripts/plot.py compare OUT --out OUT/plots; a failure is a warning (the runs' outputs stand).
 void write_plots(const CompareOptions& options, const fs::path& out_dir) {
-  const fs::path script = find_plot_script(options.plot_script);
-  if (!fs::exists(script)) {
-    spdlog::warn("compare: no plots: {} not found (--plot-script PATH or LOOPGATE_PLOT_SCRIPT)",
-                 script.string());
-    return;
-  }
-  const std::string command = "/usr/bin/python3 " + shell_quote(script.string()) + " compare " +
-                              shell_quote(out_dir.string()) + " --out " +
-                              shell_quote((out_dir / "plots").string());
-  std::fflush(stdout);  // the table before the plotter's own lines
-  const int status = std::system(command.c_str());
-  if (status != 0) {
-    spdlog::warn("compare: plotting failed (exit status {}): {}", status, command);
-  } else {
+  if (run_plot_script(options.plot_script,
+                      {"compare", out_dir.string(), "--out", (out_dir / "plots").string()}, "compare"))
     std::printf("plots in %s\n", (out_dir / "plots").c_str());
-  }
 }
 
 // Two sequences (--reference A --query B): the cross-condition methods, each run_two_sequences() with its
