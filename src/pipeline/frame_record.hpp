@@ -54,8 +54,8 @@ struct FrameRecord {
   std::int64_t match_in_describe_cpu_ns = 0;
 
   // A pose the odometry estimated for this frame, which the gate, the loop closer and trajectory.tum use:
-  // status tracking. An initialising source's pose is a placeholder (the EKF's identity before it has a
-  // state), a lost frame's is the last good one.
+  // status tracking. An initialising source reports the identity until it has a state, and a lost frame
+  // carries the last good pose: neither is an estimate of this frame.
   bool usable_pose() const { return has_pose && odometry.pose.status == OdometryStatus::kTracking; }
 
   // The hand-over between nodes goes through TBB's scheduler, whose synchronisation ThreadSanitizer

@@ -197,6 +197,7 @@ void LoopCloser::work() {
     {
       std::lock_guard lock(mutex_);
       queue_.pop_front();
+      if (!result.skipped) ms_by_frame_[loop.query].verify_ms += result.verify_ms;
       results_.push_back(std::move(result));
       const std::size_t verified = static_cast<std::size_t>(std::count_if(
           results_.begin(), results_.end(), [](const LoopResult& r) { return r.result.verified; }));
@@ -215,19 +216,15 @@ void LoopCloser::work() {
     // The frame's rows (frames.csv, timing.csv) wait until its loop is verified and the solve it started is
     // done, so that timing.csv books that solve on it.
     std::lock_guard lock(mutex_);
-    if (solve_now) solve_ms_by_frame_[loop.query] += solve_ms;
+    if (solve_now) ms_by_frame_[loop.query].optimize_ms += solve_ms;
     if (loop.query >= first_ && loop.query < last_) --pending_by_frame_[loop.query - first_];
   }
 }
 
 LoopCloser::FrameMs LoopCloser::frame_ms(std::size_t frame) const {
-  FrameMs out;
   std::lock_guard lock(mutex_);
-  for (const LoopResult& r : results_)
-    if (r.loop.query == frame && !r.skipped) out.verify_ms += r.verify_ms;
-  if (const auto it = solve_ms_by_frame_.find(frame); it != solve_ms_by_frame_.end())
-    out.optimize_ms = it->second;
-  return out;
+  const auto it = ms_by_frame_.find(frame);
+  return it != ms_by_frame_.end() ? it->second : FrameMs{};
 }
 
 double LoopCloser::solve(std::size_t last, bool final) {
@@ -483,7 +480,8 @@ nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& da
   const auto start = std::chrono::steady_clock::now();
   LoopCloser closer(config, dataset, track.first_frame, track.last_frame, true);
   if (!closer.active()) throw std::logic_error("correct_after_run: verify.enabled is false");
-  for (const auto& [frame, T_w_b] : track.frame_poses) closer.record_pose(frame, T_w_b);
+  for (std::size_t k = 0; k < track.tracked_frames.size(); ++k)
+    closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b);
   for (const Detection& loop : track.loops) closer.submit(loop);
   closer.finish();
   closer.write_edges(run_dir);

@@ -118,8 +118,8 @@ class LoopCloser {
   std::deque<std::size_t> feature_cache_order_;  // oldest first
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
-  std::unordered_map<std::size_t, double>
-      solve_ms_by_frame_;  // the query frame whose loop started it (mutex_)
+  // timing.csv's cells by query frame: its loops' verification and the streaming solves they started (mutex_)
+  std::unordered_map<std::size_t, FrameMs> ms_by_frame_;
   double final_solve_ms_ = 0;
   SolveReport final_report_;
   std::vector<std::size_t> nodes_;  // frames of the final graph's nodes

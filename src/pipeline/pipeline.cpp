@@ -368,7 +368,7 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   }
   result.summary = make_run_summary(parts, result, std::move(evaluation));
   result.summary["problems"] = problems;
-  result.track = {range_.first, range_.second, outputs_.frame_poses(), outputs_.tracked_poses(),
+  result.track = {range_.first, range_.second, outputs_.tracked_frames(), outputs_.tracked_poses(),
                   loops_.loops()};
   if (config_.output.trace) {
     write_output("trace.json", [&] { outputs_.write_trace(out_dir_ / "trace.json", config_.run.threads); });

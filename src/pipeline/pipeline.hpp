@@ -60,10 +60,10 @@ class Dataset;
 // A finished run's odometry and loops, for correcting its trajectory after the run (compare's loop
 // correction, correct_after_run in loop_closer.hpp).
 struct RunTrack {
-  std::size_t first_frame = 0, last_frame = 0;                         // the run's frame range [first, last)
-  std::vector<std::pair<std::size_t, Eigen::Isometry3d>> frame_poses;  // frame, usable odometry pose
-  std::vector<StampedPose> tracked_poses;                              // status tracking (the ATE's poses)
-  std::vector<Detection> loops;                                        // as loops.csv, dataset frames
+  std::size_t first_frame = 0, last_frame = 0;  // the run's frame range [first, last)
+  std::vector<std::size_t> tracked_frames;      // the frame of each tracked pose
+  std::vector<StampedPose> tracked_poses;       // the odometry's estimates (status tracking; the ATE's poses)
+  std::vector<Detection> loops;                 // as loops.csv, dataset frames
 };
 
 struct RunResult {

@@ -134,12 +134,12 @@ void RunOutputs::sink(FrameRecord& r) {
   } else {
     frames_csv_.write_row(row.values());
   }
-  // trajectory.tum holds only the poses the odometry estimated (issue 14): an initialising filter's
-  // placeholder (the identity) and a lost frame's last good pose are not estimates of this frame.
+  // trajectory.tum holds only the poses the odometry estimated (issue 14): the identity an initialising
+  // filter reports and a lost frame's last good pose are not estimates of this frame.
   if (r.usable_pose()) {
     const PoseEstimate& pose = r.odometry.pose;
     trajectory_.write(r.t_ns, pose.T_w_b);
-    frame_poses_.emplace_back(r.frame, pose.T_w_b);
+    tracked_frames_.push_back(r.frame);
     tracked_poses_.push_back({r.t_ns, pose.T_w_b});
   }
   counters_.count(r, status, reason);

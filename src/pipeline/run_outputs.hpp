@@ -42,8 +42,8 @@ class RunOutputs {
   const RunCounters& counters() const { return counters_; }
   const StageProfiler& profiler() const { return profiler_; }
   const std::vector<StampedPose>& tracked_poses() const { return tracked_poses_; }
-  // Every frame's usable odometry pose (not lost), in frame order.
-  const std::vector<std::pair<std::size_t, Eigen::Isometry3d>>& frame_poses() const { return frame_poses_; }
+  // The frame of each of tracked_poses().
+  const std::vector<std::size_t>& tracked_frames() const { return tracked_frames_; }
   std::uint64_t frames_through() const { return next_seq_; }
   // The time accounting's measurements summed over the frames through the sink.
   const StageTimes& frame_times() const { return frame_times_; }
@@ -76,9 +76,9 @@ class RunOutputs {
   TraceWriter trace_;
   StageProfiler profiler_;
   RunCounters counters_;
-  StageTimes frame_times_;                  // time accounting: sums over the frames through the sink
-  std::vector<StampedPose> tracked_poses_;  // odometry poses with status tracking (ATE in summary.json)
-  std::vector<std::pair<std::size_t, Eigen::Isometry3d>> frame_poses_;
+  StageTimes frame_times_;                   // time accounting: sums over the frames through the sink
+  std::vector<StampedPose> tracked_poses_;   // odometry poses with status tracking (ATE in summary.json)
+  std::vector<std::size_t> tracked_frames_;  // the frame of each tracked pose
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection
     std::size_t seq = 0;
