@@ -98,7 +98,6 @@ class PipelineRun {
   bool stop_requested() const { return (stop_ && stop_->load()) || failed_.load(); }
   void produce(tbb::flow::queue_node<FrameMsg>& queue);
   std::vector<std::string> missing_outputs() const;
-  RunCheckInput check_input() const;
   void finish_stream(tbb::task_arena& arena, RunResult& result, double cpu_start_s);
   // Runs `write`, one output step after the drain: a failure (a full disk) is recorded, naming the file, and
   // the next outputs are still written.
@@ -360,7 +359,8 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
   // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
   std::vector<std::string> problems;
   if (!result.failed && !result.interrupted) {
-    problems = run_problems(check_input());
+    problems = run_problems(run_check_input(config_, dataset_, outputs_.counters(),
+                                            steps_.odometry_source().name(), method_->detects()));
     if (!problems.empty()) {
       result.failed = true;
       result.error = fmt::format("{}", fmt::join(problems, "; "));
@@ -388,26 +388,6 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
       result.error = "outputs missing: " + fmt::format("{}", fmt::join(result.missing_outputs, ", "));
     spdlog::error("run failed: {}", result.error);
   }
-}
-
-RunCheckInput PipelineRun::check_input() const {
-  const RunCounters& c = outputs_.counters();
-  RunCheckInput in;
-  in.frames_processed = c.processed;
-  in.odometry_source = steps_.odometry_source().name();
-  in.odometry_expected = odometry_expectation(config_.odometry, config_.ekf, dataset_);
-  in.frames_with_pose = c.frames_with_pose;
-  in.first_odometry_problem = c.first_odometry_problem;
-  in.frames_needing_image = c.frames_needing_image;
-  in.frames_decoded = c.decoded;
-  in.first_image_error = c.first_image_error;
-  in.dataset_root = dataset_.root().string();
-  in.detects = method_->detects();
-  in.method = enum_name(config_.run.method);
-  const bool seqslam = config_.run.seqslam();
-  in.margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
-  in.margin_frames = seqslam ? config_.seqslam.exclusion_margin_frames : config_.match.margin;
-  return in;
 }
 
 std::vector<std::string> PipelineRun::missing_outputs() const {

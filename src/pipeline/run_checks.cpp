@@ -4,7 +4,32 @@
 
 #include <algorithm>
 
+#include "io/dataset.hpp"
+#include "pipeline/odometry_factory.hpp"
+#include "pipeline/pipeline_config.hpp"
+#include "pipeline/run_counters.hpp"
+
 namespace loopgate {
+
+RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& dataset, const RunCounters& c,
+                              const std::string& odometry_source, bool detects) {
+  RunCheckInput in;
+  in.frames_processed = c.processed;
+  in.odometry_source = odometry_source;
+  in.odometry_expected = odometry_expectation(config.odometry, config.ekf, dataset);
+  in.frames_with_pose = c.frames_with_pose;
+  in.first_odometry_problem = c.first_odometry_problem;
+  in.frames_needing_image = c.frames_needing_image;
+  in.frames_decoded = c.decoded;
+  in.first_image_error = c.first_image_error;
+  in.dataset_root = dataset.root().string();
+  in.detects = detects;
+  in.method = enum_name(config.run.method);
+  const bool seqslam = config.run.seqslam();
+  in.margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
+  in.margin_frames = seqslam ? config.seqslam.exclusion_margin_frames : config.match.margin;
+  return in;
+}
 
 std::vector<std::string> run_problems(const RunCheckInput& in) {
   std::vector<std::string> problems;

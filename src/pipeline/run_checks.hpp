@@ -38,6 +38,15 @@ struct RunCheckInput {
   int margin_frames = 0;
 };
 
+struct PipelineConfig;
+class Dataset;
+struct RunCounters;
+
+// The input as a finished run fills it: its configuration, dataset and counters, the odometry source's name
+// and whether its method detects loops.
+RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& dataset,
+                              const RunCounters& counters, const std::string& odometry_source, bool detects);
+
 // One message per failed check, each starting with what is missing ("no odometry: ...", "no image: ...",
 // "no detection possible: ..."); empty when the run produced what it was asked for.
 std::vector<std::string> run_problems(const RunCheckInput& input);
