@@ -145,11 +145,13 @@ void LoadedDataset::finish() {
     const std::size_t count = std::min(frames.size(), kSizeProbeFrames);
     for (std::size_t k = 0; k < count; ++k) {
       const std::size_t i = count == 1 ? 0 : k * (frames.size() - 1) / (count - 1);
-      std::error_code ec;
-      if (!std::filesystem::is_regular_file(frames[i].image, ec)) continue;
-      if (auto size = png_size(frames[i].image)) {
-        probes.push_back({i, *size});
-        continue;
+      if (!image_reader) {
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(frames[i].image, ec)) continue;
+        if (auto size = png_size(frames[i].image)) {
+          probes.push_back({i, *size});
+          continue;
+        }
       }
       try {
         const cv::Mat image = decode(i);
@@ -197,6 +199,7 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   const std::string where = "frame " + std::to_string(entry.source_index);  // its number, as in frames.csv
   if (!images_present)
     throw DataError(entry.image, where + ": image absent (this dataset has no image files)");
+  if (image_reader) return image_reader(frame);
   std::error_code ec;
   if (!std::filesystem::is_regular_file(entry.image, ec))
     throw DataError(entry.image, where + ": image file missing");
@@ -217,9 +220,13 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   if (image.empty()) {
     throw DataError(entry.image, where + ": cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
   }
+  return to_grey_8bit(image, entry.image, where);
+}
+
+cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, const std::string& where) {
   if (image.depth() != CV_8U) {
-    throw DataError(entry.image, where + ": image has " + std::to_string(image.elemSize1() * 8) +
-                                     "-bit samples, expected 8-bit");
+    throw DataError(file, where + ": image has " + std::to_string(image.elemSize1() * 8) +
+                              "-bit samples, expected 8-bit");
   }
   if (image.channels() == 1) return image;
   cv::Mat grey;
@@ -228,8 +235,8 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   } else if (image.channels() == 4) {
     cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
   } else {
-    throw DataError(entry.image, where + ": image has " + std::to_string(image.channels()) +
-                                     " channels, expected grey, RGB or RGBA");
+    throw DataError(file, where + ": image has " + std::to_string(image.channels()) +
+                              " channels, expected grey, RGB or RGBA");
   }
   return grey;
 }

@@ -45,6 +45,51 @@ bool is_identity(const Eigen::Isometry3d& T) {
 
 }  // namespace
 
+namespace io_detail {
+
+void read_euroc_calibration(const fs::path& mav, int camera_index, IssueLog& log, LoadedDataset& d) {
+  const std::string cam_name = "cam" + std::to_string(camera_index);
+  const fs::path cam_dir = mav / cam_name;
+  d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
+                                            [](const fs::path& f) { return read_euroc_camera_yaml(f); });
+  if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
+  d.imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
+                                   [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+}
+
+void read_euroc_ground_truth(const fs::path& mav, IssueLog& log, LoadedDataset& d) {
+  std::error_code ec;
+  const fs::path gt_dir = mav / "state_groundtruth_estimate0";
+  const fs::path gt_csv = gt_dir / "data.csv";
+  if (fs::exists(gt_csv, ec)) {
+    d.gt = read_euroc_groundtruth(gt_csv, log);
+    // The ground-truth sensor.yaml carries only T_BS (no camera or IMU keys).
+    const auto T_BS =
+        read_optional_yaml(gt_dir / "sensor.yaml", log, [](const fs::path& f) { return read_yaml_T_BS(f); });
+    if (T_BS && !is_identity(*T_BS)) {
+      const Eigen::Isometry3d T_s_b = T_BS->inverse();
+      for (GroundTruthState& s : d.gt) s.T_w_b = s.T_w_b * T_s_b;
+      spdlog::info("{}: ground truth moved from its sensor frame to the body frame (T_BS not identity)",
+                   gt_csv.string());
+    }
+  } else {
+    for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
+      if (fs::exists(tum, ec)) require_regular_file(tum);
+      if (!fs::is_regular_file(tum, ec)) continue;
+      for (const StampedPose& pose : read_tum(tum, log)) {
+        GroundTruthState s;
+        s.t_ns = pose.t_ns;
+        s.T_w_b = pose.T_w_b;
+        d.gt.push_back(s);
+      }
+      spdlog::info("{}: ground truth from {}", mav.string(), tum.string());
+      break;
+    }
+  }
+}
+
+}  // namespace io_detail
+
 std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& options) {
   if (options.camera_index != 0 && options.camera_index != 1) {
     throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
@@ -89,11 +134,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Calibration.
-  d->camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
-                                             [](const fs::path& f) { return read_euroc_camera_yaml(f); });
-  if (d->camera_calibration) d->calibration_size_source = cam_name + "/sensor.yaml resolution";
-  d->imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
-                                    [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+  io_detail::read_euroc_calibration(mav, options.camera_index, log, *d);
 
   // IMU.
   const fs::path imu_csv = mav / "imu0" / "data.csv";
@@ -103,33 +144,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Ground truth.
-  const fs::path gt_dir = mav / "state_groundtruth_estimate0";
-  const fs::path gt_csv = gt_dir / "data.csv";
-  if (fs::exists(gt_csv, ec)) {
-    d->gt = io_detail::read_euroc_groundtruth(gt_csv, log);
-    // The ground-truth sensor.yaml carries only T_BS (no camera or IMU keys).
-    const auto T_BS = read_optional_yaml(gt_dir / "sensor.yaml", log,
-                                         [](const fs::path& f) { return io_detail::read_yaml_T_BS(f); });
-    if (T_BS && !is_identity(*T_BS)) {
-      const Eigen::Isometry3d T_s_b = T_BS->inverse();
-      for (GroundTruthState& s : d->gt) s.T_w_b = s.T_w_b * T_s_b;
-      spdlog::info("{}: ground truth moved from its sensor frame to the body frame (T_BS not identity)",
-                   gt_csv.string());
-    }
-  } else {
-    for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
-      if (fs::exists(tum, ec)) require_regular_file(tum);
-      if (!fs::is_regular_file(tum, ec)) continue;
-      for (const StampedPose& pose : io_detail::read_tum(tum, log)) {
-        GroundTruthState s;
-        s.t_ns = pose.t_ns;
-        s.T_w_b = pose.T_w_b;
-        d->gt.push_back(s);
-      }
-      spdlog::info("{}: ground truth from {}", dir.string(), tum.string());
-      break;
-    }
-  }
+  io_detail::read_euroc_ground_truth(mav, log, *d);
 
   d->finish();
   io_detail::log_summary(*d);
