@@ -277,7 +277,10 @@ std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const Op
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(dir, ec)) throw DataError(dir, "dataset directory not found");
-  if (!fs::is_directory(dir, ec)) throw DataError(dir, "expected a dataset directory, found a file");
+  if (!fs::is_directory(dir, ec)) {
+    if (dir.extension() == ".bag") return open_rosbag(dir, options);
+    throw DataError(dir, "expected a dataset directory or a ROS1 .bag file, found another file");
+  }
   if (fs::is_directory(dir / "mav0", ec) || fs::is_directory(dir / "cam0", ec) ||
       fs::is_directory(dir / "imu0", ec)) {
     return open_euroc(dir, options);
