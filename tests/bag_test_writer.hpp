@@ -1,6 +1,6 @@
 // Writes ROS1 bags for the tests (tests/bag_test_writer.cpp, built as C++17 like src/bag because it includes
 // the ROS1 message headers). In a build without ROS1 bag support (LOOPGATE_WITH_ROSBAG=OFF) the constructor
-// throws std::runtime_error: tests check rosbag_support_built() (io/dataset.hpp) first and skip.
+// throws std::runtime_error: tests start with LOOPGATE_REQUIRE_ROSBAG(), which skips them then.
 #pragma once
 
 #include <array>
@@ -39,3 +39,12 @@ class BagTestWriter {
 };
 
 }  // namespace loopgate::testing
+
+// GTEST_SKIP with the reason in a build without bag support (needs io/dataset.hpp: rosbag_support_built()).
+#define LOOPGATE_REQUIRE_ROSBAG()                                                                          \
+  do {                                                                                                     \
+    if (!::loopgate::rosbag_support_built()) {                                                             \
+      GTEST_SKIP() << "this build has no ROS1 bag support (LOOPGATE_WITH_ROSBAG=OFF, the default without " \
+                      "librosbag-storage-dev and libsensor-msgs-dev; scripts/setup.sh installs them)";     \
+    }                                                                                                      \
+  } while (0)

@@ -119,13 +119,6 @@ void expect_same_outputs(const fs::path& asl_out, const fs::path& bag_out) {
   EXPECT_EQ(bag_summary["evaluation"], asl_summary["evaluation"]);
 }
 
-#define LOOPGATE_REQUIRE_ROSBAG()                                                               \
-  do {                                                                                          \
-    if (!rosbag_support_built())                                                                \
-      GTEST_SKIP() << "this build has no ROS1 bag support (LOOPGATE_WITH_ROSBAG=OFF: "          \
-                      "librosbag-storage-dev or libsensor-msgs-dev missing; scripts/setup.sh)"; \
-  } while (0)
-
 TEST(E2eRosbag, EurocTopicsGiveTheOutputsOfTheAslLayout) {
   LOOPGATE_REQUIRE_ROSBAG();
   const fs::path sim = simulated();

@@ -46,10 +46,12 @@ bool rosbag_support_built() {
 #if !LOOPGATE_WITH_ROSBAG
 
 std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions&) {
-  throw DataError(bag_file,
-                  "this loopgate was built without ROS1 bag support (CMake option LOOPGATE_WITH_ROSBAG=OFF, "
-                  "librosbag-storage-dev or libsensor-msgs-dev was missing); install them (scripts/setup.sh) "
-                  "and rebuild with -DLOOPGATE_WITH_ROSBAG=ON, or use the sequence in EuRoC ASL layout");
+  throw DataError(
+      bag_file,
+      "this loopgate was built without ROS1 bag support (CMake option LOOPGATE_WITH_ROSBAG=OFF, its "
+      "default when librosbag-storage-dev or libsensor-msgs-dev is missing); install them "
+      "(scripts/setup.sh) and rebuild with -DLOOPGATE_WITH_ROSBAG=ON, or use the sequence in EuRoC ASL "
+      "layout");
 }
 
 #else
