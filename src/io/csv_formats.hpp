@@ -18,6 +18,8 @@ namespace loopgate::io_detail {
 // or is the error (strict). A file with more than half of its rows bad is an error in lenient mode too.
 std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& log);
 std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log);
+// TUM-VI mav0/mocap0/data.csv: "t_ns, p_RS_R xyz [m], q_RS wxyz", exactly these 8 columns.
+std::vector<GroundTruthState> read_mocap_groundtruth(const std::filesystem::path& csv_file, IssueLog& log);
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log);
 // Out-of-order or duplicated samples are reported and dropped like the rows of the other tables: kept in file
 // order, one outlier (a typo) made every later sample look out of order and left the frames without IMU.

@@ -218,7 +218,11 @@ std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& l
   return poses;
 }
 
-std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+namespace {
+// EuRoC state_groundtruth_estimate0 and TUM-VI mocap0 tables: the first 8 columns are the same (t_ns, p_xyz,
+// q_wxyz); `mocap` accepts those 8 only, the ground truth also its velocity and bias columns.
+std::vector<GroundTruthState> read_groundtruth_csv(const std::filesystem::path& csv_file, IssueLog& log,
+                                                   bool mocap) {
   const TextFile text(csv_file);
   std::vector<TimedRow<GroundTruthState>> rows;
   rows.reserve(text.text().size() / 160);
@@ -226,6 +230,12 @@ std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path
   log.begin_table();
   const std::size_t lines = for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
     const std::size_t n = row.size();
+    if (mocap && n != 8) {
+      throw RowError{
+          "expected 8 columns (timestamp [ns], p_RS_R_x, p_RS_R_y, p_RS_R_z [m], q_RS_w, q_RS_x, q_RS_y, "
+          "q_RS_z) as in TUM-VI mocap0/data.csv, got " +
+          std::to_string(n)};
+    }
     if (columns == 0) {
       if (n != 8 && n != 11 && n != 14 && n != 17) {
         throw RowError{
@@ -262,6 +272,15 @@ std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path
     states.push_back(row.value);
   log.end_table(csv_file, lines);
   return states;
+}
+}  // namespace
+
+std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+  return read_groundtruth_csv(csv_file, log, false);
+}
+
+std::vector<GroundTruthState> read_mocap_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+  return read_groundtruth_csv(csv_file, log, true);
 }
 
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log) {
