@@ -32,7 +32,15 @@ Eigen::Isometry3d read_yaml_T_BS(const std::filesystem::path& yaml_file);
 // instead of being removed. Times: the rows outside the longest strictly increasing run are bad.
 std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem::path& times_file,
                                                            IssueLog& log);
-std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
-                                                                   IssueLog& log);
+// A KITTI pose row: 12 numbers (row-major 3x4 T_w_cam0), or 13 with a time in seconds first.
+struct KittiPoseRow {
+  std::optional<Timestamp> t_ns;  // 13-column files only
+  Eigen::Isometry3d T_w_cam0 = Eigen::Isometry3d::Identity();
+};
+// The first good row fixes the column count (12 or 13; any other count is that line's error, and so is a
+// later row of the other count). In a 13-column file the rows outside the longest run of strictly increasing
+// times are bad too.
+std::vector<std::optional<KittiPoseRow>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
+                                                              IssueLog& log);
 
 }  // namespace loopgate::io_detail

@@ -31,7 +31,8 @@ struct OpenOptions {
   // longest run of strictly increasing times). A file with more than half of its rows bad fails in both
   // modes.
   bool strict = true;
-  // Which camera of a stereo layout: 0 (EuRoC cam0 / KITTI image_0) or 1.
+  // Which camera: 0 or 1 (EuRoC cam0 / cam1, KITTI grey image_0 / image_1), 2 or 3 (KITTI colour image_2 /
+  // image_3, with calib.txt's P2 / P3; images are converted to grey).
   int camera_index = 0;
   // Image folder only: frame period when no timestamps file is present.
   double folder_rate_hz = 1.0;

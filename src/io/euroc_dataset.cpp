@@ -94,7 +94,9 @@ void apply_sensor_T_BS(const fs::path& gt_dir, io_detail::IssueLog& log, std::ve
 
 std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& options) {
   if (options.camera_index != 0 && options.camera_index != 1) {
-    throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
+    throw ConfigError(
+        "camera_index: " + std::to_string(options.camera_index) +
+        ", expected 0 or 1 for the EuRoC layout (cam0, cam1; 2 and 3 are KITTI's colour cameras)");
   }
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw DataError(dir, "EuRoC dataset directory not found");

@@ -349,21 +349,42 @@ std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem
   return rows;
 }
 
-std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
-                                                                   IssueLog& log) {
+std::vector<std::optional<KittiPoseRow>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
+                                                              IssueLog& log) {
   const TextFile text(poses_file);
-  std::vector<std::optional<Eigen::Isometry3d>> rows;
+  std::vector<std::optional<KittiPoseRow>> rows;
+  std::vector<TimedRow<std::size_t>> timed;  // 13 columns: (line, time, row index), for the order check
+  std::size_t columns = 0;                   // fixed by the first good row: 12 or 13
   log.begin_table();
   const std::size_t lines = for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
-    rows.emplace_back();
-    row.expect_columns(kKittiPoseColumns, "row-major 3x4 T_w_cam0");
-    const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, 0, "pose");
+    rows.emplace_back();  // the row keeps its index even when bad
+    const std::size_t n = row.size();
+    if (columns == 0 && n != kKittiPoseColumns && n != kKittiPoseColumns + 1) {
+      throw RowError{"expected 12 columns (row-major 3x4 T_w_cam0) or 13 (time [s], then the 12), got " +
+                     std::to_string(n)};
+    }
+    if (columns != 0 && n != columns) {
+      throw RowError{"expected " + std::to_string(columns) + " columns like the first data row (" +
+                     (columns == kKittiPoseColumns ? "no time" : "a time first") + "), got " +
+                     std::to_string(n)};
+    }
+    const std::size_t first = n - kKittiPoseColumns;  // 1 when a time comes first
+    KittiPoseRow pose;
+    if (first == 1) pose.t_ns = row.seconds_ns(0, "t_s");
+    const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, first, "pose");
     if (!is_rotation(M.leftCols<3>())) throw RowError{"rotation block is not a rotation matrix"};
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    T.linear() = M.leftCols<3>();
-    T.translation() = M.col(3);
-    rows.back() = T;
+    pose.T_w_cam0.linear() = M.leftCols<3>();
+    pose.T_w_cam0.translation() = M.col(3);
+    rows.back() = pose;
+    columns = n;
+    if (pose.t_ns) timed.push_back({row.line, *pose.t_ns, rows.size() - 1});
   });
+  // Timed rows: the ones outside the longest strictly increasing run are bad (kept as nullopt).
+  std::vector<char> in_order(rows.size(), 0);
+  for (const auto& row : keep_increasing(poses_file, log, timed, "time", true)) in_order[row.value] = 1;
+  for (const auto& row : timed) {
+    if (!in_order[row.value]) rows[row.value].reset();
+  }
   log.end_table(poses_file, lines);
   return rows;
 }
@@ -403,8 +424,14 @@ std::vector<Timestamp> read_kitti_times(const std::filesystem::path& times_file)
 std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
                                           const std::filesystem::path& times_file, bool allow_fewer) {
   IssueLog log(true, nullptr);
-  const auto times = io_detail::read_kitti_time_rows(times_file, log);
   const auto rows = io_detail::read_kitti_pose_rows(poses_file, log);
+  if (!rows.empty() && rows.front()->t_ns) {  // 13 columns: every row has its own time
+    std::vector<StampedPose> poses;
+    poses.reserve(rows.size());
+    for (const auto& row : rows) poses.push_back(StampedPose{*row->t_ns, row->T_w_cam0});
+    return poses;
+  }
+  const auto times = io_detail::read_kitti_time_rows(times_file, log);
   if (rows.size() > times.size() || (!allow_fewer && rows.size() != times.size())) {
     throw DataError(poses_file, std::to_string(rows.size()) + " poses, expected " +
                                     (allow_fewer ? "at most " : "") + std::to_string(times.size()) +
@@ -412,7 +439,7 @@ std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_fil
   }
   std::vector<StampedPose> poses;
   poses.reserve(rows.size());
-  for (std::size_t i = 0; i < rows.size(); ++i) poses.push_back(StampedPose{*times[i], *rows[i]});
+  for (std::size_t i = 0; i < rows.size(); ++i) poses.push_back(StampedPose{*times[i], rows[i]->T_w_cam0});
   return poses;
 }
 
