@@ -157,6 +157,10 @@ TEST(IoKitti, SubsetFolderTakesMetadataFromParent) {
     EXPECT_EQ(cv::norm(d->load_image(i), frame_image(expected[i]), cv::NORM_INF), 0.0);
   }
   EXPECT_EQ(d->ground_truth().size(), static_cast<std::size_t>(kFrames));  // the whole trajectory
+  // Every row of the parent's times.txt by its frame number: what times a 12-column odometry.file.
+  const auto source_times = d->source_times();
+  ASSERT_EQ(source_times.size(), static_cast<std::size_t>(kFrames));
+  for (int i = 0; i < kFrames; ++i) EXPECT_EQ(source_times[static_cast<std::size_t>(i)], i * kPeriod);
   ASSERT_TRUE(d->camera());
   EXPECT_EQ(d->camera()->width_px, kWidth);
   // The parent alone (no images) is a KITTI dataset with timestamps and poses only.

@@ -37,6 +37,16 @@ std::span<const ImuSample> Dataset::imu_between(Timestamp t_begin_ns, Timestamp 
   return std::span<const ImuSample>(samples).subspan(begin, end - begin);
 }
 
+std::vector<std::optional<Timestamp>> Dataset::source_times() const {
+  std::vector<std::optional<Timestamp>> times;
+  for (std::size_t frame = 0; frame < frame_count(); ++frame) {
+    const std::size_t index = source_index(frame);
+    if (index >= times.size()) times.resize(index + 1);
+    times[index] = frame_t_ns(frame);
+  }
+  return times;
+}
+
 namespace io_detail {
 
 namespace {

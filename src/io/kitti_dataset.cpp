@@ -95,6 +95,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
 
   const fs::path times_file = meta_dir / "times.txt";
   const std::vector<std::optional<Timestamp>> times = io_detail::read_kitti_time_rows(times_file, log);
+  d->source_time_table = times;
 
   // Image files by frame number.
   std::map<std::size_t, fs::path> images;
