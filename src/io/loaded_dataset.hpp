@@ -33,6 +33,9 @@ class LoadedDataset final : public Dataset {
   std::vector<DataIssue> problems;
   // Where the expected image size comes from when the calibration gives it ("cam0/sensor.yaml").
   std::string calibration_size_source;
+  // The sequence's frame times by source index when the layout has a table of them (KITTI times.txt); empty:
+  // source_times() is made from the frames.
+  std::vector<std::optional<Timestamp>> source_time_table;
 
   // Fixes the reference image size: the calibration's when it has one (calibration_size_source set),
   // else that of the first frame whose image decodes (a few frames are probed). Sets the camera size
@@ -56,6 +59,9 @@ class LoadedDataset final : public Dataset {
   std::optional<CameraCalibration> camera() const override { return camera_calibration; }
   std::optional<ImuCalibration> imu_calibration() const override { return imu_calib; }
   const std::vector<DataIssue>& issues() const override { return problems; }
+  std::vector<std::optional<Timestamp>> source_times() const override {
+    return source_time_table.empty() ? Dataset::source_times() : source_time_table;
+  }
 
  private:
   // Decodes without the size check; throws DataError naming the frame and file.
