@@ -8,8 +8,10 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <set>
 #include <sstream>
 
 #include "test_support.hpp"
@@ -84,7 +86,36 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
     EXPECT_EQ(summary["stages"][stage]["calls"].get<int>(), 60) << stage;
   }
   EXPECT_EQ(read_csv(out / "timing.csv").size(), 60u);
-  EXPECT_TRUE(nlohmann::json::parse(read_file(out / "trace.json")).contains("traceEvents"));
+  // trace.json (issue 14): the process named (method, mode, dataset), every stage of every frame a span on a named track, the
+  // end-of-stream work as spans on the producer's track.
+  const auto trace = nlohmann::json::parse(read_file(out / "trace.json"));
+  std::string process_name;
+  std::map<int, std::string> track_names;
+  std::map<std::string, int> stage_spans;
+  std::set<std::string> end_of_stream;
+  std::set<int> tracks_used;
+  for (const auto& event : trace["traceEvents"]) {
+    if (event["ph"] == "M" && event["name"] == "process_name") process_name = event["args"]["name"];
+    if (event["ph"] == "M" && event["name"] == "thread_name")
+      track_names[event["tid"]] = event["args"]["name"];
+    if (event["ph"] != "X") continue;
+    tracks_used.insert(event["tid"].get<int>());
+    if (event["cat"] == "stage") ++stage_spans[event["name"]];
+    if (event["cat"] == "end_of_stream") {
+      end_of_stream.insert(event["name"].get<std::string>());
+      EXPECT_EQ(track_names.count(event["tid"].get<int>()), 1u);
+    }
+  }
+  EXPECT_NE(process_name.find("loopgate run: dird-seqslam (gated) on " + dataset.string()), std::string::npos)
+      << process_name;
+  for (const char* stage : {"sync", "decode", "odometry", "gate", "describe", "match", "sink"})
+    EXPECT_EQ(stage_spans[stage], 60) << stage;
+  for (const int tid : tracks_used) EXPECT_EQ(track_names.count(tid), 1u) << "track " << tid << " unnamed";
+  EXPECT_EQ(end_of_stream.count("end of stream: method (matcher flush, search)"), 1u);
+  EXPECT_EQ(end_of_stream.count("end of stream: evaluation"), 1u);
+  EXPECT_NE(std::find_if(track_names.begin(), track_names.end(),
+                         [](const auto& named) { return named.second == "producer, end of stream"; }),
+            track_names.end());
   EXPECT_NE(output.find("p99 ms"), std::string::npos) << "profiler table on stderr";
 }
 

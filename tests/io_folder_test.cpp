@@ -91,6 +91,65 @@ TEST(IoFolder, TimesFileAndColour) {
   EXPECT_EQ(open_dataset(dir, lenient)->frame_count(), 2u);
 }
 
+// Images named by 19-digit nanosecond times (EuRoC's and TUM-VI's cam0/data/ as a plain folder): the names
+// are the frame times; a name that is not one among them names the file (strict) or is skipped (lenient).
+TEST(IoFolder, NanosecondFileNamesAreTheFrameTimes) {
+  const fs::path dir = testing::make_temp_dir("io-folder-ns");
+  const std::vector<Timestamp> times = {1403636579763555584, 1403636579813555456, 1403636579863555584,
+                                        1403636579913555456};
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    cv::imwrite((dir / (std::to_string(times[i]) + ".png")).string(), grey(static_cast<int>(10 * i)));
+  }
+  OpenOptions options;
+  options.folder_rate_hz = 4.0;  // not used: the names give the times
+  const auto d = open_dataset(dir, options);
+  EXPECT_EQ(d->layout(), "folder");
+  ASSERT_EQ(d->frame_count(), times.size());
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    EXPECT_EQ(d->frame_t_ns(i), times[i]);
+    EXPECT_EQ(d->source_index(i), i);
+  }
+  EXPECT_NEAR(cv::mean(d->load_image(2))[0], 20, 0.5);
+
+  // One image named otherwise among them: strict names it; lenient skips it, the others keep their number.
+  cv::imwrite((dir / "1403636579888888888_copy.png").string(), grey(99));
+  const DataError e = catch_data_error([&] { open_image_folder(dir); });
+  EXPECT_EQ(e.file(), dir / "1403636579888888888_copy.png");
+  EXPECT_NE(
+      e.message().find("image name is not a 19-digit nanosecond time like the other 4 of 5 images (e.g. "
+                       "1403636579763555584.png)"),
+      std::string::npos)
+      << e.what();
+  OpenOptions lenient;
+  lenient.strict = false;
+  const auto skipped = open_image_folder(dir, lenient);
+  ASSERT_EQ(skipped->frame_count(), times.size());
+  EXPECT_EQ(skipped->frame_t_ns(3), times[3]);
+  EXPECT_EQ(skipped->source_index(3), 4u);  // the odd file was number 3 in the folder
+  ASSERT_EQ(skipped->issues().size(), 1u);
+  EXPECT_EQ(skipped->issues()[0].file.filename(), "1403636579888888888_copy.png");
+  fs::remove(dir / "1403636579888888888_copy.png");
+
+  // The same time twice (png and jpg): the second is the problem.
+  cv::imwrite((dir / (std::to_string(times[1]) + ".jpg")).string(), grey(5));
+  const DataError twice = catch_data_error([&] { open_image_folder(dir); });
+  EXPECT_EQ(twice.file().filename(), std::to_string(times[1]) + ".png");
+  EXPECT_NE(
+      twice.message().find("second image for time 1403636579813555456 ns besides 1403636579813555456.jpg"),
+      std::string::npos)
+      << twice.what();
+  fs::remove(dir / (std::to_string(times[1]) + ".jpg"));
+
+  // Names of 19 digits beyond int64, or mostly other names: frames at folder_rate_hz as before.
+  cv::imwrite((dir / "a.png").string(), grey(1));
+  cv::imwrite((dir / "b.png").string(), grey(2));
+  cv::imwrite((dir / "c.png").string(), grey(3));
+  cv::imwrite((dir / "9999999999999999999.png").string(), grey(4));
+  const auto rate = open_image_folder(dir, options);
+  ASSERT_EQ(rate->frame_count(), 8u);
+  EXPECT_EQ(rate->frame_t_ns(1), 250'000'000);
+}
+
 TEST(IoFolder, DamagedImagesAndEmptyFolder) {
   const fs::path dir = testing::make_temp_dir("io-folder-bad");
   EXPECT_THROW(open_image_folder(dir), DataError);  // no images
@@ -104,10 +163,11 @@ TEST(IoFolder, DamagedImagesAndEmptyFolder) {
   ASSERT_EQ(d->frame_count(), 5u);
   EXPECT_NE(catch_data_error([&] { d->load_image(0); }).message().find("frame 0: cannot decode image"),
             std::string::npos);
-  EXPECT_NE(catch_data_error([&] { d->load_image(2); })
-                .message()
-                .find("image is 21x10, expected 20x10 like most frames (3 of 4 probed, e.g. frame 1 (a1.png))"),
-            std::string::npos);
+  EXPECT_NE(
+      catch_data_error([&] { d->load_image(2); })
+          .message()
+          .find("image is 21x10, expected 20x10 like most frames (3 of 4 probed, e.g. frame 1 (a1.png))"),
+      std::string::npos);
   EXPECT_NE(catch_data_error([&] { d->load_image(4); }).message().find("16-bit samples, expected 8-bit"),
             std::string::npos);
   EXPECT_EQ(d->load_image(3).at<unsigned char>(0, 0), 7);

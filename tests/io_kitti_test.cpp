@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -156,6 +157,10 @@ TEST(IoKitti, SubsetFolderTakesMetadataFromParent) {
     EXPECT_EQ(cv::norm(d->load_image(i), frame_image(expected[i]), cv::NORM_INF), 0.0);
   }
   EXPECT_EQ(d->ground_truth().size(), static_cast<std::size_t>(kFrames));  // the whole trajectory
+  // Every row of the parent's times.txt by its frame number: what times a 12-column odometry.file.
+  const auto source_times = d->source_times();
+  ASSERT_EQ(source_times.size(), static_cast<std::size_t>(kFrames));
+  for (int i = 0; i < kFrames; ++i) EXPECT_EQ(source_times[static_cast<std::size_t>(i)], i * kPeriod);
   ASSERT_TRUE(d->camera());
   EXPECT_EQ(d->camera()->width_px, kWidth);
   // The parent alone (no images) is a KITTI dataset with timestamps and poses only.
@@ -203,8 +208,7 @@ TEST(IoKitti, BadInput) {
   EXPECT_EQ(e3.file().filename(), image_name(3));
   EXPECT_NE(e3.message().find("frame 3: image file missing"), std::string::npos);
   const DataError e4 = catch_data_error([&] { d2->load_image(5); });
-  EXPECT_NE(e4.message().find("frame 5: image is 96x16, expected 48x16 like most frames"),
-            std::string::npos)
+  EXPECT_NE(e4.message().find("frame 5: image is 96x16, expected 48x16 like most frames"), std::string::npos)
       << e4.what();
   EXPECT_EQ(d2->load_image(4).cols, kWidth);
 
@@ -238,6 +242,123 @@ TEST(IoKitti, BadInput) {
   EXPECT_EQ(d4->ground_truth().size(), 2u);
   EXPECT_TRUE(d4->ground_truth_T_w_b(1));
   EXPECT_FALSE(d4->ground_truth_T_w_b(5));
+}
+
+// KITTI's colour cameras (data_odometry_color: image_2/ and image_3/ only, no image_0/): camera_index 2 or 3
+// picks the folder and calib.txt's P2 / P3; the colour images are read as grey.
+TEST(IoKitti, ColourCameras) {
+  const fs::path seq = testing::make_temp_dir("io-kitti-colour") / "00";
+  make_kitti(seq, seq / "image_2", {}, seq / "poses.txt");
+  // KITTI 00's calib.txt rows P2 and P3 (camera 2 sits 6 cm left of camera 0, camera 3 47 cm right).
+  write_file(seq / "calib.txt",
+             std::string(kCalib) +
+                 "P2: 7.188560000000e+02 0 6.071928000000e+02 4.538225000000e+01 0 7.188560000000e+02 "
+                 "1.852157000000e+02 -1.130887000000e-01 0 0 1 3.779761000000e-03\n"
+                 "P3: 7.188560000000e+02 0 6.071928000000e+02 -3.372877000000e+02 0 7.188560000000e+02 "
+                 "1.852157000000e+02 2.369057000000e+00 0 0 1 4.915215000000e-03\n");
+  for (const char* folder : {"image_2", "image_3"}) {
+    fs::create_directories(seq / folder);
+    for (int i = 0; i < kFrames; ++i) {
+      cv::Mat colour(kHeight, kWidth, CV_8UC3, cv::Scalar(10 + i, 100, 200 - i));  // BGR
+      if (folder[6] == '3') colour.setTo(cv::Scalar(200 - i, 100, 10 + i));
+      cv::imwrite((seq / folder / image_name(i)).string(), colour);
+    }
+  }
+  for (const int camera : {2, 3}) {
+    OpenOptions options;
+    options.camera_index = camera;
+    const auto d = open_dataset(seq, options);  // found as KITTI by image_2/ and image_3/ alone
+    EXPECT_EQ(d->layout(), "kitti");
+    ASSERT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
+    EXPECT_EQ(d->image_path(4).parent_path().filename(), "image_" + std::to_string(camera));
+    const cv::Mat grey = d->load_image(4);
+    ASSERT_EQ(grey.type(), CV_8UC1);
+    cv::Mat expected;
+    cv::cvtColor(cv::imread((seq / ("image_" + std::to_string(camera)) / image_name(4)).string()), expected,
+                 cv::COLOR_BGR2GRAY);
+    EXPECT_EQ(cv::norm(grey, expected, cv::NORM_INF), 0.0);
+    ASSERT_TRUE(d->camera());
+    // The camera's offset from camera 0 (the body): -K^-1 P[:, 3] of its row.
+    const double x_m = camera == 2 ? -(45.38225 - 607.1928 * 3.779761e-3) / 718.856
+                                   : -(-337.2877 - 607.1928 * 4.915215e-3) / 718.856;
+    EXPECT_NEAR(d->camera()->T_b_c.translation().x(), x_m, 1e-12) << camera;
+    EXPECT_NEAR(d->camera()->T_b_c.translation().x(), camera == 2 ? -0.06 : 0.47, 0.01);
+    EXPECT_EQ(d->ground_truth_T_w_b(4)->matrix(), pose(4).matrix());  // ground truth stays camera 0's
+  }
+  OpenOptions bad;
+  bad.camera_index = 4;
+  EXPECT_THROW(open_kitti(seq, bad), ConfigError);
+}
+
+// Pose files with 13 columns, a time in seconds first: each pose is timed by itself (the rows need not be one
+// per frame) and interpolated to the frame times.
+TEST(IoKitti, PosesWithTimeColumn) {
+  const fs::path seq = testing::make_temp_dir("io-kitti-timed") / "04";
+  make_kitti(seq, seq / "image_0", all_frames(), seq / "poses.txt");
+  std::string text = "# t_s r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz\n";
+  for (int i = 0; i < kFrames; i += 2) {  // every other frame
+    const Eigen::Matrix4d M = pose(i).matrix();
+    char time[32];
+    std::snprintf(time, sizeof(time), "%.9f", ns_to_s(i * kPeriod));
+    text += time;
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 4; ++c) text += " " + std::to_string(M(r, c));
+    }
+    text += "\n";
+  }
+  write_file(seq / "poses.txt", text);
+  const auto d = open_kitti(seq);
+  ASSERT_EQ(d->ground_truth().size(), static_cast<std::size_t>(kFrames / 2));
+  EXPECT_EQ(d->ground_truth()[1].t_ns, 2 * kPeriod);
+  EXPECT_TRUE(d->ground_truth_T_w_b(4)->matrix().isApprox(pose(4).matrix(), 1e-6));
+  const Eigen::Isometry3d between = *d->ground_truth_T_w_b(3);  // interpolated between frames 2 and 4
+  EXPECT_NEAR(between.translation().z(), 0.9 * 3, 1e-5);
+  EXPECT_TRUE(d->issues().empty());
+  // The public reader takes the times from the file too (times.txt is not needed).
+  const auto poses = read_kitti_poses(seq / "poses.txt", seq / "no-such-times.txt");
+  ASSERT_EQ(poses.size(), static_cast<std::size_t>(kFrames / 2));
+  EXPECT_EQ(poses[2].t_ns, 4 * kPeriod);
+}
+
+TEST(IoKitti, PoseColumnCountErrorsNameFileAndLine) {
+  const fs::path seq = testing::make_temp_dir("io-kitti-columns") / "02";
+  make_kitti(seq, seq / "image_0", all_frames(), seq / "poses.txt");
+  const std::string twelve = "1 0 0 0 0 1 0 0 0 0 1 0";
+  // A 14-column row: neither format (first data row), or not the format of the first row.
+  write_file(seq / "poses.txt", "# poses\n0.2 " + twelve + " 7\n" + twelve + "\n");
+  const DataError e1 = catch_data_error([&] { open_kitti(seq); });
+  EXPECT_EQ(e1.file(), seq / "poses.txt");
+  EXPECT_EQ(e1.line(), 2u);
+  EXPECT_NE(
+      e1.message().find("expected 12 columns (row-major 3x4 T_w_cam0) or 13 (time [s], then the 12), got 14"),
+      std::string::npos)
+      << e1.what();
+  write_file(seq / "poses.txt", twelve + "\n" + twelve + "\n0.2 " + twelve + " 7\n");
+  const DataError e1b = catch_data_error([&] { open_kitti(seq); });
+  EXPECT_EQ(e1b.line(), 3u);
+  EXPECT_NE(e1b.message().find("expected 12 columns like the first data row (no time), got 14"),
+            std::string::npos)
+      << e1b.what();
+  // A 12-column row in a 13-column file.
+  write_file(seq / "poses.txt", "0.0 " + twelve + "\n0.1 " + twelve + "\n\n" + twelve + "\n");
+  const DataError e2 = catch_data_error([&] { open_kitti(seq); });
+  EXPECT_EQ(e2.line(), 4u);
+  EXPECT_NE(e2.message().find("expected 13 columns like the first data row (a time first), got 12"),
+            std::string::npos)
+      << e2.what();
+  // Times going back in a 13-column file.
+  write_file(seq / "poses.txt",
+             "0.0 " + twelve + "\n0.2 " + twelve + "\n0.1 " + twelve + "\n0.3 " + twelve + "\n");
+  const DataError e3 = catch_data_error([&] { open_kitti(seq); });
+  EXPECT_EQ(e3.line(), 3u);
+  EXPECT_NE(e3.message().find("time 0.100000000 s is before line 2"), std::string::npos) << e3.what();
+  // Lenient: the bad row is skipped and recorded, the others are the ground truth.
+  OpenOptions lenient;
+  lenient.strict = false;
+  const auto d = open_kitti(seq, lenient);
+  EXPECT_EQ(d->ground_truth().size(), 3u);
+  ASSERT_EQ(d->issues().size(), 1u);
+  EXPECT_EQ(d->issues()[0].line, 3u);
 }
 
 TEST(IoKitti, RealThumbs) {

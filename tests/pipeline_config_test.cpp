@@ -67,6 +67,9 @@ TEST(PipelineConfig, BadValuesNameTheKey) {
   EXPECT_NE(error_of({"run.frames=a:b"}).find("run.frames"), std::string::npos);
   EXPECT_NE(error_of({"odometry.source=ekf2"}).find("odometry.source: 'ekf2' is not one of drift|file"),
             std::string::npos);
+  EXPECT_NE(error_of({"odometry.file_format=csv"})
+                .find("odometry.file_format: 'csv' is not one of auto|tum|kitti|euroc"),
+            std::string::npos);
   EXPECT_NE(error_of({"odometry.sorce=drift"}).find("unknown key 'odometry.sorce'"), std::string::npos);
   EXPECT_NE(error_of({"bogus.radius=1"}).find("unknown section 'bogus'"), std::string::npos);
   EXPECT_NE(error_of({"output.progress=maybe"}).find("output.progress"), std::string::npos);

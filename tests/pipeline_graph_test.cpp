@@ -2,6 +2,8 @@
 
 #include <atomic>
 #include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -140,6 +142,7 @@ TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
   PipelineConfig config = base_config(1);
   config.run.rate = "50";
   config.run.max_in_flight = 2;
+  config.output.trace = true;
   const auto out = testing::make_temp_dir("pipeline-rate");
   const RunResult result = run_pipeline(config, dataset, out);
   EXPECT_FALSE(result.failed) << result.error;
@@ -150,6 +153,22 @@ TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
   const auto rows = read_csv(out / "frames.csv");
   ASSERT_EQ(rows.size(), result.frames_processed);
   for (std::size_t i = 0; i < rows.size(); ++i) EXPECT_EQ(rows[i][0], std::to_string(i));  // contiguous seq
+  // Issue 14: trace.json shows each dropped frame and each deadline miss as an instant event, with its frame.
+  const auto trace = nlohmann::json::parse(testing::read_file(out / "trace.json"));
+  std::set<std::int64_t> dropped, missed;
+  std::set<std::int64_t> processed;
+  for (const auto& row : rows) processed.insert(std::stoll(row[1]));
+  for (const auto& event : trace["traceEvents"]) {
+    if (event["name"] == "dropped frame") {
+      EXPECT_EQ(event["ph"], "i");
+      dropped.insert(event["args"]["frame"].get<std::int64_t>());
+    }
+    if (event["name"] == "deadline miss") missed.insert(event["args"]["frame"].get<std::int64_t>());
+  }
+  EXPECT_EQ(dropped.size(), result.frames_dropped);
+  EXPECT_EQ(missed.size(), result.deadline_misses);
+  for (const std::int64_t frame : dropped) EXPECT_EQ(processed.count(frame), 0u) << frame;
+  for (const std::int64_t frame : missed) EXPECT_EQ(processed.count(frame), 1u) << frame;
 }
 
 // The stop request comes on an event, not a timer (issue 15: a fixed 150 ms timer failed under TSan, where

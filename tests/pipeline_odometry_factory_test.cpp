@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "core/error.hpp"
@@ -152,6 +153,50 @@ TEST(PipelineOdometryFactory, FileSourceReadsTheTrajectory) {
     FAIL() << "expected DataError";
   } catch (const DataError& e) {
     EXPECT_NE(std::string(e.what()).find("no poses"), std::string::npos) << e.what();
+  }
+}
+
+// odometry.file in KITTI (12 columns: line k is frame k, timed by the dataset; 13: a time first) and EuRoC
+// formats as well as TUM (issue 14), told apart by their content or named by odometry.file_format.
+TEST(PipelineOdometryFactory, FileSourceReadsKittiAndEurocFormats) {
+  const testing::FakeDataset dataset(10);
+  const fs::path dir = testing::make_temp_dir("odometry-factory-formats");
+  std::vector<Eigen::Isometry3d> matrices;
+  std::vector<GroundTruthState> states;
+  for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
+    matrices.push_back(*dataset.ground_truth_T_w_b(i));
+    matrices.back().translation().z() = 5.0;
+    GroundTruthState s;
+    s.t_ns = dataset.frame_t_ns(i);
+    s.T_w_b = matrices.back();
+    s.T_w_b.translation().z() = 6.0;
+    states.push_back(s);
+  }
+  write_kitti_poses(dir / "poses.txt", matrices);
+  write_euroc_groundtruth(dir / "data.csv", states);
+  OdometryConfig config = source("file");
+  for (const auto& [file, format, z_m] : {std::tuple{"poses.txt", TrajectoryFormat::kAuto, 5.0},
+                                          std::tuple{"poses.txt", TrajectoryFormat::kKitti, 5.0},
+                                          std::tuple{"data.csv", TrajectoryFormat::kAuto, 6.0},
+                                          std::tuple{"data.csv", TrajectoryFormat::kEuroc, 6.0}}) {
+    config.file = (dir / file).string();
+    config.file_format = format;
+    const auto odometry = make_odometry_source(config, dataset);
+    const std::vector<PoseEstimate> estimates = run(*odometry, dataset);
+    EXPECT_EQ(estimates[4].status, OdometryStatus::kTracking) << file;
+    EXPECT_NEAR(estimates[4].T_w_b.translation().z(), z_m, 1e-9) << file;
+    EXPECT_TRUE(estimates[4].T_w_b.linear().isApprox(matrices[4].linear(), 1e-12)) << file;
+  }
+  // Named wrongly: the reader's error, naming the file and the line.
+  config.file = (dir / "poses.txt").string();
+  config.file_format = TrajectoryFormat::kEuroc;
+  try {
+    make_odometry_source(config, dataset);
+    FAIL() << "expected DataError";
+  } catch (const DataError& e) {
+    EXPECT_EQ(e.file(), dir / "poses.txt");
+    EXPECT_EQ(e.line(), 1u);
+    EXPECT_NE(e.message().find("expected 8, 11, 14 or 17 columns"), std::string::npos) << e.what();
   }
 }
 

@@ -6,6 +6,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <string>
@@ -108,6 +110,47 @@ TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
   EXPECT_DOUBLE_EQ(pr["curve"].back()["precision"].get<double>(), 1.0);
   // The aligned pairs: 2 for the first and last query frame, 3 for the others.
   EXPECT_EQ(read_csv(out / "truth_loops.csv").size(), 3 * kPeriod - 2);
+  EXPECT_FALSE(std::filesystem::exists(out / "trace.json"));  // output.trace is off
+}
+
+// --trace in two-sequence mode (issue 14): the process named, the phases on the main track, and the
+// describe blocks on the threads that did them, covering every frame of both sequences once.
+TEST(PipelineTwoSequence, TraceShowsPhasesAndBlocks) {
+  const RevisitDataset reference(kPeriod, 1, 0);
+  const RevisitDataset query(kPeriod, 1, 12345);
+  for (const char* method : {"dird", "seqslam"}) {
+    PipelineConfig config = dird_config();
+    if (std::string(method) == "seqslam") config.run.method = Detector::kSeqSlam;
+    config.output.trace = true;
+    config.run.threads = 2;
+    const auto out = testing::make_temp_dir("pipeline-two-seq-trace");
+    run_two_sequences(config, reference, query, out);
+    const auto trace = nlohmann::json::parse(testing::read_file(out / "trace.json"));
+    std::string process_name;
+    std::set<std::string> phases;
+    std::map<std::string, std::size_t> block_frames;
+    for (const auto& event : trace["traceEvents"]) {
+      if (event["name"] == "process_name") process_name = event["args"]["name"];
+      if (event["ph"] != "X") continue;
+      if (event["cat"] == "phase") {
+        EXPECT_EQ(event["tid"].get<int>(), 0);
+        phases.insert(event["name"].get<std::string>());
+      }
+      if (event["cat"] == "block") {
+        EXPECT_GE(event["tid"].get<int>(), 0);
+        EXPECT_LT(event["tid"].get<int>(), 2);
+        unsigned begin = 0, end = 0;
+        ASSERT_EQ(std::sscanf(event["args"]["detail"].get<std::string>().c_str(), "[%u, %u)", &begin, &end),
+                  2);
+        block_frames[event["name"].get<std::string>()] += end - begin;
+      }
+    }
+    EXPECT_NE(process_name.find("two sequences"), std::string::npos) << process_name;
+    EXPECT_EQ(phases.count("outputs and evaluation"), 1u) << method;
+    const std::string step = std::string(method) == "dird" ? "describe" : "preprocess";
+    EXPECT_EQ(block_frames[step + " reference"], kPeriod) << method;
+    EXPECT_EQ(block_frames[step + " query"], kPeriod) << method;
+  }
 }
 
 // scale.mode online in two-sequence mode: mu and sigma from the distances of every (reference, query) pair

@@ -169,9 +169,11 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
       ->capture_default_str()
       ->check(CLI::IsMember({"l1", "l2"}));
   cmd->add_flag("--flip-vertical", opt->flip_vertical, "Read images bottom-up (reference tool)");
-  cmd->add_option("--camera", opt->camera, "Camera of a stereo layout (0 or 1)")
+  cmd->add_option(
+         "--camera", opt->camera,
+         "Camera: 0, 1 (EuRoC cam0/cam1, KITTI image_0/image_1), 2, 3 (KITTI colour image_2/image_3)")
       ->capture_default_str()
-      ->check(CLI::Range(0, 1));
+      ->check(CLI::Range(0, 3));
   cmd->add_option("--margin", opt->margin, "Safety margin in frames (pairs closer in time are not used)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);

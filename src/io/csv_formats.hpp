@@ -18,6 +18,8 @@ namespace loopgate::io_detail {
 // or is the error (strict). A file with more than half of its rows bad is an error in lenient mode too.
 std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& log);
 std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log);
+// TUM-VI mav0/mocap0/data.csv: "t_ns, p_RS_R xyz [m], q_RS wxyz", exactly these 8 columns.
+std::vector<GroundTruthState> read_mocap_groundtruth(const std::filesystem::path& csv_file, IssueLog& log);
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log);
 // Out-of-order or duplicated samples are reported and dropped like the rows of the other tables: kept in file
 // order, one outlier (a typo) made every later sample look out of order and left the frames without IMU.
@@ -30,7 +32,15 @@ Eigen::Isometry3d read_yaml_T_BS(const std::filesystem::path& yaml_file);
 // instead of being removed. Times: the rows outside the longest strictly increasing run are bad.
 std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem::path& times_file,
                                                            IssueLog& log);
-std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
-                                                                   IssueLog& log);
+// A KITTI pose row: 12 numbers (row-major 3x4 T_w_cam0), or 13 with a time in seconds first.
+struct KittiPoseRow {
+  std::optional<Timestamp> t_ns;  // 13-column files only
+  Eigen::Isometry3d T_w_cam0 = Eigen::Isometry3d::Identity();
+};
+// The first good row fixes the column count (12 or 13; any other count is that line's error, and so is a
+// later row of the other count). In a 13-column file the rows outside the longest run of strictly increasing
+// times are bad too.
+std::vector<std::optional<KittiPoseRow>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
+                                                              IssueLog& log);
 
 }  // namespace loopgate::io_detail

@@ -37,6 +37,16 @@ std::span<const ImuSample> Dataset::imu_between(Timestamp t_begin_ns, Timestamp 
   return std::span<const ImuSample>(samples).subspan(begin, end - begin);
 }
 
+std::vector<std::optional<Timestamp>> Dataset::source_times() const {
+  std::vector<std::optional<Timestamp>> times;
+  for (std::size_t frame = 0; frame < frame_count(); ++frame) {
+    const std::size_t index = source_index(frame);
+    if (index >= times.size()) times.resize(index + 1);
+    times[index] = frame_t_ns(frame);
+  }
+  return times;
+}
+
 namespace io_detail {
 
 namespace {
@@ -285,13 +295,15 @@ std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const Op
       fs::is_directory(dir / "imu0", ec)) {
     return open_euroc(dir, options);
   }
-  if (fs::is_directory(dir / "image_0", ec) || fs::is_directory(dir / "image_1", ec))
-    return open_kitti(dir, options);
+  for (const char* camera : {"image_0", "image_1", "image_2", "image_3"}) {
+    if (fs::is_directory(dir / camera, ec)) return open_kitti(dir, options);
+  }
   if (!io_detail::list_image_files(dir).empty()) return open_image_folder(dir, options);
   if (fs::is_regular_file(dir / "times.txt", ec)) return open_kitti(dir, options);
-  throw DataError(dir,
-                  "no dataset found: expected mav0/ or cam0/ (EuRoC), image_0/ or times.txt (KITTI), "
-                  "or image files (png, jpg, pgm)");
+  throw DataError(
+      dir,
+      "no dataset found: expected mav0/ or cam0/ (EuRoC), image_0/ .. image_3/ or times.txt (KITTI), "
+      "or image files (png, jpg, pgm)");
 }
 
 }  // namespace loopgate

@@ -31,7 +31,8 @@ struct OpenOptions {
   // longest run of strictly increasing times). A file with more than half of its rows bad fails in both
   // modes.
   bool strict = true;
-  // Which camera of a stereo layout: 0 (EuRoC cam0 / KITTI image_0) or 1.
+  // Which camera: 0 or 1 (EuRoC cam0 / cam1, KITTI grey image_0 / image_1), 2 or 3 (KITTI colour image_2 /
+  // image_3, with calib.txt's P2 / P3; images are converted to grey).
   int camera_index = 0;
   // Image folder only: frame period when no timestamps file is present.
   double folder_rate_hz = 1.0;
@@ -86,11 +87,16 @@ class Dataset {
   // the file-order run from the first sample at or after t_begin_ns up to (excluding) the first later
   // one at or after t_end_ns, i.e. what a streaming consumer would see.
   virtual std::span<const ImuSample> imu_between(Timestamp t_begin_ns, Timestamp t_end_ns) const;
+  // The time of every frame of the original sequence, by source index: element k is the time of the frame
+  // whose source_index() is k (nullopt when there is none). KITTI gives every row of times.txt, also in a
+  // subset folder that holds only a few of the images. This times a trajectory with one pose per frame of the
+  // sequence and no times of its own (a 12-column KITTI pose file as odometry.file).
+  virtual std::vector<std::optional<Timestamp>> source_times() const;
 };
 
-// Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ or times.txt),
-// else an image folder; a file ending in .bag is a ROS1 bag (open_rosbag). Throws DataError naming the path
-// when nothing usable is there.
+// Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ .. image_3/ or
+// times.txt), else an image folder; a file ending in .bag is a ROS1 bag (open_rosbag). Throws DataError
+// naming the path when nothing usable is there.
 std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const OpenOptions& options = {});
 
 std::unique_ptr<Dataset> open_euroc(const std::filesystem::path& dir, const OpenOptions& options = {});

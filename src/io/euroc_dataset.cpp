@@ -2,16 +2,24 @@
 //   cam<k>/data.csv (+ cam<k>/data/*.png, may be absent), cam<k>/sensor.yaml   required / optional
 //   imu0/data.csv, imu0/sensor.yaml                                             optional
 //   state_groundtruth_estimate0/data.csv (+ sensor.yaml T_BS)                   optional
+//   mocap0/data.csv (+ sensor.yaml T_BS), TUM-VI                                optional
+//   ../camchain-imucam.yaml, ../imu.yaml (or dso/...), Kalibr, TUM-VI            optional
 // Ground truth is the body (= IMU for EuRoC) pose: when the ground-truth sensor.yaml has a T_BS that is
 // not the identity, the estimated sensor pose T_w_s is turned into T_w_b = T_w_s * T_BS^-1.
-// Without state_groundtruth_estimate0/data.csv, a TUM file "groundtruth_tum.txt" beside mav0/ (as in
-// the shared V1_01_easy_micro excerpt) or inside it is used instead.
+// Without state_groundtruth_estimate0/data.csv, TUM-VI's mocap0/data.csv (t_ns, p_xyz, q_wxyz: TUM-VI gives
+// the pose of the IMU, its motion-capture marker frame moved to the IMU with their calibration, so it is the
+// body pose as it is; a mocap0/sensor.yaml T_BS other than the identity is applied like the ground truth's),
+// else a TUM file "groundtruth_tum.txt" beside mav0/ (as in the shared V1_01_easy_micro excerpt) or inside
+// it. Calibration without cam<k>/sensor.yaml or imu0/sensor.yaml: Kalibr files (kalibr_calibration.hpp) in
+// the tree's root (the folder holding mav0/) or its dso/ folder, as TUM-VI ships them: camchain-imucam.yaml
+// or camchain.yaml for the camera, imu.yaml or imu_config.yaml for the IMU.
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
+#include "io/kalibr_calibration.hpp"
 #include "io/loaded_dataset.hpp"
 #include "io/trajectory_io.hpp"
 
@@ -43,35 +51,92 @@ bool is_identity(const Eigen::Isometry3d& T) {
   return T.matrix().isApprox(Eigen::Matrix4d::Identity(), 0.0);
 }
 
+// The first of `names` that is a file in one of `dirs` (in that order).
+std::optional<fs::path> first_file(const std::vector<fs::path>& dirs,
+                                   std::initializer_list<const char*> names) {
+  std::error_code ec;
+  for (const fs::path& dir : dirs) {
+    for (const char* name : names) {
+      const fs::path file = dir / name;
+      if (fs::exists(file, ec)) require_regular_file(file);  // a FIFO would block open() forever
+      if (fs::is_regular_file(file, ec)) return file;
+    }
+  }
+  return std::nullopt;
+}
+
+// Where Kalibr files are looked for: the tree's root (the folder holding mav0/, also when `dir` is mav0
+// itself) and its dso/ folder (TUM-VI).
+std::vector<fs::path> kalibr_dirs(const fs::path& dir, const fs::path& mav) {
+  fs::path root = dir;
+  if (mav == dir) {
+    std::error_code ec;
+    fs::path absolute = fs::absolute(dir, ec).lexically_normal();
+    if (absolute.filename().empty()) absolute = absolute.parent_path();
+    if (absolute.filename() == "mav0") root = absolute.parent_path();
+  }
+  return {root, root / "dso"};
+}
+
+// Moves ground truth given for a sensor frame to the body frame when the sensor.yaml beside it has a T_BS
+// that is not the identity.
+void apply_sensor_T_BS(const fs::path& gt_dir, io_detail::IssueLog& log, std::vector<GroundTruthState>& gt) {
+  const auto T_BS = read_optional_yaml(gt_dir / "sensor.yaml", log,
+                                       [](const fs::path& f) { return io_detail::read_yaml_T_BS(f); });
+  if (!T_BS || is_identity(*T_BS)) return;
+  const Eigen::Isometry3d T_s_b = T_BS->inverse();
+  for (GroundTruthState& s : gt) s.T_w_b = s.T_w_b * T_s_b;
+  spdlog::info("{}: ground truth moved from its sensor frame to the body frame (T_BS not identity)",
+               (gt_dir / "data.csv").string());
+}
+
 }  // namespace
 
 namespace io_detail {
 
-void read_euroc_calibration(const fs::path& mav, int camera_index, IssueLog& log, LoadedDataset& d) {
+void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera_index, IssueLog& log,
+                            LoadedDataset& d) {
+  std::error_code ec;
   const std::string cam_name = "cam" + std::to_string(camera_index);
   const fs::path cam_dir = mav / cam_name;
-  d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
-                                            [](const fs::path& f) { return read_euroc_camera_yaml(f); });
-  if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
-  d.imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
-                                   [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+  const std::vector<fs::path> kalibr = kalibr_dirs(dir, mav);
+  if (fs::exists(cam_dir / "sensor.yaml", ec)) {
+    d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
+                                              [](const fs::path& f) { return read_euroc_camera_yaml(f); });
+    if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
+  } else if (const auto chain = first_file(kalibr, {"camchain-imucam.yaml", "camchain.yaml"})) {
+    d.camera_calibration = read_optional_yaml(
+        *chain, log, [&](const fs::path& f) { return read_kalibr_camchain(f, camera_index); });
+    if (d.camera_calibration) {
+      d.calibration_size_source = chain->filename().string() + " " + cam_name + ".resolution";
+      spdlog::info("{}: no {}/sensor.yaml: camera calibration from Kalibr {}", dir.string(), cam_name,
+                   chain->string());
+    }
+  }
+  if (fs::exists(mav / "imu0" / "sensor.yaml", ec)) {
+    d.imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
+                                     [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+  } else if (const auto imu_yaml = first_file(kalibr, {"imu.yaml", "imu_config.yaml"})) {
+    d.imu_calib = read_optional_yaml(*imu_yaml, log, [](const fs::path& f) { return read_kalibr_imu(f); });
+    if (d.imu_calib) {
+      spdlog::info("{}: no imu0/sensor.yaml: IMU calibration from Kalibr {}", dir.string(),
+                   imu_yaml->string());
+    }
+  }
 }
 
-void read_euroc_ground_truth(const fs::path& mav, IssueLog& log, LoadedDataset& d) {
+void read_euroc_ground_truth(const fs::path& dir, const fs::path& mav, IssueLog& log, LoadedDataset& d) {
   std::error_code ec;
   const fs::path gt_dir = mav / "state_groundtruth_estimate0";
-  const fs::path gt_csv = gt_dir / "data.csv";
-  if (fs::exists(gt_csv, ec)) {
-    d.gt = read_euroc_groundtruth(gt_csv, log);
-    // The ground-truth sensor.yaml carries only T_BS (no camera or IMU keys).
-    const auto T_BS =
-        read_optional_yaml(gt_dir / "sensor.yaml", log, [](const fs::path& f) { return read_yaml_T_BS(f); });
-    if (T_BS && !is_identity(*T_BS)) {
-      const Eigen::Isometry3d T_s_b = T_BS->inverse();
-      for (GroundTruthState& s : d.gt) s.T_w_b = s.T_w_b * T_s_b;
-      spdlog::info("{}: ground truth moved from its sensor frame to the body frame (T_BS not identity)",
-                   gt_csv.string());
-    }
+  const fs::path mocap_dir = mav / "mocap0";
+  if (fs::exists(gt_dir / "data.csv", ec)) {
+    d.gt = read_euroc_groundtruth(gt_dir / "data.csv", log);
+    apply_sensor_T_BS(gt_dir, log, d.gt);
+  } else if (fs::exists(mocap_dir / "data.csv", ec)) {
+    d.gt = read_mocap_groundtruth(mocap_dir / "data.csv", log);
+    apply_sensor_T_BS(mocap_dir, log, d.gt);
+    spdlog::info("{}: ground truth from {} (TUM-VI motion capture, the IMU's pose)", dir.string(),
+                 (mocap_dir / "data.csv").string());
   } else {
     for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
       if (fs::exists(tum, ec)) require_regular_file(tum);
@@ -82,7 +147,7 @@ void read_euroc_ground_truth(const fs::path& mav, IssueLog& log, LoadedDataset& 
         s.T_w_b = pose.T_w_b;
         d.gt.push_back(s);
       }
-      spdlog::info("{}: ground truth from {}", mav.string(), tum.string());
+      spdlog::info("{}: ground truth from {}", dir.string(), tum.string());
       break;
     }
   }
@@ -92,7 +157,9 @@ void read_euroc_ground_truth(const fs::path& mav, IssueLog& log, LoadedDataset& 
 
 std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& options) {
   if (options.camera_index != 0 && options.camera_index != 1) {
-    throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
+    throw ConfigError(
+        "camera_index: " + std::to_string(options.camera_index) +
+        ", expected 0 or 1 for the EuRoC layout (cam0, cam1; 2 and 3 are KITTI's colour cameras)");
   }
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw DataError(dir, "EuRoC dataset directory not found");
@@ -133,8 +200,8 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
                  data_dir.string(), missing, entries.size());
   }
 
-  // Calibration.
-  io_detail::read_euroc_calibration(mav, options.camera_index, log, *d);
+  // Calibration: the EuRoC sensor.yaml files, else Kalibr files (TUM-VI).
+  io_detail::read_euroc_calibration(dir, mav, options.camera_index, log, *d);
 
   // IMU.
   const fs::path imu_csv = mav / "imu0" / "data.csv";
@@ -144,7 +211,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Ground truth.
-  io_detail::read_euroc_ground_truth(mav, log, *d);
+  io_detail::read_euroc_ground_truth(dir, mav, log, *d);
 
   d->finish();
   io_detail::log_summary(*d);

@@ -1,10 +1,16 @@
 // Image folder reader for appearance-only sets (e.g. Nordland): every image file directly in DIR, in
 // natural order (img2 before img10). Frame times come from an optional DIR/times.txt (seconds, one row
-// per image, strictly increasing); without it frame i is at i / OpenOptions::folder_rate_hz seconds.
-// No IMU, no ground truth, no calibration.
+// per image, strictly increasing); without it, from the file names when they are 19-digit integers
+// (nanosecond times, as EuRoC and TUM-VI name their images: 1403636579763555584.png), else frame i is at i /
+// OpenOptions::folder_rate_hz seconds. In a folder of nanosecond names (more than half of its images), an
+// image named otherwise, or a second image of the same time, is a problem (strict: the error; lenient: the
+// file is skipped and every other image keeps its number, its position in the folder). No IMU, no ground
+// truth, no calibration.
 #include <spdlog/spdlog.h>
 
+#include <charconv>
 #include <cmath>
+#include <optional>
 
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
@@ -13,6 +19,61 @@
 #include "io/loaded_dataset.hpp"
 
 namespace loopgate {
+
+namespace {
+
+constexpr std::size_t kNsNameDigits = 19;  // nanoseconds since 1970: 19 digits from 2001 to 2286
+
+// The time of an image named by 19 digits of nanoseconds, else nullopt.
+std::optional<Timestamp> ns_name(const std::filesystem::path& file) {
+  const std::string stem = file.stem().string();
+  if (stem.size() != kNsNameDigits || stem.find_first_not_of("0123456789") != std::string::npos) {
+    return std::nullopt;
+  }
+  Timestamp t_ns = 0;
+  const auto [ptr, ec] = std::from_chars(stem.data(), stem.data() + stem.size(), t_ns);
+  if (ec != std::errc{} || ptr != stem.data() + stem.size()) return std::nullopt;  // beyond int64
+  return t_ns;
+}
+
+// Frames timed by their nanosecond names; false (nothing added) when at most half of the names are such.
+bool frames_from_ns_names(const std::vector<std::filesystem::path>& files, io_detail::IssueLog& log,
+                          io_detail::LoadedDataset& d) {
+  std::vector<std::optional<Timestamp>> times;
+  std::size_t named = 0;
+  for (const auto& file : files) {
+    times.push_back(ns_name(file));
+    if (times.back()) ++named;
+  }
+  if (named == 0 || 2 * named <= files.size()) return false;
+  // Natural order is time order for names of equal length; equal stems (a.png, a.jpg) are the one problem
+  // left.
+  std::string example;  // a good name, for the message about the others
+  for (std::size_t i = 0; i < files.size() && example.empty(); ++i) {
+    if (times[i]) example = files[i].filename().string();
+  }
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    if (!times[i]) {
+      log.report(files[i], 0,
+                 "image name is not a 19-digit nanosecond time like the other " + std::to_string(named) +
+                     " of " + std::to_string(files.size()) + " images (e.g. " + example +
+                     "), so it has no time (file ignored)");
+      continue;
+    }
+    if (!d.frames.empty() && *times[i] <= d.frames.back().t_ns) {
+      log.report(files[i], 0,
+                 "second image for time " + std::to_string(*times[i]) + " ns besides " +
+                     d.frames.back().image.filename().string() + " (file ignored)");
+      continue;
+    }
+    d.frames.push_back(io_detail::FrameEntry{*times[i], files[i], i});
+  }
+  spdlog::info("{}: frame times from the image names (19-digit nanoseconds) of {} images",
+               d.root_dir.string(), d.frames.size());
+  return true;
+}
+
+}  // namespace
 
 std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, const OpenOptions& options) {
   namespace fs = std::filesystem;
@@ -55,7 +116,7 @@ std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, con
           "position in the folder) in frames.csv and loops.csv, which shows the gap",
           times_file.string(), rejected);
     }
-  } else {
+  } else if (!frames_from_ns_names(files, log, *d)) {
     for (std::size_t i = 0; i < files.size(); ++i) {
       d->frames.push_back(
           io_detail::FrameEntry{s_to_ns(static_cast<double>(i) / options.folder_rate_hz), files[i], i});

@@ -1,7 +1,10 @@
-// KITTI odometry layout reader. DIR holds image_0/ (image_1/ with camera_index 1) with images named by
-// frame number (000000.png ...), times.txt (seconds, one row per frame), optional calib.txt (P0..P3) and
-// ground truth as poses.txt, poses/NN.txt or, in the official tree, ../../poses/NN.txt (NN = DIR's name).
-// The body frame is camera 0 (KITTI poses are T_w_cam0).
+// KITTI odometry layout reader. DIR holds image_<k>/ (k = camera_index: 0, 1 the grey cameras, 2, 3 the
+// colour ones, whose images are converted to grey) with images named by frame number (000000.png ...),
+// times.txt (seconds, one row per frame), optional calib.txt (P0..P3: the camera's row P<k>) and ground truth
+// as poses.txt, poses/NN.txt or, in the official tree, ../../poses/NN.txt (NN = DIR's name). The body frame
+// is camera 0 (KITTI poses are T_w_cam0); the camera's offset from it comes from P<k>. A pose file has 12
+// numbers per row (row i is frame i, timed by times.txt), or 13 with a time in seconds first (each row timed
+// by itself: the rows need not be one per frame).
 //
 // Two ways frames are defined:
 //  - times.txt inside DIR (the normal layout): one frame per row of times.txt; frame i shows image
@@ -14,6 +17,7 @@
 // Without calib.txt camera() is empty; with it, the size is that of the first decodable image.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
 #include <map>
@@ -60,8 +64,9 @@ std::optional<fs::path> first_existing(const std::vector<fs::path>& candidates) 
 }  // namespace
 
 std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& options) {
-  if (options.camera_index != 0 && options.camera_index != 1) {
-    throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
+  if (options.camera_index < 0 || options.camera_index > 3) {
+    throw ConfigError("camera_index: " + std::to_string(options.camera_index) +
+                      ", expected 0..3 (image_0, image_1 grey; image_2, image_3 colour)");
   }
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw DataError(dir, "KITTI sequence directory not found");
@@ -90,6 +95,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
 
   const fs::path times_file = meta_dir / "times.txt";
   const std::vector<std::optional<Timestamp>> times = io_detail::read_kitti_time_rows(times_file, log);
+  d->source_time_table = times;
 
   // Image files by frame number.
   std::map<std::size_t, fs::path> images;
@@ -160,18 +166,32 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
                             (sequence + ".txt"));
   if (const auto poses_file = first_existing(pose_candidates)) {
     const auto rows = io_detail::read_kitti_pose_rows(*poses_file, log);
-    if (rows.size() != times.size()) {
-      log.report(*poses_file, 0,
-                 std::to_string(rows.size()) + " poses, expected " + std::to_string(times.size()) +
-                     " (the rows of " + times_file.string() + ")" +
-                     (rows.size() > times.size() ? "; extra poses ignored" : "; ground truth ends early"));
-    }
-    for (std::size_t i = 0; i < std::min(rows.size(), times.size()); ++i) {
-      if (!times[i] || !rows[i]) continue;
-      GroundTruthState s;
-      s.t_ns = *times[i];
-      s.T_w_b = *rows[i];
-      d->gt.push_back(s);
+    const bool timed = std::any_of(rows.begin(), rows.end(), [](const auto& r) { return r && r->t_ns; });
+    if (timed) {
+      // 13 columns: each pose has its own time; it is interpolated to the frame times like EuRoC's.
+      for (const auto& row : rows) {
+        if (!row) continue;
+        GroundTruthState s;
+        s.t_ns = *row->t_ns;
+        s.T_w_b = row->T_w_cam0;
+        d->gt.push_back(s);
+      }
+      spdlog::info("{}: ground truth from {}, timed by its first column", dir.string(), poses_file->string());
+    } else {
+      // 12 columns: row i is frame i, timed by times.txt.
+      if (rows.size() != times.size()) {
+        log.report(*poses_file, 0,
+                   std::to_string(rows.size()) + " poses, expected " + std::to_string(times.size()) +
+                       " (the rows of " + times_file.string() + ")" +
+                       (rows.size() > times.size() ? "; extra poses ignored" : "; ground truth ends early"));
+      }
+      for (std::size_t i = 0; i < std::min(rows.size(), times.size()); ++i) {
+        if (!times[i] || !rows[i]) continue;
+        GroundTruthState s;
+        s.t_ns = *times[i];
+        s.T_w_b = rows[i]->T_w_cam0;
+        d->gt.push_back(s);
+      }
     }
     spdlog::debug("{}: ground truth from {}", dir.string(), poses_file->string());
   }

@@ -40,6 +40,9 @@ class LoadedDataset final : public Dataset {
   // the bag file). It decodes frame `frame` as 8-bit grey without the size check and throws DataError naming
   // the frame; it must be safe to call from several threads at once.
   std::function<cv::Mat(std::size_t frame)> image_reader;
+  // The sequence's frame times by source index when the layout has a table of them (KITTI times.txt); empty:
+  // source_times() is made from the frames.
+  std::vector<std::optional<Timestamp>> source_time_table;
 
   // Fixes the reference image size: the calibration's when it has one (calibration_size_source set),
   // else that of the first frame whose image decodes (a few frames are probed). Sets the camera size
@@ -63,6 +66,9 @@ class LoadedDataset final : public Dataset {
   std::optional<CameraCalibration> camera() const override { return camera_calibration; }
   std::optional<ImuCalibration> imu_calibration() const override { return imu_calib; }
   const std::vector<DataIssue>& issues() const override { return problems; }
+  std::vector<std::optional<Timestamp>> source_times() const override {
+    return source_time_table.empty() ? Dataset::source_times() : source_time_table;
+  }
 
  private:
   // Decodes without the size check; throws DataError naming the frame and file.
@@ -78,14 +84,16 @@ class LoadedDataset final : public Dataset {
 // naming `file` and `where` ("frame 12"), in the words every reader uses for it.
 cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, const std::string& where);
 
-// The calibration and the ground truth of an EuRoC ASL tree `mav` (mav0/, or a folder holding cam0/ ...), as
-// open_euroc reads them; what is absent stays unset. Calibration: cam<camera_index>/sensor.yaml
-// (camera_calibration, calibration_size_source) and imu0/sensor.yaml (imu_calib). Ground truth (gt):
-// state_groundtruth_estimate0/data.csv, moved to the body frame by its sensor.yaml T_BS, else a TUM file
-// groundtruth_tum.txt beside or inside `mav`.
-void read_euroc_calibration(const std::filesystem::path& mav, int camera_index, IssueLog& log,
-                            LoadedDataset& d);
-void read_euroc_ground_truth(const std::filesystem::path& mav, IssueLog& log, LoadedDataset& d);
+// The calibration and the ground truth of an EuRoC ASL tree `dir` (its mav0/ is `mav`, or `dir` itself when
+// it holds cam0/ ...), as open_euroc reads them; what is absent stays unset. Calibration:
+// cam<camera_index>/sensor.yaml (camera_calibration, calibration_size_source) and imu0/sensor.yaml
+// (imu_calib), else Kalibr files in `dir` or its dso/ (TUM-VI). Ground truth (gt):
+// state_groundtruth_estimate0/data.csv, else TUM-VI's mocap0/data.csv (each moved to the body frame by its
+// sensor.yaml T_BS), else a TUM file groundtruth_tum.txt beside or inside `mav`.
+void read_euroc_calibration(const std::filesystem::path& dir, const std::filesystem::path& mav,
+                            int camera_index, IssueLog& log, LoadedDataset& d);
+void read_euroc_ground_truth(const std::filesystem::path& dir, const std::filesystem::path& mav,
+                             IssueLog& log, LoadedDataset& d);
 
 // Image files directly inside `dir` (png, jpg/jpeg, pgm/ppm, bmp, tif/tiff; any case), in natural order:
 // runs of digits compare by value, so "img2.png" < "img10.png".

@@ -287,8 +287,8 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
   // Calibration and ground truth: the bag has none; an EuRoC ASL folder gives them.
   if (const fs::path asl = asl_dir_for(bag_file, options); !asl.empty()) {
     const fs::path mav = fs::is_directory(asl / "mav0", ec) ? asl / "mav0" : asl;
-    io_detail::read_euroc_calibration(mav, options.camera_index, log, *d);
-    io_detail::read_euroc_ground_truth(mav, log, *d);
+    io_detail::read_euroc_calibration(asl, mav, options.camera_index, log, *d);
+    io_detail::read_euroc_ground_truth(asl, mav, log, *d);
     spdlog::info(
         "{}: calibration and ground truth from {} (camera calibration {}, IMU calibration {}, {} "
         "ground-truth poses)",

@@ -12,26 +12,30 @@
 #include "io/csv_formats.hpp"
 #include "io/csv_text.hpp"
 #include "io/time_order.hpp"
+#include "io/yaml_fields.hpp"
 
 namespace loopgate {
 
 namespace {
 
 using io_detail::Delimiter;
+using io_detail::is_rotation;
 using io_detail::IssueLog;
 using io_detail::keep_increasing;
+using io_detail::load_yaml;
+using io_detail::require_key;
+using io_detail::rigid_transform;
 using io_detail::Row;
 using io_detail::RowError;
 using io_detail::TextFile;
 using io_detail::TimedRow;
+using io_detail::yaml_line;
+using io_detail::yaml_number;
+using io_detail::yaml_numbers;
 
 // A stored quaternion whose norm is further than this from 1 is rejected as garbage (rather than
 // silently normalised); files carry 6+ decimals, so honest rounding is orders of magnitude smaller.
 constexpr double kQuaternionNormTolerance = 1e-2;
-// Largest |R^T R - I| entry accepted for a rotation read as a matrix (KITTI poses, T_BS).
-constexpr double kRotationOrthonormalTolerance = 1e-2;
-// Largest deviation of the bottom row of a 4x4 T_BS from [0 0 0 1].
-constexpr double kHomogeneousRowTolerance = 1e-9;
 
 constexpr int kKittiPoseColumns = 12;
 constexpr int kKittiCameras = 4;
@@ -48,80 +52,7 @@ Eigen::Quaterniond checked_quaternion(double w, double x, double y, double z) {
   return q;
 }
 
-bool is_rotation(const Eigen::Matrix3d& R) {
-  return ((R.transpose() * R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <=
-          kRotationOrthonormalTolerance) &&
-         R.determinant() > 0;
-}
-
 // ---------- YAML ----------
-
-YAML::Node load_yaml(const std::filesystem::path& file) {
-  const TextFile text(file);
-  // OpenCV/EuRoC files start with "%YAML:1.0", a directive yaml-cpp rejects. Blank such directive
-  // lines into comments so line numbers in error messages stay those of the file.
-  std::string cleaned;
-  cleaned.reserve(text.text().size());
-  std::size_t pos = 0;
-  const std::string& s = text.text();
-  while (pos < s.size()) {
-    std::size_t end = s.find('\n', pos);
-    if (end == std::string::npos) end = s.size();
-    std::string_view line(s.data() + pos, end - pos);
-    if (!line.empty() && line.front() == '%') {
-      cleaned += '#';
-      cleaned.append(line.substr(1));
-    } else {
-      cleaned.append(line);
-    }
-    cleaned += '\n';
-    pos = end + 1;
-  }
-  try {
-    YAML::Node root = YAML::Load(cleaned);
-    if (!root.IsMap()) throw DataError(file, "expected a YAML mapping of sensor keys");
-    return root;
-  } catch (const YAML::Exception& e) {
-    throw DataError(file, static_cast<std::size_t>(e.mark.line + 1), "malformed YAML: " + e.msg);
-  }
-}
-
-std::size_t yaml_line(const YAML::Node& node) {
-  return static_cast<std::size_t>(node.Mark().line + 1);
-}
-
-YAML::Node require_key(const std::filesystem::path& file, const YAML::Node& root, const char* key) {
-  const YAML::Node node = root[key];
-  if (!node) throw DataError(file, std::string("missing key '") + key + "'");
-  return node;
-}
-
-double yaml_number(const std::filesystem::path& file, const YAML::Node& node, const std::string& what) {
-  if (!node.IsScalar()) throw DataError(file, yaml_line(node), what + ": expected a number");
-  std::string_view text = node.Scalar();
-  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
-  double value = 0;
-  const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
-  if (text.empty() || ec != std::errc{} || ptr != text.data() + text.size() || !std::isfinite(value)) {
-    throw DataError(file, yaml_line(node),
-                    what + ": expected a finite number, got " + quote_excerpt(node.Scalar()));
-  }
-  return value;
-}
-
-std::vector<double> yaml_numbers(const std::filesystem::path& file, const YAML::Node& node,
-                                 const std::string& what, std::size_t expected) {
-  if (!node.IsSequence() || node.size() != expected) {
-    throw DataError(file, yaml_line(node),
-                    what + ": expected a list of " + std::to_string(expected) + " numbers");
-  }
-  std::vector<double> values;
-  values.reserve(expected);
-  for (std::size_t i = 0; i < expected; ++i) {
-    values.push_back(yaml_number(file, node[i], what + "[" + std::to_string(i) + "]"));
-  }
-  return values;
-}
 
 Eigen::Isometry3d yaml_T_BS(const std::filesystem::path& file, const YAML::Node& root) {
   const YAML::Node node = require_key(file, root, "T_BS");
@@ -137,16 +68,7 @@ Eigen::Isometry3d yaml_T_BS(const std::filesystem::path& file, const YAML::Node&
   for (int r = 0; r < 4; ++r) {
     for (int c = 0; c < 4; ++c) M(r, c) = values[static_cast<std::size_t>(4 * r + c)];
   }
-  if ((M.row(3) - Eigen::RowVector4d(0, 0, 0, 1)).cwiseAbs().maxCoeff() > kHomogeneousRowTolerance) {
-    throw DataError(file, yaml_line(data), "T_BS: expected bottom row [0, 0, 0, 1]");
-  }
-  if (!is_rotation(M.topLeftCorner<3, 3>())) {
-    throw DataError(file, yaml_line(data), "T_BS: rotation block is not a rotation matrix");
-  }
-  Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-  T.linear() = M.topLeftCorner<3, 3>();
-  T.translation() = M.topRightCorner<3, 1>();
-  return T;
+  return rigid_transform(file, yaml_line(data), M, "T_BS");
 }
 
 void append_list(std::string& out, const double* values, std::size_t n) {
@@ -220,7 +142,11 @@ std::vector<StampedPose> read_tum(const std::filesystem::path& file, IssueLog& l
   return poses;
 }
 
-std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+namespace {
+// EuRoC state_groundtruth_estimate0 and TUM-VI mocap0 tables: the first 8 columns are the same (t_ns, p_xyz,
+// q_wxyz); `mocap` accepts those 8 only, the ground truth also its velocity and bias columns.
+std::vector<GroundTruthState> read_groundtruth_csv(const std::filesystem::path& csv_file, IssueLog& log,
+                                                   bool mocap) {
   const TextFile text(csv_file);
   std::vector<TimedRow<GroundTruthState>> rows;
   rows.reserve(text.text().size() / 160);
@@ -228,6 +154,12 @@ std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path
   log.begin_table();
   const std::size_t lines = for_each_row(text, Delimiter::kComma, log, [&](const Row& row) {
     const std::size_t n = row.size();
+    if (mocap && n != 8) {
+      throw RowError{
+          "expected 8 columns (timestamp [ns], p_RS_R_x, p_RS_R_y, p_RS_R_z [m], q_RS_w, q_RS_x, q_RS_y, "
+          "q_RS_z) as in TUM-VI mocap0/data.csv, got " +
+          std::to_string(n)};
+    }
     if (columns == 0) {
       if (n != 8 && n != 11 && n != 14 && n != 17) {
         throw RowError{
@@ -264,6 +196,15 @@ std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path
     states.push_back(row.value);
   log.end_table(csv_file, lines);
   return states;
+}
+}  // namespace
+
+std::vector<GroundTruthState> read_euroc_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+  return read_groundtruth_csv(csv_file, log, false);
+}
+
+std::vector<GroundTruthState> read_mocap_groundtruth(const std::filesystem::path& csv_file, IssueLog& log) {
+  return read_groundtruth_csv(csv_file, log, true);
 }
 
 std::vector<EurocImageEntry> read_euroc_camera_csv(const std::filesystem::path& csv_file, IssueLog& log) {
@@ -332,21 +273,42 @@ std::vector<std::optional<Timestamp>> read_kitti_time_rows(const std::filesystem
   return rows;
 }
 
-std::vector<std::optional<Eigen::Isometry3d>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
-                                                                   IssueLog& log) {
+std::vector<std::optional<KittiPoseRow>> read_kitti_pose_rows(const std::filesystem::path& poses_file,
+                                                              IssueLog& log) {
   const TextFile text(poses_file);
-  std::vector<std::optional<Eigen::Isometry3d>> rows;
+  std::vector<std::optional<KittiPoseRow>> rows;
+  std::vector<TimedRow<std::size_t>> timed;  // 13 columns: (line, time, row index), for the order check
+  std::size_t columns = 0;                   // fixed by the first good row: 12 or 13
   log.begin_table();
   const std::size_t lines = for_each_row(text, Delimiter::kWhitespace, log, [&](const Row& row) {
-    rows.emplace_back();
-    row.expect_columns(kKittiPoseColumns, "row-major 3x4 T_w_cam0");
-    const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, 0, "pose");
+    rows.emplace_back();  // the row keeps its index even when bad
+    const std::size_t n = row.size();
+    if (columns == 0 && n != kKittiPoseColumns && n != kKittiPoseColumns + 1) {
+      throw RowError{"expected 12 columns (row-major 3x4 T_w_cam0) or 13 (time [s], then the 12), got " +
+                     std::to_string(n)};
+    }
+    if (columns != 0 && n != columns) {
+      throw RowError{"expected " + std::to_string(columns) + " columns like the first data row (" +
+                     (columns == kKittiPoseColumns ? "no time" : "a time first") + "), got " +
+                     std::to_string(n)};
+    }
+    const std::size_t first = n - kKittiPoseColumns;  // 1 when a time comes first
+    KittiPoseRow pose;
+    if (first == 1) pose.t_ns = row.seconds_ns(0, "t_s");
+    const Eigen::Matrix<double, 3, 4> M = kitti_row_matrix(row, first, "pose");
     if (!is_rotation(M.leftCols<3>())) throw RowError{"rotation block is not a rotation matrix"};
-    Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
-    T.linear() = M.leftCols<3>();
-    T.translation() = M.col(3);
-    rows.back() = T;
+    pose.T_w_cam0.linear() = M.leftCols<3>();
+    pose.T_w_cam0.translation() = M.col(3);
+    rows.back() = pose;
+    columns = n;
+    if (pose.t_ns) timed.push_back({row.line, *pose.t_ns, rows.size() - 1});
   });
+  // Timed rows: the ones outside the longest strictly increasing run are bad (kept as nullopt).
+  std::vector<char> in_order(rows.size(), 0);
+  for (const auto& row : keep_increasing(poses_file, log, timed, "time", true)) in_order[row.value] = 1;
+  for (const auto& row : timed) {
+    if (!in_order[row.value]) rows[row.value].reset();
+  }
   log.end_table(poses_file, lines);
   return rows;
 }
@@ -386,8 +348,14 @@ std::vector<Timestamp> read_kitti_times(const std::filesystem::path& times_file)
 std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
                                           const std::filesystem::path& times_file, bool allow_fewer) {
   IssueLog log(true, nullptr);
-  const auto times = io_detail::read_kitti_time_rows(times_file, log);
   const auto rows = io_detail::read_kitti_pose_rows(poses_file, log);
+  if (!rows.empty() && rows.front()->t_ns) {  // 13 columns: every row has its own time
+    std::vector<StampedPose> poses;
+    poses.reserve(rows.size());
+    for (const auto& row : rows) poses.push_back(StampedPose{*row->t_ns, row->T_w_cam0});
+    return poses;
+  }
+  const auto times = io_detail::read_kitti_time_rows(times_file, log);
   if (rows.size() > times.size() || (!allow_fewer && rows.size() != times.size())) {
     throw DataError(poses_file, std::to_string(rows.size()) + " poses, expected " +
                                     (allow_fewer ? "at most " : "") + std::to_string(times.size()) +
@@ -395,7 +363,7 @@ std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_fil
   }
   std::vector<StampedPose> poses;
   poses.reserve(rows.size());
-  for (std::size_t i = 0; i < rows.size(); ++i) poses.push_back(StampedPose{*times[i], *rows[i]});
+  for (std::size_t i = 0; i < rows.size(); ++i) poses.push_back(StampedPose{*times[i], rows[i]->T_w_cam0});
   return poses;
 }
 
@@ -589,48 +557,18 @@ CameraCalibration read_euroc_camera_yaml(const std::filesystem::path& yaml_file)
     camera.rate_hz = yaml_number(yaml_file, rate, "rate_hz");
     if (!(camera.rate_hz > 0)) throw DataError(yaml_file, yaml_line(rate), "rate_hz: expected > 0");
   }
-  const YAML::Node resolution = require_key(yaml_file, root, "resolution");
-  const std::vector<double> size = yaml_numbers(yaml_file, resolution, "resolution [width, height]", 2);
-  if (size[0] < 1 || size[1] < 1 || size[0] != std::floor(size[0]) || size[1] != std::floor(size[1])) {
-    throw DataError(yaml_file, yaml_line(resolution),
-                    "resolution: expected two positive integers [width, height]");
-  }
-  camera.width_px = static_cast<int>(size[0]);
-  camera.height_px = static_cast<int>(size[1]);
+  io_detail::yaml_resolution(yaml_file, require_key(yaml_file, root, "resolution"), camera);
   if (const YAML::Node model = root["camera_model"]) {
     if (!model.IsScalar() || model.Scalar() != "pinhole") {
       throw DataError(yaml_file, yaml_line(model), "camera_model: expected 'pinhole'");
     }
   }
-  const YAML::Node intrinsics = require_key(yaml_file, root, "intrinsics");
-  const std::vector<double> k = yaml_numbers(yaml_file, intrinsics, "intrinsics [fu, fv, cu, cv]", 4);
-  if (!(k[0] > 0) || !(k[1] > 0)) {
-    throw DataError(yaml_file, yaml_line(intrinsics), "intrinsics: expected positive focal lengths fu, fv");
-  }
-  camera.fx = k[0];
-  camera.fy = k[1];
-  camera.cx = k[2];
-  camera.cy = k[3];
-  const YAML::Node model = root["distortion_model"];
-  const std::string model_name = model && model.IsScalar() ? model.Scalar() : std::string("none");
-  if (model_name == "radial-tangential" || model_name == "radtan") {
-    camera.distortion_model = DistortionModel::kRadTan;
-  } else if (model_name == "equidistant") {
-    camera.distortion_model = DistortionModel::kEquidistant;
-  } else if (model_name == "none") {
-    camera.distortion_model = DistortionModel::kNone;
-  } else {
-    throw DataError(yaml_file, model ? yaml_line(model) : 0,
-                    "distortion_model: " + quote_excerpt(model_name) +
-                        ", expected radial-tangential, equidistant or none");
-  }
+  io_detail::yaml_pinhole_intrinsics(yaml_file, require_key(yaml_file, root, "intrinsics"), camera);
+  camera.distortion_model = io_detail::yaml_distortion_model(yaml_file, root["distortion_model"]);
   if (camera.distortion_model != DistortionModel::kNone) {
-    const YAML::Node coefficients = require_key(yaml_file, root, "distortion_coefficients");
-    camera.distortion = yaml_numbers(yaml_file, coefficients,
-                                     camera.distortion_model == DistortionModel::kRadTan
-                                         ? "distortion_coefficients [k1, k2, p1, p2]"
-                                         : "distortion_coefficients [k1, k2, k3, k4]",
-                                     4);
+    io_detail::yaml_distortion_coefficients(yaml_file,
+                                            require_key(yaml_file, root, "distortion_coefficients"),
+                                            "distortion_coefficients", camera);
   }
   return camera;
 }

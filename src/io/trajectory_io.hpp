@@ -14,7 +14,8 @@ namespace loopgate {
 std::vector<StampedPose> read_tum(const std::filesystem::path& file);
 void write_tum(const std::filesystem::path& file, const std::vector<StampedPose>& poses);
 
-// KITTI odometry: poses (12 numbers per line, row-major 3x4 T_w_cam0) and times.txt (seconds).
+// KITTI odometry: poses (12 numbers per line, row-major 3x4 T_w_cam0; or 13, a time in seconds first) and
+// times.txt (seconds).
 // The two files must have the same number of rows (poses may have fewer rows only if `allow_fewer`).
 std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
                                           const std::filesystem::path& times_file);
@@ -38,7 +39,8 @@ void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalib
 // ---- additions (io owner) ----
 
 // KITTI poses with times; with allow_fewer the poses file may have fewer rows than times.txt
-// (ground truth that stops early); more rows is always an error.
+// (ground truth that stops early); more rows is always an error. A pose file with 13 columns (a time in
+// seconds first, then the 12) is timed by itself: times_file is then not read.
 std::vector<StampedPose> read_kitti_poses(const std::filesystem::path& poses_file,
                                           const std::filesystem::path& times_file, bool allow_fewer);
 // KITTI odometry calib.txt: camera `camera_index` (0..3) from its projection matrix P<i>: fx fy cx cy,

@@ -2,6 +2,7 @@
 
 #include <spdlog/fmt/fmt.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -178,23 +179,52 @@ void write_json_file(const std::filesystem::path& file, const nlohmann::json& js
   commit(out, file);
 }
 
+void TraceWriter::add(TraceEvent event) {
+  std::lock_guard lock(mutex_);
+  events_.push_back(std::move(event));
+}
+
 void TraceWriter::name_thread(int thread_id, const std::string& name) {
+  std::lock_guard lock(mutex_);
+  for (auto& [tid, known] : thread_names_) {
+    if (tid == thread_id) {
+      known = name;
+      return;
+    }
+  }
   thread_names_.emplace_back(thread_id, name);
 }
 
+std::size_t TraceWriter::size() const {
+  std::lock_guard lock(mutex_);
+  return events_.size();
+}
+
 void TraceWriter::write(const std::filesystem::path& file) const {
+  std::lock_guard lock(mutex_);
   nlohmann::json events = nlohmann::json::array();
-  for (const auto& [tid, name] : thread_names_) {
+  if (!process_name_.empty()) {
+    events.push_back(
+        {{"name", "process_name"}, {"ph", "M"}, {"pid", 1}, {"args", {{"name", process_name_}}}});
+  }
+  std::vector<std::pair<int, std::string>> names = thread_names_;
+  for (const auto& e : events_) {  // every other track is named by its thread index
+    if (std::none_of(names.begin(), names.end(), [&](const auto& n) { return n.first == e.thread_id; }))
+      names.emplace_back(e.thread_id, "thread " + std::to_string(e.thread_id));
+  }
+  for (const auto& [tid, name] : names) {
     events.push_back(
         {{"name", "thread_name"}, {"ph", "M"}, {"pid", 1}, {"tid", tid}, {"args", {{"name", name}}}});
   }
   for (const auto& e : events_) {
-    nlohmann::json event = {{"name", e.name},    {"cat", e.category},    {"ph", "X"},
-                            {"ts", e.start_us},  {"dur", e.duration_us}, {"pid", 1},
-                            {"tid", e.thread_id}};
+    nlohmann::json event = {{"name", e.name},   {"cat", e.category}, {"ph", std::string(1, e.phase)},
+                            {"ts", e.start_us}, {"pid", 1},          {"tid", e.thread_id}};
+    if (e.phase == 'X') event["dur"] = e.duration_us;
+    if (e.phase == 'i') event["s"] = "t";  // an instant on its thread's track
     nlohmann::json args = nlohmann::json::object();
     if (e.seq >= 0) args["seq"] = e.seq;
     if (e.frame >= 0) args["frame"] = e.frame;
+    if (!e.detail.empty()) args["detail"] = e.detail;
     event["args"] = args;
     events.push_back(std::move(event));
   }

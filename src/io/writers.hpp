@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -75,7 +76,8 @@ void write_json_file(const std::filesystem::path& file, const nlohmann::json& js
 // The temporary name of an output being written: FILE.partial.
 std::filesystem::path partial_path(const std::filesystem::path& file);
 
-// One complete ("X") event of the Chrome trace-event format: a span on a thread track.
+// One event of the Chrome trace-event format: a span ("X", start and duration) or an instant ("i", at
+// start_us) on a thread track.
 struct TraceEvent {
   std::string name;
   std::string category;
@@ -84,18 +86,24 @@ struct TraceEvent {
   int thread_id = 0;
   std::int64_t seq = -1;    // written into args when >= 0
   std::int64_t frame = -1;  // written into args when >= 0
+  char phase = 'X';         // 'X' span, 'i' instant
+  std::string detail;       // written into args when not empty
 };
 
-// Collects trace events and writes {"traceEvents": [...], "displayTimeUnit": "ms"} with thread names.
+// Collects trace events and writes {"traceEvents": [...], "displayTimeUnit": "ms"} with the process and
+// thread names. add() may be called from several threads at once.
 class TraceWriter {
  public:
-  void add(TraceEvent event) { events_.push_back(std::move(event)); }
+  void add(TraceEvent event);
+  void name_process(const std::string& name) { process_name_ = name; }
   void name_thread(int thread_id, const std::string& name);
-  std::size_t size() const { return events_.size(); }
+  std::size_t size() const;
   void write(const std::filesystem::path& file) const;
 
  private:
+  mutable std::mutex mutex_;
   std::vector<TraceEvent> events_;
+  std::string process_name_;
   std::vector<std::pair<int, std::string>> thread_names_;
 };
 

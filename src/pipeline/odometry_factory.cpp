@@ -8,7 +8,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "io/dataset.hpp"
-#include "io/trajectory_io.hpp"
+#include "io/trajectory_file.hpp"
 #include "stages/ekf/vio_ekf.hpp"
 #include "stages/odometry/drift_odometry.hpp"
 #include "stages/odometry/ekf_odometry.hpp"
@@ -50,7 +50,7 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
   if (source == "file") {
     std::string covers = "no readable poses";
     try {
-      const auto poses = read_tum(config.file);
+      const auto poses = read_trajectory_file(config.file, config.file_format, dataset.source_times()).poses;
       if (!poses.empty())
         covers = "poses at t = " + seconds(poses.front().t_ns) + " .. " + seconds(poses.back().t_ns) + " s";
     } catch (const std::exception& e) {
@@ -155,7 +155,8 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
     return std::make_unique<NoOdometry>();
   }
   if (source == "file") {
-    auto poses = read_tum(config.file);
+    TrajectoryFile trajectory = read_trajectory_file(config.file, config.file_format, dataset.source_times());
+    std::vector<StampedPose>& poses = trajectory.poses;
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
     // A trajectory that does not overlap the dataset would make every frame "odometry lost" (issue 15).
     const auto gap_ns = static_cast<Timestamp>(config.file_max_gap_s * 1e9);
@@ -173,7 +174,8 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
       spdlog::warn("odometry: {} covers {} of the dataset's {} frames; the others are 'odometry lost'",
                    config.file, covered, dataset.frame_count());
     }
-    spdlog::info("odometry: file source, {} poses from {}", poses.size(), config.file);
+    spdlog::info("odometry: file source, {} poses from {} ({})", poses.size(), config.file,
+                 trajectory.description);
     return std::make_unique<FileOdometry>(config, std::move(poses));
   }
   if (!dataset.has_ground_truth()) {

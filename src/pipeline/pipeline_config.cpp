@@ -97,7 +97,9 @@ void RunConfig::validate() const {
   rate_factor();
   require(threads >= 1 && threads <= 256, "run.threads", "in 1..256", std::to_string(threads));
   require_in("run.max_in_flight", max_in_flight, 1, 1024, "frames");
-  require(camera_index == 0 || camera_index == 1, "run.camera_index", "0 or 1", std::to_string(camera_index));
+  require(camera_index >= 0 && camera_index <= 3, "run.camera_index",
+          "0..3 (0, 1: EuRoC cam0/cam1, KITTI image_0/image_1; 2, 3: KITTI colour image_2/image_3)",
+          std::to_string(camera_index));
   require_in("run.deadline_ms", deadline_ms, 0.0, 3.6e6, "ms (0 = the frame period)");
   require_in("run.image_cache_frames", image_cache_frames, 0, 100'000, "images");
   // The form of A:B and A < B (the dataset's size is checked when the run opens it).

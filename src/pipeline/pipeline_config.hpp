@@ -66,8 +66,10 @@ struct RunConfig {
   int max_in_flight = 8;                      // limiter: frames inside the graph at once
   std::string frames;                         // "A:B" frame indices [A, B), "A:" or ":B"; empty = all
   DecodePolicy decode = DecodePolicy::kLazy;  // lazy | all
-  bool strict = false;     // open the dataset strictly (first bad row fails) instead of leniently
-  int camera_index = 0;    // 0 or 1 (stereo layouts)
+  bool strict = false;  // open the dataset strictly (first bad row fails) instead of leniently
+  // Which camera: 0, 1 (EuRoC cam0 / cam1, KITTI grey image_0 / image_1), 2, 3 (KITTI colour image_2 /
+  // image_3)
+  int camera_index = 0;
   double deadline_ms = 0;  // rate mode: time a frame may take from release to sink; 0 = frame period
   // gated mode: decoded images of the most recent frames kept for describe (a new candidate area asks for
   // the descriptors of the rows just behind the current frame); older frames are read again from the

@@ -148,7 +148,16 @@ void RunOutputs::sink(FrameRecord& r) {
   const std::int64_t exit_ns = clock_.now_ns();
   r.stamps[kSink].exit_ns = exit_ns;
   r.cpu_ns[kSink] = thread_cpu_ns() - cpu_start_ns;
-  if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) ++counters_.deadline_misses;
+  if (r.deadline_ns > 0 && exit_ns > r.deadline_ns) {
+    ++counters_.deadline_misses;
+    if (config_.output.trace) {
+      trace_.add(TraceEvent{"deadline miss", "replay", 1e-3 * static_cast<double>(exit_ns), 0,
+                            r.stamps[kSink].thread, static_cast<std::int64_t>(r.seq),
+                            static_cast<std::int64_t>(r.label), 'i',
+                            fmt::format("left the graph {:.3f} ms after its deadline",
+                                        1e-6 * static_cast<double>(exit_ns - r.deadline_ns))});
+    }
+  }
   timing(r, exit_ns);
   if (counters_.processed % static_cast<std::size_t>(config_.output.flush_every) == 0) {
     frames_csv_.flush();
@@ -179,9 +188,15 @@ void RunOutputs::timing(FrameRecord& r, std::int64_t exit_ns) {
     total_ms += service_ms;
     cells.push_back(format_fixed(service_ms, 4));
     if (config_.output.trace) {
-      trace_.add(TraceEvent{kStageNames[s], "stage", 1e-3 * static_cast<double>(stamp.enter_ns),
-                            1e-3 * static_cast<double>(stamp.exit_ns - stamp.enter_ns), stamp.thread,
-                            static_cast<std::int64_t>(r.seq), static_cast<std::int64_t>(r.label)});
+      trace_.add(TraceEvent{kStageNames[s],
+                            "stage",
+                            1e-3 * static_cast<double>(stamp.enter_ns),
+                            1e-3 * static_cast<double>(stamp.exit_ns - stamp.enter_ns),
+                            stamp.thread,
+                            static_cast<std::int64_t>(r.seq),
+                            static_cast<std::int64_t>(r.label),
+                            'X',
+                            {}});
     }
   }
   const double latency_ms = 1e-6 * static_cast<double>(exit_ns - r.release_ns);
@@ -256,9 +271,8 @@ std::vector<std::string> RunOutputs::finish(bool show_final_progress) {
   return errors;
 }
 
-void RunOutputs::write_trace(const std::filesystem::path& file, int threads) {
-  trace_.name_thread(0, "producer");
-  for (int t = 1; t <= threads + 1; ++t) trace_.name_thread(t, fmt::format("thread {}", t));
+void RunOutputs::write_trace(const std::filesystem::path& file, int producer_thread) {
+  trace_.name_thread(producer_thread, "producer, end of stream");
   trace_.write(file);
 }
 

@@ -37,7 +37,11 @@ class RunOutputs {
   // gave none (a failed run); closes (completes) the files. Returns the files that could not be written,
   // "NAME: why" (each of the three is attempted).
   std::vector<std::string> finish(bool show_final_progress);
-  void write_trace(const std::filesystem::path& file, int threads);
+  // The producer's track is named; the others by their thread index (TraceWriter::write).
+  void write_trace(const std::filesystem::path& file, int producer_thread);
+  // trace.json's events (output.trace): the sink adds the stages' spans and the deadline misses; the producer
+  // adds the dropped frames and the end of the stream its spans (TraceWriter::add is thread-safe).
+  TraceWriter& trace() { return trace_; }
 
   const RunCounters& counters() const { return counters_; }
   const StageProfiler& profiler() const { return profiler_; }

@@ -48,20 +48,45 @@ double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+// trace.json of a two-sequence run (output.trace): spans on the calling thread's track (0) and the workers'
+// (1..threads-1), in microseconds since the run's start.
+struct RunTrace {
+  TraceWriter* writer = nullptr;  // null: no trace
+  Clock::time_point origin;
+
+  void span(std::string name, const char* category, Clock::time_point from, int track,
+            std::string detail = {}) const {
+    if (!writer) return;
+    const auto us = [&](Clock::time_point t) {
+      return std::chrono::duration<double, std::micro>(t - origin).count();
+    };
+    writer->add(TraceEvent{std::move(name), category, us(from), us(Clock::now()) - us(from), track, -1, -1,
+                           'X', std::move(detail)});
+  }
+};
+
+// The blocks of parallel_indices on trace.json: each one a span named `what` with its index range.
+struct BlockTrace {
+  const RunTrace* trace = nullptr;
+  const char* what = "";
+};
+
 // Runs body(k) for k in [0, count) on `threads` threads (plain std::threads: thread start and join
 // order everything the caller prepared and the bodies wrote, visibly for ThreadSanitizer too). Indices are
 // handed out in small blocks; each body writes only its own outputs, so the result does not depend on
 // the thread count. The first exception of a body is rethrown after the join.
 // Stop requests (issue 15): once `stop` is set no block is handed out; the blocks handed out are finished, so
 // the indices done are a prefix [0, returned). A second stop signal aborts (stop_request::check_abort).
+// With a BlockTrace, each block is a span on its thread's track.
 template <class Body>
-std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<bool>* stop, Body body) {
+std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<bool>* stop, Body body,
+                             BlockTrace block_trace = {}) {
   constexpr std::size_t kBlock = 16;
   std::atomic<std::size_t> next{0};
   std::mutex handout_mutex;  // a block is handed out only while no stop is requested
   std::exception_ptr error;
   std::mutex error_mutex;
-  const auto worker = [&] {
+  const auto worker = [&](int track) {
     for (;;) {
       std::size_t begin = 0;
       {
@@ -72,7 +97,12 @@ std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<b
       if (begin >= count) return;
       stop_request::check_abort("two-sequence run");
       try {
-        for (std::size_t k = begin; k < std::min(count, begin + kBlock); ++k) body(k);
+        const auto block_start = Clock::now();
+        const std::size_t end = std::min(count, begin + kBlock);
+        for (std::size_t k = begin; k < end; ++k) body(k);
+        if (block_trace.trace)
+          block_trace.trace->span(block_trace.what, "block", block_start, track,
+                                  fmt::format("[{}, {})", begin, end));
       } catch (...) {
         std::lock_guard lock(error_mutex);
         if (!error) error = std::current_exception();
@@ -82,8 +112,8 @@ std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<b
     }
   };
   std::vector<std::thread> pool;
-  for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
-  worker();
+  for (int t = 1; t < threads; ++t) pool.emplace_back(worker, t);
+  worker(0);
   for (auto& thread : pool) thread.join();
   if (error) std::rethrow_exception(error);
   return std::min(count, next.load());
@@ -98,22 +128,26 @@ struct DescribedSequence {
 };
 
 DescribedSequence describe_sequence(int threads, const Dataset& dataset, std::size_t first, std::size_t last,
-                                    const DirdExtractor& extractor, const std::atomic<bool>* stop) {
+                                    const DirdExtractor& extractor, const std::atomic<bool>* stop,
+                                    BlockTrace block_trace) {
   DescribedSequence out;
   const std::size_t count = last - first;
   out.descriptors.resize(count);
   out.valid.assign(count, 0);
   out.errors.resize(count);
-  out.taken = parallel_indices(threads, count, stop, [&](std::size_t k) {
-    try {
-      const cv::Mat image = dataset.load_image(first + k);
-      extractor.extract(image, out.descriptors[k]);
-      out.valid[k] = 1;
-    } catch (const DataError& e) {
-      std::fill(out.descriptors[k].begin(), out.descriptors[k].end(), std::uint8_t{0});
-      out.errors[k] = std::string("image: ") + e.what();
-    }
-  });
+  out.taken = parallel_indices(
+      threads, count, stop,
+      [&](std::size_t k) {
+        try {
+          const cv::Mat image = dataset.load_image(first + k);
+          extractor.extract(image, out.descriptors[k]);
+          out.valid[k] = 1;
+        } catch (const DataError& e) {
+          std::fill(out.descriptors[k].begin(), out.descriptors[k].end(), std::uint8_t{0});
+          out.errors[k] = std::string("image: ") + e.what();
+        }
+      },
+      block_trace);
   out.described = static_cast<std::size_t>(std::count(out.valid.begin(), out.valid.end(), std::uint8_t{1}));
   return out;
 }
@@ -201,22 +235,25 @@ nlohmann::json standardize_json(const StandardizeConfig& standardize, const Code
 // a frame that does not decode or preprocess takes part as an all-zero image (SeqSlamBatch::add_missing).
 DescribedSequence preprocess_sequence(int threads, const Dataset& dataset, std::size_t first,
                                       std::size_t count, std::size_t offset, SeqSlamBatch& batch,
-                                      const std::atomic<bool>* stop) {
+                                      const std::atomic<bool>* stop, BlockTrace block_trace) {
   DescribedSequence out;
   out.valid.assign(count, 0);
   out.errors.resize(count);
-  out.taken = parallel_indices(threads, count, stop, [&](std::size_t k) {
-    try {
-      batch.add(offset + k, dataset.load_image(first + k));
-      out.valid[k] = 1;
-    } catch (const DataError& e) {
-      out.errors[k] = std::string("image: ") + e.what();
-    } catch (const std::invalid_argument& e) {
-      out.errors[k] =
-          fmt::format("seqslam preprocessing of {}: {}", dataset.image_path(first + k).string(), e.what());
-    }
-    if (!out.valid[k]) batch.add_missing(offset + k);
-  });
+  out.taken = parallel_indices(
+      threads, count, stop,
+      [&](std::size_t k) {
+        try {
+          batch.add(offset + k, dataset.load_image(first + k));
+          out.valid[k] = 1;
+        } catch (const DataError& e) {
+          out.errors[k] = std::string("image: ") + e.what();
+        } catch (const std::invalid_argument& e) {
+          out.errors[k] = fmt::format("seqslam preprocessing of {}: {}",
+                                      dataset.image_path(first + k).string(), e.what());
+        }
+        if (!out.valid[k]) batch.add_missing(offset + k);
+      },
+      block_trace);
   out.described = static_cast<std::size_t>(std::count(out.valid.begin(), out.valid.end(), std::uint8_t{1}));
   return out;
 }
@@ -228,6 +265,11 @@ struct TwoSequenceSetup {
   const Dataset& query;
   AlignedSequences ranges;
   const std::atomic<bool>* stop = nullptr;
+  RunTrace trace;
+
+  // A phase of the run, from `from` to now, on the calling thread's track of trace.json.
+  void phase(const char* name, Clock::time_point from) const { trace.span(name, "phase", from, 0); }
+  BlockTrace blocks(const char* what) const { return {trace.writer ? &trace : nullptr, what}; }
 
   // Frames in loops.csv by their numbers (Dataset::source_index): i query, j reference.
   LoopsWriter::Label query_label() const {
@@ -305,11 +347,14 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   const DirdSimilarity similarity(config.dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref = describe_sequence(config.run.threads, reference, ref_first,
-                                                  ref_first + ref_count, extractor, setup.stop);
-  const DescribedSequence qry = describe_sequence(config.run.threads, query, query_first,
-                                                  query_first + query_count, extractor, setup.stop);
+  const DescribedSequence ref =
+      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor,
+                        setup.stop, setup.blocks("describe reference"));
+  const DescribedSequence qry =
+      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor,
+                        setup.stop, setup.blocks("describe query"));
   const double describe_s = seconds_since(t0);
+  setup.phase("describe (reference and query)", t0);
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
 
   // Similarity rows of every query against the whole reference (no margin), in parallel; frames
@@ -383,6 +428,7 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
     });
   }
   const double similarity_s = seconds_since(t0);
+  setup.phase("similarities", t0);
   const std::size_t similarities = qry.described * ref.described;
 
   // The streaming matcher, query by query.
@@ -395,7 +441,9 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   }
   matcher.flush(output);
   const double match_s = seconds_since(t0);
+  setup.phase("match (sequence matcher)", t0);
 
+  const auto outputs_start = Clock::now();
   LoopsWriter loops_csv;
   loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   std::size_t loops_aligned = 0;
@@ -448,6 +496,7 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   result.loops = output.loops.size();
   const std::string score_order = "higher_is_better";
   nlohmann::json evaluation = run_evaluation(setup, detections, detections, score_order, out_dir);
+  setup.phase("outputs and evaluation", outputs_start);
   result.wall_s = seconds_since(start);
   result.summary = {
       {"mode", "two-sequence"},
@@ -498,14 +547,17 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   const DirdExtractor extractor(dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref = describe_sequence(config.run.threads, reference, ref_first,
-                                                  ref_first + ref_count, extractor, setup.stop);
-  const DescribedSequence qry = describe_sequence(config.run.threads, query, query_first,
-                                                  query_first + query_count, extractor, setup.stop);
+  const DescribedSequence ref =
+      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor,
+                        setup.stop, setup.blocks("describe reference"));
+  const DescribedSequence qry =
+      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor,
+                        setup.stop, setup.blocks("describe query"));
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   const CodedSequence ref_codes = code_sequence(ref, standardize);
   const CodedSequence qry_codes = code_sequence(qry, standardize);
   const double describe_s = seconds_since(t0);
+  setup.phase("describe and code (reference and query)", t0);
 
   // Distances in blocks of queries (in parallel), each block then searched in query order: memory for
   // one block of rows, not the whole matrix.
@@ -518,28 +570,35 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   for (std::size_t first = 0; first < query_count; first += kBlock) {
     const std::size_t count = std::min(kBlock, query_count - first);
     t0 = Clock::now();
-    parallel_indices(config.run.threads, count, nullptr, [&](std::size_t k) {
-      const std::size_t q = first + k;
-      rows[k].clear();
-      if (!qry.valid[q]) return;
-      rows[k].reserve(ref_count);
-      for (std::size_t r = 0; r < ref_count; ++r) {
-        if (ref.valid[r])
-          rows[k].push_back(
-              {static_cast<std::int64_t>(r), coded_distance(dird, standardize, qry_codes, q, ref_codes, r)});
-      }
-    });
+    parallel_indices(
+        config.run.threads, count, nullptr,
+        [&](std::size_t k) {
+          const std::size_t q = first + k;
+          rows[k].clear();
+          if (!qry.valid[q]) return;
+          rows[k].reserve(ref_count);
+          for (std::size_t r = 0; r < ref_count; ++r) {
+            if (ref.valid[r])
+              rows[k].push_back({static_cast<std::int64_t>(r),
+                                 coded_distance(dird, standardize, qry_codes, q, ref_codes, r)});
+          }
+        },
+        setup.blocks("distances"));
     distance_s += seconds_since(t0);
+    setup.phase("distances (query block)", t0);
     t0 = Clock::now();
     stop_request::check_abort("two-sequence run");  // a second stop signal aborts the search
     for (std::size_t k = 0; k < count; ++k)
       search.push(static_cast<std::int64_t>(first + k), rows[k], output);
     search_s += seconds_since(t0);
+    setup.phase("search (query block)", t0);
   }
   t0 = Clock::now();
   search.flush(output);
   search_s += seconds_since(t0);
+  setup.phase("search flush", t0);
 
+  const auto outputs_start = Clock::now();
   LoopsWriter loops_csv;
   loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   std::size_t loops_aligned = 0;
@@ -596,6 +655,7 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   result.loops = output.loops.size();
   const std::string score_order = "higher_is_better";
   nlohmann::json evaluation = run_evaluation(setup, loops, ranked, score_order, out_dir);
+  setup.phase("outputs and evaluation", outputs_start);
   result.wall_s = seconds_since(start);
   result.summary = {
       {"mode", "two-sequence"},
@@ -654,11 +714,13 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
   SeqSlamBatch batch(seqslam, ref_count + query_count);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref =
-      preprocess_sequence(config.run.threads, reference, ref_first, ref_count, 0, batch, setup.stop);
+  const DescribedSequence ref = preprocess_sequence(config.run.threads, reference, ref_first, ref_count, 0,
+                                                    batch, setup.stop, setup.blocks("preprocess reference"));
   const DescribedSequence qry =
-      preprocess_sequence(config.run.threads, query, query_first, query_count, ref_count, batch, setup.stop);
+      preprocess_sequence(config.run.threads, query, query_first, query_count, ref_count, batch, setup.stop,
+                          setup.blocks("preprocess query"));
   const double preprocess_s = seconds_since(t0);
+  setup.phase("preprocess (reference and query)", t0);
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   for (const auto& [dataset, described] : {std::pair{&reference, &ref}, std::pair{&query, &qry}}) {
     if (described->described == 0 && query_count > 0) {
@@ -675,7 +737,9 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
   tbb::task_arena arena(config.run.threads);
   if (query_count > 0) arena.execute([&] { matches = batch.run_two_sequence(ref_count, query_count); });
   const double search_s = seconds_since(t0);
+  setup.phase("search (SeqSLAM)", t0);
 
+  const auto outputs_start = Clock::now();
   LoopsWriter loops_csv;
   loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
   CsvWriter frames_csv(out_dir / "frames.csv",
@@ -725,6 +789,7 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
   result.loops = loops.size();
   const std::string score_order = "lower_is_better";
   nlohmann::json evaluation = run_evaluation(setup, loops, ranked, score_order, out_dir);
+  setup.phase("outputs and evaluation", outputs_start);
   result.wall_s = seconds_since(start);
   result.summary = {
       {"mode", "two-sequence"},
@@ -772,11 +837,13 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   const auto [query_first, query_last] = config.run.frame_range(query.frame_count());
   const AlignedSequences ranges{ref_first, ref_last - ref_first, query_first, query_last - query_first,
                                 config.eval.aligned_tolerance_frames};
-  const TwoSequenceSetup setup{config, reference, query, ranges, stop};
+  TraceWriter trace;
+  TwoSequenceSetup setup{config, reference, query, ranges, stop, RunTrace{}};
   spdlog::info("two-sequence run ({}): reference {} ({} frames) vs query {} ({} frames), {} threads",
                enum_name(config.run.method), reference.root().string(), setup.ranges.reference_count,
                query.root().string(), setup.ranges.query_count, config.run.threads);
   const auto start = Clock::now();
+  if (config.output.trace) setup.trace = RunTrace{&trace, start};
   std::filesystem::create_directories(out_dir);
   TwoSequenceResult result = config.run.seqslam()        ? run_seqslam(setup, out_dir, start)
                              : config.run.dird_seqslam() ? run_dird_seqslam(setup, out_dir, start)
@@ -784,6 +851,13 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   result.interrupted = stop && stop->load();
   result.summary["interrupted"] = result.interrupted;
   result.summary["provenance"] = provenance_json(result.summary.value("config", nlohmann::json::object()));
+  if (config.output.trace) {
+    trace.name_process(fmt::format("loopgate run: two sequences, {} ({} vs {})", enum_name(config.run.method),
+                                   reference.root().string(), query.root().string()));
+    trace.name_thread(0, "main");
+    for (int t = 1; t < config.run.threads; ++t) trace.name_thread(t, fmt::format("worker {}", t));
+    trace.write(out_dir / "trace.json");
+  }
   write_json_file(out_dir / "summary.json", result.summary);
   return result;
 }

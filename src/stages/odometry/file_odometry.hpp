@@ -1,5 +1,5 @@
-// The `file` odometry source: an external trajectory (TUM) interpolated to each frame time (linear
-// position, slerp rotation), with covariance from the growth model
+// The `file` odometry source: an external trajectory (io/trajectory_file.hpp) interpolated to each frame time
+// (linear position, slerp rotation), with covariance from the growth model
 //   position sigma^2 = a + b * d,   rotation sigma^2 = a_rot + b_rot * d   (isotropic),
 // d the distance travelled along the trajectory up to the frame time.
 #pragma once
@@ -12,7 +12,8 @@ namespace loopgate {
 
 class FileOdometry : public OdometrySource {
  public:
-  // `poses` strictly increasing in time (read_tum guarantees it); throws std::invalid_argument if empty.
+  // `poses` strictly increasing in time (read_trajectory_file guarantees it); throws std::invalid_argument if
+  // empty.
   FileOdometry(const OdometryConfig& config, std::vector<StampedPose> poses);
 
   const char* name() const override { return "file"; }

@@ -29,7 +29,8 @@ void OdometryConfig::validate() const {
   require(file_max_gap_s > 0 && file_max_gap_s <= 3600, "odometry.file_max_gap_s", "in (0, 3600] s",
           std::to_string(file_max_gap_s));
   if (source == "file")
-    require(!file.empty(), "odometry.file", "a TUM trajectory path when source is file", "''");
+    require(!file.empty(), "odometry.file", "a trajectory path (TUM, KITTI or EuRoC) when source is file",
+            "''");
 }
 
 }  // namespace loopgate

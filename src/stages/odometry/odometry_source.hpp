@@ -1,7 +1,8 @@
 // Odometry sources (vio-ekf.md § Odometry sources): one interface, chosen by `odometry.source`.
 //   drift: ground truth corrupted by a seeded random walk in position, heading and scale, with the
 //          covariance of that drift model (for datasets without IMU and controlled experiments);
-//   file:  an external TUM trajectory, covariance from the growth model sigma^2 = a + b * distance;
+//   file:  an external trajectory (TUM, KITTI or EuRoC format: file_format), covariance from the growth model
+//          sigma^2 = a + b * distance;
 //   ekf:   the MSCKF visual-inertial filter of src/stages/ekf on the images and IMU (ekf_odometry.hpp);
 //   none:  no poses at all (appearance-only runs, issue 14): frames carry no pose, frames.csv says
 //          odom_status none, trajectory.tum is empty; only run.mode full can detect loops without poses (the
@@ -20,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "core/trajectory_format.hpp"
 #include "core/types.hpp"
 #include "stages/ekf/ekf_config.hpp"
 
@@ -41,8 +43,12 @@ struct OdometryConfig {
   std::string heading_axis = "auto";
   double initial_sigma_m = 0.01;     // floor added to the position variances
   double initial_sigma_rad = 0.001;  // floor added to the rotation variances
-  // file: TUM trajectory (relative paths are relative to the working directory).
+  // file: a trajectory (relative paths are relative to the working directory) in `file_format`: auto (told
+  // from its first data line) | tum | kitti (12 columns: row k is the dataset's frame k, timed by the
+  // dataset, e.g. KITTI times.txt; 13: a time in seconds first) | euroc (state_groundtruth_estimate0/data.csv
+  // columns).
   std::string file;
+  TrajectoryFormat file_format = TrajectoryFormat::kAuto;
   double file_sigma2_a_m2 = 0.01;
   double file_sigma2_b_m2_per_m = 0.01;
   double file_rot_sigma2_a_rad2 = 1e-4;
@@ -66,6 +72,7 @@ struct OdometryConfig {
     v("initial_sigma_m", self.initial_sigma_m);
     v("initial_sigma_rad", self.initial_sigma_rad);
     v("file", self.file);
+    v("file_format", self.file_format);
     v("file_sigma2_a_m2", self.file_sigma2_a_m2);
     v("file_sigma2_b_m2_per_m", self.file_sigma2_b_m2_per_m);
     v("file_rot_sigma2_a_rad2", self.file_rot_sigma2_a_rad2);

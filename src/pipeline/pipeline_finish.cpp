@@ -1,0 +1,163 @@
+// The end of a run's stream (pipeline_run.hpp): what follows the method's end-of-stream work.
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/error.hpp"
+#include "io/writers.hpp"
+#include "pipeline/pipeline_run.hpp"
+#include "pipeline/run_checks.hpp"
+#include "pipeline/run_summary.hpp"
+#include "pipeline/thread_cpu_time.hpp"
+
+namespace loopgate::pipeline_internal {
+
+void PipelineRun::trace_end_of_stream(const char* name, std::int64_t start_ns) {
+  const std::int64_t end_ns = clock_.now_ns();
+  outputs_.trace().add(TraceEvent{name,
+                                  "end_of_stream",
+                                  1e-3 * static_cast<double>(start_ns),
+                                  1e-3 * static_cast<double>(end_ns - start_ns),
+                                  thread_index(),
+                                  -1,
+                                  -1,
+                                  'X',
+                                  {}});
+}
+
+// The method's end-of-stream work is matching (the matcher's flush, SeqSLAM's search) in the time
+// accounting; loops.csv and the loop closure below are the rest.
+void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
+  std::int64_t step_ns = clock_.now_ns();
+  if (method_->detects()) write_output("loops.csv", [&] { loops_.close(); });
+  const std::int64_t closer_start_ns = clock_.now_ns();
+  closer_.finish();  // the last loops' verification and the final pose-graph solve
+  const double loop_closure_ms = 1e-6 * static_cast<double>(clock_.now_ns() - closer_start_ns);
+  const double end_of_stream_ms = 1e-6 * static_cast<double>(clock_.now_ns() - work.start_ns);
+  const EndOfStreamTime end_of_stream_time{
+      1e-6 * static_cast<double>(work.method_cpu_ns), 1e-6 * static_cast<double>(work.finish_parallel_ns),
+      1e-6 * static_cast<double>(thread_cpu_ns() - work.cpu_start_ns - work.method_cpu_ns)};
+  if (config_.output.trace) {
+    trace_end_of_stream("end of stream: loops.csv", step_ns);
+    if (closer_.active())
+      trace_end_of_stream("end of stream: loop closure (verification, pose graph)", closer_start_ns);
+  }
+  step_ns = clock_.now_ns();
+  {
+    std::lock_guard failure_lock(failure_mutex_);
+    result.failed = failed_.load();
+    result.error = failed_.load() ? failure_ : work.aborted;
+  }
+  // The end-of-stream work is part of the run (SeqSLAM's search happens there).
+  result.wall_s = 1e-9 * static_cast<double>(clock_.now_ns());
+  result.cpu_s = cpu_seconds() - work.cpu_start_s;
+  result.peak_rss_mb = peak_rss_mb();
+  for (std::string& error : outputs_.finish(true)) output_errors_.push_back(std::move(error));
+  write_output("the method's files", [&] { method_->write_files(out_dir_); });
+  if (closer_.active()) {
+    write_output("loop_edges.csv", [&] { closer_.write_edges(out_dir_); });
+    write_output("loops.csv's verification", [&] { closer_.annotate_loops(loops_); });
+    write_output("trajectory_corrected.tum",
+                 [&] { closer_.write_corrected(out_dir_, outputs_.tracked_poses()); });
+  }
+  if (config_.output.trace)
+    trace_end_of_stream("end of stream: outputs (csv, trajectories, method files)", step_ns);
+  step_ns = clock_.now_ns();
+  const RunCounters& counters = outputs_.counters();
+  result.frames_in = replay_.frames_in();
+  result.frames_dropped = replay_.frames_dropped();
+  result.frames_processed = counters.processed;
+  result.deadline_misses = counters.deadline_misses;
+  result.frames_ok = counters.frames_ok;
+  result.frames_warning = counters.frames_warning;
+  result.frames_error = counters.frames_error;
+  result.data_s = counters.data_s();
+  result.realtime_factor = result.wall_s > 0 ? result.data_s / result.wall_s : 0.0;
+  result.profile_table =
+      outputs_.profiler().table(result.wall_s) +
+      fmt::format(
+          "cpu {:.2f} s / wall {:.2f} s = {:.2f} cores busy; {} frames in, {} processed, {} dropped, {} "
+          "deadline misses; real-time factor {:.2f}\n",
+          result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
+          result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
+          result.realtime_factor) +
+      closer_.profile_line() +
+      (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
+  RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
+                 outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
+                 end_of_stream_ms, std::nullopt, &closer_,     end_of_stream_time};
+  parts.truth_pairs = truth_pairs_ ? &*truth_pairs_ : nullptr;
+  // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
+  // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
+  const std::size_t processed = outputs_.frames_through();
+  parts.evaluated_end_frame =
+      result.failed
+          ? (processed > 0 ? seqs_.frame(static_cast<std::int64_t>(processed) - 1) + 1 : range_.first)
+          : presented_end_;
+  try {
+    result.example_descriptor = method_->example_descriptor();
+  } catch (const DataError& e) {
+    spdlog::warn("run: no example descriptor for the plots: {}", e.what());
+  }
+  nlohmann::json evaluation = {{"available", false}};
+  step_ns = clock_.now_ns();
+  write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
+               [&] { evaluation = evaluate_run(parts, out_dir_); });
+  if (config_.output.trace) trace_end_of_stream("end of stream: evaluation", step_ns);
+  // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
+  std::vector<std::string> problems;
+  if (!result.failed && !result.interrupted) {
+    problems = run_problems(run_check_input(config_, dataset_, outputs_.counters(),
+                                            steps_.odometry_source().name(), method_->detects()));
+    if (!problems.empty()) {
+      result.failed = true;
+      result.error = fmt::format("{}", fmt::join(problems, "; "));
+    }
+  }
+  result.summary = make_run_summary(parts, result, std::move(evaluation));
+  result.summary["problems"] = problems;
+  result.track = {range_.first, range_.second, outputs_.tracked_frames(), outputs_.tracked_poses(),
+                  loops_.loops()};
+  if (config_.output.trace) {
+    outputs_.trace().name_process(fmt::format("loopgate run: {} ({}) on {}", method_->name(), method_->mode(),
+                                              dataset_.root().string()));
+    write_output("trace.json", [&] { outputs_.write_trace(out_dir_ / "trace.json", thread_index()); });
+  }
+  // Last: summary.json says which outputs are missing (when it can itself be written).
+  result.output_errors = output_errors_;
+  result.missing_outputs = missing_outputs();
+  std::erase(result.missing_outputs, std::string("summary.json"));  // being written now
+  result.summary["outputs_missing"] = result.missing_outputs;
+  result.summary["output_errors"] = result.output_errors;
+  write_output("summary.json", [&] { write_json_file(out_dir_ / "summary.json", result.summary); });
+  result.output_errors = output_errors_;
+  result.missing_outputs = missing_outputs();
+  if (!result.missing_outputs.empty()) result.failed = true;
+  if (result.failed) {
+    if (result.error.empty())
+      result.error = "outputs missing: " + fmt::format("{}", fmt::join(result.missing_outputs, ", "));
+    spdlog::error("run failed: {}", result.error);
+  }
+}
+
+std::vector<std::string> PipelineRun::missing_outputs() const {
+  std::vector<std::string> expected = {"frames.csv", "timing.csv", "trajectory.tum", "summary.json"};
+  if (method_->detects()) expected.emplace_back("loops.csv");
+  if (config_.output.trace) expected.emplace_back("trace.json");
+  std::vector<std::string> missing;
+  std::error_code ec;
+  for (const std::string& name : expected)
+    if (!std::filesystem::is_regular_file(out_dir_ / name, ec)) missing.push_back(name);
+  // Files of the method and of the evaluation are named by their errors.
+  for (const std::string& error : output_errors_) {
+    const std::string what = error.substr(0, error.find(':'));
+    if (std::find(expected.begin(), expected.end(), what) == expected.end()) missing.push_back(error);
+  }
+  return missing;
+}
+
+}  // namespace loopgate::pipeline_internal
