@@ -483,6 +483,40 @@ TEST(IoRosbag, CalibrationAndGroundTruthFromAnAslFolder) {
             std::string::npos);
 }
 
+// TUM-VI publishes bags too; its tree beside the bag gives mocap0 ground truth and Kalibr calibration (dso/).
+TEST(IoRosbag, CalibrationAndGroundTruthFromATumViTree) {
+  LOOPGATE_REQUIRE_ROSBAG();
+  const fs::path dir = testing::make_temp_dir("rosbag-tumvi");
+  const fs::path bag = write_euroc_bag(dir, 6);
+  std::string mocap =
+      "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n";
+  for (int k = 0; k <= 40; ++k)
+    mocap += std::to_string(kT0 + k * 10'000'000) + "," + std::to_string(0.01 * k) + ",0,1.2,1,0,0,0\n";
+  fs::create_directories(dir / "seq" / "mav0" / "mocap0");
+  std::ofstream(dir / "seq" / "mav0" / "mocap0" / "data.csv") << mocap;
+  fs::create_directories(dir / "seq" / "dso");
+  std::ofstream(dir / "seq" / "dso" / "camchain.yaml")
+      << "cam0:\n  T_cam_imu:\n  - [0.0, -1.0, 0.0, 0.05]\n  - [0.0, 0.0, -1.0, -0.04]\n"
+         "  - [1.0, 0.0, 0.0, -0.07]\n  - [0.0, 0.0, 0.0, 1.0]\n  camera_model: pinhole\n"
+         "  distortion_coeffs: [0.0034, 0.0007, -0.0021, 0.0002]\n  distortion_model: equidistant\n"
+         "  intrinsics: [19.1, 19.0, 20.0, 12.0]\n  resolution: [40, 24]\n";
+  std::ofstream(dir / "seq" / "dso" / "imu_config.yaml")
+      << "accelerometer_noise_density: 0.0028\naccelerometer_random_walk: 0.00086\n"
+         "gyroscope_noise_density: 0.00016\ngyroscope_random_walk: 0.000022\nupdate_rate: 200.0\n";
+  const auto d = open_dataset(bag, strict());
+  ASSERT_TRUE(d->has_ground_truth());
+  EXPECT_EQ(d->ground_truth().size(), 41u);
+  const auto T = d->ground_truth_T_w_b(1);  // 50 ms: mocap row 5
+  ASSERT_TRUE(T);
+  EXPECT_NEAR(T->translation().x(), 0.05, 1e-12);
+  ASSERT_TRUE(d->camera());
+  EXPECT_DOUBLE_EQ(d->camera()->fx, 19.1);
+  EXPECT_EQ(d->camera()->distortion_model, DistortionModel::kEquidistant);
+  ASSERT_TRUE(d->imu_calibration());
+  EXPECT_DOUBLE_EQ(d->imu_calibration()->rate_hz, 200.0);
+  EXPECT_TRUE(same_pixels(d->load_image(2), frame_image(2)));  // 40 x 24 like camchain's resolution
+}
+
 TEST(IoRosbag, AFileThatIsNotABag) {
   LOOPGATE_REQUIRE_ROSBAG();
   const fs::path dir = testing::make_temp_dir("rosbag-not");
