@@ -3,7 +3,7 @@
 
 Usage: /usr/bin/python3 scripts/check_includes.py SRC_DIR
 
-SRC_DIR is the source root (src/): it holds core/, io/, sim/, eval/, stages/, pipeline/ and app/, and
+SRC_DIR is the source root (src/): it holds core/, bag/, io/, sim/, eval/, stages/, pipeline/ and app/, and
 project includes are written relative to it ("stages/gate/pose_gate.hpp"). A quoted include that names a
 file next to the including one ("../x.hpp", "x.hpp") is resolved as the compiler would.
 
@@ -15,7 +15,7 @@ import os
 import re
 import sys
 
-MODULES = ("core", "io", "sim", "eval", "stages", "pipeline", "app")
+MODULES = ("core", "bag", "io", "sim", "eval", "stages", "pipeline", "app")
 SOURCE_SUFFIXES = (".cpp", ".hpp", ".h", ".cc", ".hh", ".inl", ".ipp")
 
 # (does the rule apply to a file of this module, modules it must not include, the rule as printed);
@@ -29,11 +29,18 @@ RULES = (
      "eval/ must not include pipeline/, stages/, sim/ or app/"),
     (lambda m: m == "sim", ("pipeline", "stages", "app"), "sim/ must not include pipeline/, stages/ or app/"),
     (lambda m: m != "app", ("app",), "only app/ includes app/"),
+    (lambda m: m == "bag", ("core", "io", "sim", "eval", "stages", "pipeline", "app"),
+     "bag/ includes no other module (it is built as C++17 for the ROS1 headers)"),
+    (lambda m: m not in ("io", "bag"), ("bag",), "only io/ includes bag/ (ROS1 bags are read as a Dataset)"),
 )
 TBB_ALLOWED = ("pipeline", "sim")
 TBB_RULE = "only pipeline/ and sim/ include TBB (a stage is plain code, no threads)"
+ROS_ALLOWED = ("bag",)
+ROS_RULE = "only bag/ includes ROS1 headers (their generated messages do not compile as C++20)"
+ROS_PREFIXES = ("ros/", "rosbag/", "sensor_msgs/", "std_msgs/", "geometry_msgs/")
 
 __doc__ += "".join("  - " + rule + "\n" for _, _, rule in RULES) + "  - " + TBB_RULE + "\n"
+__doc__ += "  - " + ROS_RULE + "\n"
 
 INCLUDE = re.compile(r'^\s*#\s*include\s*([<"])([^>"]+)[>"]')
 
@@ -90,6 +97,10 @@ def is_tbb(included):
     return path.startswith("tbb/") or path.startswith("oneapi/tbb") or path == "tbb.h"
 
 
+def is_ros(included):
+    return included.replace("\\", "/").startswith(ROS_PREFIXES)
+
+
 def check(src_root):
     """Every violation under src_root as (file, line, include text, rule), in file order."""
     violations = []
@@ -104,6 +115,8 @@ def check(src_root):
                 text = "#include " + (delimiter + included + (">" if delimiter == "<" else '"'))
                 if is_tbb(included) and module not in TBB_ALLOWED:
                     violations.append((path, number, text, TBB_RULE))
+                if is_ros(included) and module not in ROS_ALLOWED:
+                    violations.append((path, number, text, ROS_RULE))
                 target = included_module(src_root, path, delimiter, included)
                 if target is None:
                     continue

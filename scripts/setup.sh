@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Installs loopgate's build and run dependencies from Debian packages. Idempotent: installs only
-# what is missing, and runs apt-get update only when something is.
+# what is missing, and runs apt-get update only when something is. librosbag-storage-dev and
+# libsensor-msgs-dev are for ROS1 bag input (CMake option LOOPGATE_WITH_ROSBAG, on when they are found).
 set -euo pipefail
 packages=(
   cmake ninja-build g++ pkg-config
   libeigen3-dev libopencv-dev libtbb-dev libspdlog-dev libcli11-dev libnanoflann-dev
   libyaml-cpp-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev
+  librosbag-storage-dev libsensor-msgs-dev
   python3-matplotlib python3-numpy
   parallel
 )

@@ -314,9 +314,7 @@ int compare_two_sequences(const CompareOptions& options) {
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
   const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   log_config_lines(config_to_lines(base));
-  OpenOptions open_options;
-  open_options.strict = base.run.strict;
-  open_options.camera_index = base.run.camera_index;
+  const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
   // Before anything is written: no output over an input, one command at a time in the folder; SIGINT,
   // SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is written
@@ -375,9 +373,7 @@ int compare_command(const CompareOptions& options) {
   const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(base));
-  OpenOptions open_options;
-  open_options.strict = base.run.strict;
-  open_options.camera_index = base.run.camera_index;
+  const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
   // Before anything is written: no output over an input (compare.json, each method's run files), and one
   // command at a time in the folder (issue 15).
@@ -556,7 +552,7 @@ void add_compare_command(CLI::App& app, int& exit_code) {
                                      "B), and compare them side by side");
   cmd->add_option("--config", options->config_file, "YAML configuration (configs/*.yaml)")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--dataset", options->dataset, "dataset folder; overrides run.dataset");
+  cmd->add_option("--dataset", options->dataset, "dataset folder or ROS1 .bag file; overrides run.dataset");
   cmd->add_option("--reference", options->reference,
                   "two-sequence compare (with --query): reference dataset folder, e.g. Nordland summer; the "
                   "methods default to " +

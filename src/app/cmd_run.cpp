@@ -72,9 +72,7 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run --reference --query");
   refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
-  OpenOptions open_options;
-  open_options.strict = config.run.strict;
-  open_options.camera_index = config.run.camera_index;
+  const OpenOptions open_options = config.open_options();
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
@@ -110,7 +108,8 @@ int run_command(const RunOptions& options) {
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
   PipelineConfig config = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
-  if (config.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
+  if (config.run.dataset.empty())
+    throw ConfigError("run.dataset: no dataset (pass --dataset DIR or --dataset FILE.bag)");
   log_config_lines(config_to_lines(config));
   // Before anything is written: no output over an input, and one command at a time in the folder.
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
@@ -119,9 +118,7 @@ int run_command(const RunOptions& options) {
 
   // From here a stop signal (SIGINT, SIGTERM, SIGHUP) drains the run and writes every output.
   const StopSignals signals;
-  OpenOptions open_options;
-  open_options.strict = config.run.strict;
-  open_options.camera_index = config.run.camera_index;
+  const OpenOptions open_options = config.open_options();
   const auto dataset = open_dataset(config.run.dataset, open_options);
   if (!dataset->issues().empty()) {
     spdlog::warn("dataset {}: {} problems found while opening (lenient mode; listed in summary.json)",
@@ -162,8 +159,10 @@ void add_run_command(CLI::App& app, int& exit_code) {
       app.add_subcommand("run", "Replay a dataset through the streaming pipeline and write the run outputs");
   cmd->add_option("--config", options->config_file, "YAML configuration (configs/*.yaml)")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--dataset", options->dataset,
-                  "dataset folder (EuRoC, KITTI or image folder); overrides run.dataset");
+  cmd->add_option(
+      "--dataset", options->dataset,
+      "dataset folder (EuRoC, KITTI or image folder) or ROS1 .bag file (section dataset); overrides "
+      "run.dataset");
   cmd->add_option("--mode", options->mode,
                   "gated (default: the method only inside the pose gate's candidate areas), full (on every "
                   "frame) or odometry (no loop detection); overrides run.mode");

@@ -12,7 +12,8 @@ std::string quote_excerpt(std::string_view text, std::size_t max_chars) {
 }
 
 DataError::DataError(const std::filesystem::path& file, std::size_t line, const std::string& message)
-    : std::runtime_error(file.string() + ":" + std::to_string(line) + ": " + message),
+    : std::runtime_error(file.string() + (line > 0 ? ":" + std::to_string(line) : std::string()) + ": " +
+                         message),
       file_(file),
       line_(line),
       message_(message) {}

@@ -14,7 +14,7 @@ namespace loopgate {
 // message (or a huge summary.json).
 std::string quote_excerpt(std::string_view text, std::size_t max_chars = 64);
 
-// Thrown for bad input. what() reads "FILE:LINE: MESSAGE" (or "FILE: MESSAGE" without a line).
+// Thrown for bad input. what() reads "FILE:LINE: MESSAGE" (or "FILE: MESSAGE" without a line, or line 0).
 class DataError : public std::runtime_error {
  public:
   DataError(const std::filesystem::path& file, std::size_t line, const std::string& message);

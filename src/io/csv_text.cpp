@@ -64,7 +64,7 @@ void IssueLog::begin_table() {
   held_.clear();
 }
 
-void IssueLog::end_table(const std::filesystem::path& file, std::size_t rows) {
+void IssueLog::end_table(const std::filesystem::path& file, std::size_t rows, const std::string& topic) {
   in_table_ = false;
   std::vector<DataIssue> issues = std::move(held_);
   held_.clear();
@@ -74,6 +74,12 @@ void IssueLog::end_table(const std::filesystem::path& file, std::size_t rows) {
   if (strict_) throw DataError(issues.front().file, issues.front().line, issues.front().message);
   const std::size_t rejected = issues.size();
   if (rows > 0 && 2 * rejected > rows) {
+    if (!topic.empty()) {
+      throw DataError(file,
+                      std::to_string(rejected) + " of the " + std::to_string(rows) + " messages of " + topic +
+                          " are bad (first: " + issues.front().to_string() +
+                          "); more than half of the topic is rejected, so the rest is not trusted either");
+    }
     throw DataError(file, std::to_string(rejected) + " of its " + std::to_string(rows) +
                               " rows are bad (first: " + issues.front().to_string() +
                               "); more than half of the file is rejected, so the rest is not trusted either");

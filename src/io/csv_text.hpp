@@ -26,9 +26,10 @@ class IssueLog {
   // the problems are held, so that they come out in line order. end_table() then throws the problem of the
   // earliest line (strict), or records them in line order (lenient) and refuses the file when more than
   // half of its `rows` data rows are bad: lenient reading keeps the good rows of a damaged file, not the
-  // rest of a bad one (DataError naming the count and the first problem).
+  // rest of a bad one (DataError naming the count and the first problem). The rows of a bag are the messages
+  // of one topic: `topic` names it in that error (empty: the rows are lines of `file`).
   void begin_table();
-  void end_table(const std::filesystem::path& file, std::size_t rows);
+  void end_table(const std::filesystem::path& file, std::size_t rows, const std::string& topic = {});
 
  private:
   bool strict_ = true;

@@ -155,11 +155,13 @@ void LoadedDataset::finish() {
     const std::size_t count = std::min(frames.size(), kSizeProbeFrames);
     for (std::size_t k = 0; k < count; ++k) {
       const std::size_t i = count == 1 ? 0 : k * (frames.size() - 1) / (count - 1);
-      std::error_code ec;
-      if (!std::filesystem::is_regular_file(frames[i].image, ec)) continue;
-      if (auto size = png_size(frames[i].image)) {
-        probes.push_back({i, *size});
-        continue;
+      if (!image_reader) {
+        std::error_code ec;
+        if (!std::filesystem::is_regular_file(frames[i].image, ec)) continue;
+        if (auto size = png_size(frames[i].image)) {
+          probes.push_back({i, *size});
+          continue;
+        }
       }
       try {
         const cv::Mat image = decode(i);
@@ -207,6 +209,7 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   const std::string where = "frame " + std::to_string(entry.source_index);  // its number, as in frames.csv
   if (!images_present)
     throw DataError(entry.image, where + ": image absent (this dataset has no image files)");
+  if (image_reader) return image_reader(frame);
   std::error_code ec;
   if (!std::filesystem::is_regular_file(entry.image, ec))
     throw DataError(entry.image, where + ": image file missing");
@@ -227,9 +230,13 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   if (image.empty()) {
     throw DataError(entry.image, where + ": cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
   }
+  return to_grey_8bit(image, entry.image, where);
+}
+
+cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, const std::string& where) {
   if (image.depth() != CV_8U) {
-    throw DataError(entry.image, where + ": image has " + std::to_string(image.elemSize1() * 8) +
-                                     "-bit samples, expected 8-bit");
+    throw DataError(file, where + ": image has " + std::to_string(image.elemSize1() * 8) +
+                              "-bit samples, expected 8-bit");
   }
   if (image.channels() == 1) return image;
   cv::Mat grey;
@@ -238,8 +245,8 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   } else if (image.channels() == 4) {
     cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
   } else {
-    throw DataError(entry.image, where + ": image has " + std::to_string(image.channels()) +
-                                     " channels, expected grey, RGB or RGBA");
+    throw DataError(file, where + ": image has " + std::to_string(image.channels()) +
+                              " channels, expected grey, RGB or RGBA");
   }
   return grey;
 }
@@ -280,7 +287,10 @@ std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const Op
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::exists(dir, ec)) throw DataError(dir, "dataset directory not found");
-  if (!fs::is_directory(dir, ec)) throw DataError(dir, "expected a dataset directory, found a file");
+  if (!fs::is_directory(dir, ec)) {
+    if (dir.extension() == ".bag") return open_rosbag(dir, options);
+    throw DataError(dir, "expected a dataset directory or a ROS1 .bag file, found another file");
+  }
   if (fs::is_directory(dir / "mav0", ec) || fs::is_directory(dir / "cam0", ec) ||
       fs::is_directory(dir / "imu0", ec)) {
     return open_euroc(dir, options);

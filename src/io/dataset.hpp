@@ -36,13 +36,19 @@ struct OpenOptions {
   int camera_index = 0;
   // Image folder only: frame period when no timestamps file is present.
   double folder_rate_hz = 1.0;
+  // ROS1 bag only (open_rosbag): the topics of the images (sensor_msgs/Image or CompressedImage) and of the
+  // IMU (sensor_msgs/Imu; empty = no IMU), and the folder in EuRoC ASL layout whose calibration and ground
+  // truth go with the bag (empty = the folder beside the bag named like it without ".bag", when present).
+  std::string bag_image_topic = "/cam0/image_raw";
+  std::string bag_imu_topic = "/imu0";
+  std::filesystem::path bag_asl_dir;
 };
 
 class Dataset {
  public:
   virtual ~Dataset() = default;
 
-  virtual std::string layout() const = 0;  // "euroc", "kitti" or "folder"
+  virtual std::string layout() const = 0;  // "euroc", "kitti", "folder" or "rosbag"
   virtual const std::filesystem::path& root() const = 0;
 
   virtual std::size_t frame_count() const = 0;
@@ -89,11 +95,19 @@ class Dataset {
 };
 
 // Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ .. image_3/ or
-// times.txt), else an image folder. Throws DataError naming the path when nothing usable is there.
+// times.txt), else an image folder; a file ending in .bag is a ROS1 bag (open_rosbag). Throws DataError
+// naming the path when nothing usable is there.
 std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const OpenOptions& options = {});
 
 std::unique_ptr<Dataset> open_euroc(const std::filesystem::path& dir, const OpenOptions& options = {});
 std::unique_ptr<Dataset> open_kitti(const std::filesystem::path& dir, const OpenOptions& options = {});
 std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, const OpenOptions& options = {});
+// A ROS1 bag (io/rosbag_dataset.cpp): frames are the messages of options.bag_image_topic, timed by their
+// header.stamp and decoded on demand (any frame again, in any order); IMU from options.bag_imu_topic;
+// calibration and ground truth from options.bag_asl_dir read as an EuRoC ASL tree. Throws DataError naming
+// the bag (and the topic and message) for what it cannot use, and when this build has no bag support.
+std::unique_ptr<Dataset> open_rosbag(const std::filesystem::path& bag_file, const OpenOptions& options = {});
+// Whether this build reads ROS1 bags (CMake option LOOPGATE_WITH_ROSBAG).
+bool rosbag_support_built();
 
 }  // namespace loopgate

@@ -92,6 +92,69 @@ void apply_sensor_T_BS(const fs::path& gt_dir, io_detail::IssueLog& log, std::ve
 
 }  // namespace
 
+namespace io_detail {
+
+void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera_index, IssueLog& log,
+                            LoadedDataset& d) {
+  std::error_code ec;
+  const std::string cam_name = "cam" + std::to_string(camera_index);
+  const fs::path cam_dir = mav / cam_name;
+  const std::vector<fs::path> kalibr = kalibr_dirs(dir, mav);
+  if (fs::exists(cam_dir / "sensor.yaml", ec)) {
+    d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
+                                              [](const fs::path& f) { return read_euroc_camera_yaml(f); });
+    if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
+  } else if (const auto chain = first_file(kalibr, {"camchain-imucam.yaml", "camchain.yaml"})) {
+    d.camera_calibration = read_optional_yaml(
+        *chain, log, [&](const fs::path& f) { return read_kalibr_camchain(f, camera_index); });
+    if (d.camera_calibration) {
+      d.calibration_size_source = chain->filename().string() + " " + cam_name + ".resolution";
+      spdlog::info("{}: no {}/sensor.yaml: camera calibration from Kalibr {}", dir.string(), cam_name,
+                   chain->string());
+    }
+  }
+  if (fs::exists(mav / "imu0" / "sensor.yaml", ec)) {
+    d.imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
+                                     [](const fs::path& f) { return read_euroc_imu_yaml(f); });
+  } else if (const auto imu_yaml = first_file(kalibr, {"imu.yaml", "imu_config.yaml"})) {
+    d.imu_calib = read_optional_yaml(*imu_yaml, log, [](const fs::path& f) { return read_kalibr_imu(f); });
+    if (d.imu_calib) {
+      spdlog::info("{}: no imu0/sensor.yaml: IMU calibration from Kalibr {}", dir.string(),
+                   imu_yaml->string());
+    }
+  }
+}
+
+void read_euroc_ground_truth(const fs::path& dir, const fs::path& mav, IssueLog& log, LoadedDataset& d) {
+  std::error_code ec;
+  const fs::path gt_dir = mav / "state_groundtruth_estimate0";
+  const fs::path mocap_dir = mav / "mocap0";
+  if (fs::exists(gt_dir / "data.csv", ec)) {
+    d.gt = read_euroc_groundtruth(gt_dir / "data.csv", log);
+    apply_sensor_T_BS(gt_dir, log, d.gt);
+  } else if (fs::exists(mocap_dir / "data.csv", ec)) {
+    d.gt = read_mocap_groundtruth(mocap_dir / "data.csv", log);
+    apply_sensor_T_BS(mocap_dir, log, d.gt);
+    spdlog::info("{}: ground truth from {} (TUM-VI motion capture, the IMU's pose)", dir.string(),
+                 (mocap_dir / "data.csv").string());
+  } else {
+    for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
+      if (fs::exists(tum, ec)) require_regular_file(tum);
+      if (!fs::is_regular_file(tum, ec)) continue;
+      for (const StampedPose& pose : read_tum(tum, log)) {
+        GroundTruthState s;
+        s.t_ns = pose.t_ns;
+        s.T_w_b = pose.T_w_b;
+        d.gt.push_back(s);
+      }
+      spdlog::info("{}: ground truth from {}", dir.string(), tum.string());
+      break;
+    }
+  }
+}
+
+}  // namespace io_detail
+
 std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& options) {
   if (options.camera_index != 0 && options.camera_index != 1) {
     throw ConfigError(
@@ -138,30 +201,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Calibration: the EuRoC sensor.yaml files, else Kalibr files (TUM-VI).
-  const std::vector<fs::path> kalibr = kalibr_dirs(dir, mav);
-  if (fs::exists(cam_dir / "sensor.yaml", ec)) {
-    d->camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
-                                               [](const fs::path& f) { return read_euroc_camera_yaml(f); });
-    if (d->camera_calibration) d->calibration_size_source = cam_name + "/sensor.yaml resolution";
-  } else if (const auto chain = first_file(kalibr, {"camchain-imucam.yaml", "camchain.yaml"})) {
-    d->camera_calibration = read_optional_yaml(
-        *chain, log, [&](const fs::path& f) { return read_kalibr_camchain(f, options.camera_index); });
-    if (d->camera_calibration) {
-      d->calibration_size_source = chain->filename().string() + " " + cam_name + ".resolution";
-      spdlog::info("{}: no {}/sensor.yaml: camera calibration from Kalibr {}", dir.string(), cam_name,
-                   chain->string());
-    }
-  }
-  if (fs::exists(mav / "imu0" / "sensor.yaml", ec)) {
-    d->imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
-                                      [](const fs::path& f) { return read_euroc_imu_yaml(f); });
-  } else if (const auto imu_yaml = first_file(kalibr, {"imu.yaml", "imu_config.yaml"})) {
-    d->imu_calib = read_optional_yaml(*imu_yaml, log, [](const fs::path& f) { return read_kalibr_imu(f); });
-    if (d->imu_calib) {
-      spdlog::info("{}: no imu0/sensor.yaml: IMU calibration from Kalibr {}", dir.string(),
-                   imu_yaml->string());
-    }
-  }
+  io_detail::read_euroc_calibration(dir, mav, options.camera_index, log, *d);
 
   // IMU.
   const fs::path imu_csv = mav / "imu0" / "data.csv";
@@ -171,30 +211,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Ground truth.
-  const fs::path gt_dir = mav / "state_groundtruth_estimate0";
-  const fs::path mocap_dir = mav / "mocap0";
-  if (fs::exists(gt_dir / "data.csv", ec)) {
-    d->gt = io_detail::read_euroc_groundtruth(gt_dir / "data.csv", log);
-    apply_sensor_T_BS(gt_dir, log, d->gt);
-  } else if (fs::exists(mocap_dir / "data.csv", ec)) {
-    d->gt = io_detail::read_mocap_groundtruth(mocap_dir / "data.csv", log);
-    apply_sensor_T_BS(mocap_dir, log, d->gt);
-    spdlog::info("{}: ground truth from {} (TUM-VI motion capture, the IMU's pose)", dir.string(),
-                 (mocap_dir / "data.csv").string());
-  } else {
-    for (const fs::path& tum : {mav.parent_path() / "groundtruth_tum.txt", mav / "groundtruth_tum.txt"}) {
-      if (fs::exists(tum, ec)) require_regular_file(tum);
-      if (!fs::is_regular_file(tum, ec)) continue;
-      for (const StampedPose& pose : io_detail::read_tum(tum, log)) {
-        GroundTruthState s;
-        s.t_ns = pose.t_ns;
-        s.T_w_b = pose.T_w_b;
-        d->gt.push_back(s);
-      }
-      spdlog::info("{}: ground truth from {}", dir.string(), tum.string());
-      break;
-    }
-  }
+  io_detail::read_euroc_ground_truth(dir, mav, log, *d);
 
   d->finish();
   io_detail::log_summary(*d);

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -11,6 +12,8 @@
 #include "io/dataset.hpp"
 
 namespace loopgate::io_detail {
+
+class IssueLog;
 
 struct FrameEntry {
   Timestamp t_ns = 0;
@@ -33,6 +36,10 @@ class LoadedDataset final : public Dataset {
   std::vector<DataIssue> problems;
   // Where the expected image size comes from when the calibration gives it ("cam0/sensor.yaml").
   std::string calibration_size_source;
+  // When set, images come from it instead of the files frames[].image (a ROS1 bag: frames[].image is then
+  // the bag file). It decodes frame `frame` as 8-bit grey without the size check and throws DataError naming
+  // the frame; it must be safe to call from several threads at once.
+  std::function<cv::Mat(std::size_t frame)> image_reader;
   // The sequence's frame times by source index when the layout has a table of them (KITTI times.txt); empty:
   // source_times() is made from the frames.
   std::vector<std::optional<Timestamp>> source_time_table;
@@ -72,6 +79,21 @@ class LoadedDataset final : public Dataset {
   std::string expected_size_source_;
   bool imu_sorted_ = true;
 };
+
+// `image` as 8-bit grey: grey is kept, BGR / BGRA converted; another depth or channel count throws DataError
+// naming `file` and `where` ("frame 12"), in the words every reader uses for it.
+cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, const std::string& where);
+
+// The calibration and the ground truth of an EuRoC ASL tree `dir` (its mav0/ is `mav`, or `dir` itself when
+// it holds cam0/ ...), as open_euroc reads them; what is absent stays unset. Calibration:
+// cam<camera_index>/sensor.yaml (camera_calibration, calibration_size_source) and imu0/sensor.yaml
+// (imu_calib), else Kalibr files in `dir` or its dso/ (TUM-VI). Ground truth (gt):
+// state_groundtruth_estimate0/data.csv, else TUM-VI's mocap0/data.csv (each moved to the body frame by its
+// sensor.yaml T_BS), else a TUM file groundtruth_tum.txt beside or inside `mav`.
+void read_euroc_calibration(const std::filesystem::path& dir, const std::filesystem::path& mav,
+                            int camera_index, IssueLog& log, LoadedDataset& d);
+void read_euroc_ground_truth(const std::filesystem::path& dir, const std::filesystem::path& mav,
+                             IssueLog& log, LoadedDataset& d);
 
 // Image files directly inside `dir` (png, jpg/jpeg, pgm/ppm, bmp, tif/tiff; any case), in natural order:
 // runs of digits compare by value, so "img2.png" < "img10.png".

@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
 #include "io/csv_text.hpp"
+#include "io/time_order.hpp"
 #include "io/yaml_fields.hpp"
 
 namespace loopgate {
@@ -20,12 +21,14 @@ namespace {
 using io_detail::Delimiter;
 using io_detail::is_rotation;
 using io_detail::IssueLog;
+using io_detail::keep_increasing;
 using io_detail::load_yaml;
 using io_detail::require_key;
 using io_detail::rigid_transform;
 using io_detail::Row;
 using io_detail::RowError;
 using io_detail::TextFile;
+using io_detail::TimedRow;
 using io_detail::yaml_line;
 using io_detail::yaml_number;
 using io_detail::yaml_numbers;
@@ -47,85 +50,6 @@ Eigen::Quaterniond checked_quaternion(double w, double x, double y, double z) {
   }
   q.normalize();
   return q;
-}
-
-// A time for a message: seconds with 9 decimals (the tables in seconds) or integer ns.
-std::string time_text(Timestamp t_ns, bool seconds) {
-  if (!seconds) return std::to_string(t_ns) + " ns";
-  std::string out;
-  io_detail::append_seconds(out, t_ns);
-  return out + " s";
-}
-
-// A row of a time-ordered table, parsed, before the order is judged.
-template <class T>
-struct TimedRow {
-  std::size_t line = 0;
-  Timestamp t_ns = 0;
-  T value;
-};
-
-// The rows whose times strictly increase, keeping as many as possible: the longest strictly increasing
-// subsequence (earliest rows preferred among equal times). Every other row is reported, judged against the
-// kept rows on both sides of it, so that a single outlier (a typo of 10^5 s at row 10) is the one row
-// dropped whichever way it jumps, not the 1 990 good rows after it (issue 15). Called between
-// IssueLog::begin_table() and end_table(): in strict mode the earliest problem of the table is the error.
-template <class T>
-std::vector<TimedRow<T>> keep_increasing(const std::filesystem::path& file, IssueLog& log,
-                                         std::vector<TimedRow<T>> rows, const char* what, bool seconds) {
-  const std::size_t n = rows.size();
-  // Patience sorting on the reversed sequence of negated times (strictly increasing), so that among equal
-  // times the earliest row is the one kept.
-  std::vector<std::size_t> tails;           // tails[k]: position (in reversed order) ending a run of k + 1
-  std::vector<std::ptrdiff_t> previous(n);  // link to the run's element before, -1 at its start
-  const auto key = [&](std::size_t k) { return -rows[n - 1 - k].t_ns; };
-  for (std::size_t k = 0; k < n; ++k) {
-    const auto it = std::lower_bound(tails.begin(), tails.end(), key(k),
-                                     [&](std::size_t a, Timestamp value) { return key(a) < value; });
-    previous[k] = it == tails.begin() ? -1 : static_cast<std::ptrdiff_t>(*(it - 1));
-    if (it == tails.end()) {
-      tails.push_back(k);
-    } else {
-      *it = k;
-    }
-  }
-  std::vector<char> keep(n, 0);
-  for (std::ptrdiff_t k = tails.empty() ? -1 : static_cast<std::ptrdiff_t>(tails.back()); k >= 0;
-       k = previous[static_cast<std::size_t>(k)]) {
-    keep[n - 1 - static_cast<std::size_t>(k)] = 1;
-  }
-  if (tails.size() == n) return rows;
-  std::vector<std::ptrdiff_t> next_kept(n, -1);
-  for (std::ptrdiff_t i = static_cast<std::ptrdiff_t>(n) - 1, next = -1; i >= 0; --i) {
-    next_kept[static_cast<std::size_t>(i)] = next;
-    if (keep[static_cast<std::size_t>(i)]) next = i;
-  }
-  std::vector<TimedRow<T>> kept;
-  kept.reserve(tails.size());
-  std::ptrdiff_t last_kept = -1;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (keep[i]) {
-      kept.push_back(std::move(rows[i]));
-      last_kept = static_cast<std::ptrdiff_t>(i);
-      continue;
-    }
-    const Timestamp t = rows[i].t_ns;
-    std::string message = std::string(what) + " " + time_text(t, seconds);
-    const TimedRow<T>* before = last_kept >= 0 ? &kept.back() : nullptr;
-    const TimedRow<T>* after = next_kept[i] >= 0 ? &rows[static_cast<std::size_t>(next_kept[i])] : nullptr;
-    if (before && t == before->t_ns) {
-      message = "duplicate " + message + " (line " + std::to_string(before->line) + " has it)";
-    } else if (before && t < before->t_ns) {
-      message +=
-          " is before line " + std::to_string(before->line) + " (" + time_text(before->t_ns, seconds) + ")";
-    } else {
-      message +=
-          " is after line " + std::to_string(after->line) + " (" + time_text(after->t_ns, seconds) + ")";
-    }
-    message += ", expected strictly increasing times: this row is out of order with the rows around it";
-    log.report(file, rows[i].line, message);
-  }
-  return kept;
 }
 
 // ---------- YAML ----------

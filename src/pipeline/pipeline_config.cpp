@@ -74,6 +74,21 @@ std::pair<std::size_t, std::size_t> RunConfig::frame_range(std::size_t frame_cou
   return {first, last};
 }
 
+void DatasetConfig::validate() const {
+  require(!bag_image_topic.empty(), "dataset.bag_image_topic",
+          "the topic of a bag's images (EuRoC: /cam0/image_raw)", "''");
+}
+
+OpenOptions PipelineConfig::open_options() const {
+  OpenOptions options;
+  options.strict = run.strict;
+  options.camera_index = run.camera_index;
+  options.bag_image_topic = dataset.bag_image_topic;
+  options.bag_imu_topic = dataset.bag_imu_topic;
+  options.bag_asl_dir = dataset.bag_asl_dir;
+  return options;
+}
+
 void RunConfig::validate() const {
   if (method != Detector::kDird && mode == RunMode::kOdometry) {
     throw ConfigError("run.method: " + std::string(enum_name(method)) +

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/enum_names.hpp"
+#include "io/dataset.hpp"
 #include "stages/dird/dird_config.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/gate/gate_config.hpp"
@@ -100,6 +101,28 @@ struct RunConfig {
   std::optional<double> rate_factor() const;
   // [first, last) clamped to frame_count; throws ConfigError when the range is empty or malformed.
   std::pair<std::size_t, std::size_t> frame_range(std::size_t frame_count) const;
+};
+
+// Section dataset: how inputs that are not folders are read. A ROS1 bag (run.dataset ending in .bag, README §
+// Datasets): the topics of the images (sensor_msgs/Image or CompressedImage) and of the IMU (sensor_msgs/Imu;
+// empty = no IMU), EuRoC's by default, and the folder in EuRoC ASL layout that holds the calibration and
+// ground truth a bag does not carry (cam0/sensor.yaml, imu0/sensor.yaml,
+// state_groundtruth_estimate0/data.csv; empty = the folder beside the bag named like it without ".bag", when
+// there is one). Relative paths are relative to the working directory.
+struct DatasetConfig {
+  std::string bag_image_topic = "/cam0/image_raw";
+  std::string bag_imu_topic = "/imu0";
+  std::string bag_asl_dir;
+
+  // The keys, in order, for loading, printing and the JSON echo (Self is DatasetConfig or const
+  // DatasetConfig).
+  template <class Self, class V>
+  static void fields(Self& self, V&& v) {
+    v("bag_image_topic", self.bag_image_topic);
+    v("bag_imu_topic", self.bag_imu_topic);
+    v("bag_asl_dir", self.bag_asl_dir);
+  }
+  void validate() const;
 };
 
 struct OutputConfig {
@@ -208,6 +231,7 @@ inline SeqSlamConfig single_sequence_seqslam() {
 
 struct PipelineConfig {
   RunConfig run;
+  DatasetConfig dataset;
   SyncConfig sync;
   OdometryConfig odometry;
   EkfConfig ekf;  // the `ekf` odometry source (stages/ekf/ekf_config.hpp)
@@ -241,6 +265,7 @@ struct PipelineConfig {
   template <class Self, class V>
   static void sections(Self& self, V&& v) {
     v("run", self.run);
+    v("dataset", self.dataset);
     v("sync", self.sync);
     v("odometry", self.odometry);
     v("ekf", self.ekf);
@@ -259,8 +284,11 @@ struct PipelineConfig {
   // odometry.source none gives no poses: the modes and options that need them are errors (the same check
   // for `auto` resolving to none is made when the dataset is known, pipeline/odometry_factory.hpp).
   void validate_odometry_none() const;
+  // How the datasets of this run are opened (run.strict, run.camera_index, section dataset).
+  OpenOptions open_options() const;
   void validate() const {
     run.validate();
+    dataset.validate();
     sync.validate();
     odometry.validate();
     ekf.validate();
