@@ -6,7 +6,7 @@
 // synchronises with every task).
 //
 // The only access not covered is a task's read of the body object itself (two pointers TBB copied on the
-// spawning thread); the TSan suppressions (sanitizer_suppressions.cpp) name this file for exactly that
+// spawning thread); the TSan suppressions (src/sanitizer_suppressions.cpp) name this file for exactly that
 // (race_top).
 //
 // Time accounting: a loop started while a ParallelTimeScope is active on the calling thread adds to the
@@ -24,10 +24,6 @@
 #include "pipeline/thread_cpu_time.hpp"
 
 namespace loopgate {
-
-// Does nothing; calling it links src/pipeline/sanitizer_suppressions.cpp (the oneTBB suppressions of
-// sanitizer builds) into the program.
-void sanitizer_suppressions_anchor();
 
 // The counter that parallel loops started on this thread add their helpers' CPU time to, ns (nullptr: none).
 inline thread_local std::atomic<std::int64_t>* t_parallel_time_ns = nullptr;
@@ -69,7 +65,6 @@ struct HandoffBody {
 // Calls work(i) for i in [0, count), in parallel.
 template <class Work>
 void parallel_for_with_handoff(std::size_t count, const Work& work) {
-  sanitizer_suppressions_anchor();
   std::atomic<int> handoff{0};
   handoff.store(1, std::memory_order_release);
   tbb::parallel_for(std::size_t{0}, count,

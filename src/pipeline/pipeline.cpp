@@ -148,7 +148,6 @@ RunResult PipelineRun::run() {
     make_edge(*sink, limiter->decrementer());
   });
 
-  sanitizer_suppressions_anchor();  // sanitizer builds: links the oneTBB suppressions (parallel_handoff.hpp)
   RunResult result;
   const double cpu_start_s = cpu_seconds();
   clock_.restart();

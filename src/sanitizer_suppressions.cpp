@@ -1,12 +1,7 @@
-// Sanitizer suppressions for the code that runs on oneTBB (the flow graph, parallel_for_with_handoff), scoped
-// to oneTBB only, each with its reason (issue 15; DEVELOPERS.md § Sanitizers). Linked into every program that
-// runs the pipeline through sanitizer_suppressions_anchor() (parallel_handoff.hpp), so they hold for the
-// `loopgate` binary run by hand as well as under ctest.
-#include "pipeline/parallel_handoff.hpp"
-
-namespace loopgate {
-void sanitizer_suppressions_anchor() {}
-}  // namespace loopgate
+// Sanitizer suppressions, each scoped to a system library (oneTBB; GDAL under OpenCV's image reading) and
+// given with its reason (issue 15; DEVELOPERS.md § Sanitizers). In sanitizer builds CMake links this object
+// into every executable (the `loopgate` binary, every test and benchmark), so they hold for a program run by
+// hand as well as under ctest, whether or not it runs the pipeline: io tests decode images too.
 
 #if defined(__SANITIZE_THREAD__)
 // ThreadSanitizer builds: oneTBB comes from an uninstrumented system library, so the synchronisation of
