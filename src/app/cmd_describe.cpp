@@ -15,6 +15,7 @@
 
 #include "app/commands.hpp"
 #include "core/error.hpp"
+#include "io/dataset.hpp"
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
 #include "stages/dird/dird_extractor.hpp"
@@ -43,20 +44,17 @@ std::string csv_field(const std::string& text) {
   return quoted + "\"";
 }
 
-// Decodes an image for DIRD: 8-bit grey/BGR/BGRA as stored. Other sample depths or channel layouts are
-// refused with the same words as `loopgate run` (io/dataset.cpp), so that an image describe accepts is one a
-// run accepts (issue 15: a 16-bit PNG was converted here and rejected there). Throws DataError naming the
-// file.
+// Decodes an image for DIRD: grey/BGR/BGRA, 16-bit unsigned samples scaled to 8 bits by the rule of every
+// reader (to_8bit_samples, io/dataset.hpp). Other sample types or channel layouts are refused with the same
+// words as `loopgate run`, so that an image describe accepts is one a run accepts, read the same way (issue
+// 15). Throws DataError naming the file.
 cv::Mat read_image(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw DataError(path, "no such image file");
   require_regular_file(path, "the image");  // a directory, a FIFO: say what it is
   cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (image.empty()) throw DataError(path, "cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
-  if (image.depth() != CV_8U) {
-    throw DataError(path,
-                    "image has " + std::to_string(image.elemSize1() * 8) + "-bit samples, expected 8-bit");
-  }
+  image = to_8bit_samples(image, path, "");  // 16-bit unsigned scaled to 8 bits, as `run` does
   if (image.channels() != 1 && image.channels() != 3 && image.channels() != 4) {
     throw DataError(
         path, "image has " + std::to_string(image.channels()) + " channels, expected grey, RGB or RGBA");

@@ -47,6 +47,21 @@ std::vector<std::optional<Timestamp>> Dataset::source_times() const {
   return times;
 }
 
+cv::Mat to_8bit_samples(const cv::Mat& image, const std::filesystem::path& file, const std::string& where) {
+  if (image.depth() == CV_8U) return image;
+  if (image.depth() == CV_16U) {
+    cv::Mat eight;
+    image.convertTo(eight, CV_8U, 1.0 / 257.0);  // full range: 65535 -> 255, rounded
+    return eight;
+  }
+  throw DataError(
+      file,
+      (where.empty() ? "" : where + ": ") + "image has " + std::to_string(image.elemSize1() * 8) + "-bit " +
+          (image.depth() == CV_16S || image.depth() == CV_32S || image.depth() == CV_8S ? "signed integer"
+                                                                                        : "floating-point") +
+          " samples, expected 8-bit or 16-bit unsigned");
+}
+
 namespace io_detail {
 
 namespace {
@@ -234,18 +249,15 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
 }
 
 cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, const std::string& where) {
-  if (image.depth() != CV_8U) {
-    throw DataError(file, where + ": image has " + std::to_string(image.elemSize1() * 8) +
-                              "-bit samples, expected 8-bit");
-  }
-  if (image.channels() == 1) return image;
+  const cv::Mat eight = to_8bit_samples(image, file, where);
+  if (eight.channels() == 1) return eight;
   cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else if (image.channels() == 4) {
-    cv::cvtColor(image, grey, cv::COLOR_BGRA2GRAY);
+  if (eight.channels() == 3) {
+    cv::cvtColor(eight, grey, cv::COLOR_BGR2GRAY);
+  } else if (eight.channels() == 4) {
+    cv::cvtColor(eight, grey, cv::COLOR_BGRA2GRAY);
   } else {
-    throw DataError(file, where + ": image has " + std::to_string(image.channels()) +
+    throw DataError(file, where + ": image has " + std::to_string(eight.channels()) +
                               " channels, expected grey, RGB or RGBA");
   }
   return grey;

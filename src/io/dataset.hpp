@@ -94,6 +94,12 @@ class Dataset {
   virtual std::vector<std::optional<Timestamp>> source_times() const;
 };
 
+// The sample rule of every image reader and of `describe`: 8-bit images as they are; 16-bit unsigned ones
+// (TUM-VI's PNGs, mono16 bag messages) scaled to 8 bits over the full range (v / 257, rounded: 65535 -> 255);
+// anything else (signed, floating point) is a DataError naming `file` and `where` (e.g. "frame 12"; empty:
+// none).
+cv::Mat to_8bit_samples(const cv::Mat& image, const std::filesystem::path& file, const std::string& where);
+
 // Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ .. image_3/ or
 // times.txt), else an image folder; a file ending in .bag is a ROS1 bag (open_rosbag). Throws DataError
 // naming the path when nothing usable is there.

@@ -10,12 +10,14 @@
 // Opening indexes the image topic (every message's header, not its pixels: the whole topic is read once) and
 // reads the IMU; images are read again from the bag when a frame is decoded (bag/bag_reader.hpp: a rosbag
 // MessageInstance per frame), so a gated run re-reads any past frame without holding the images in memory.
-// Image problems found in the headers (unknown encoding, 16-bit samples, a size the data does not hold) and
+// Image problems found in the headers (unknown encoding, signed samples, a size the data does not hold) and
 // header stamps out of order are table problems like a bad row: the first one is the error in strict mode,
 // lenient mode skips those frames and records them (and fails when more than half of them are bad).
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <bit>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <utility>
@@ -58,23 +60,31 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
 
 namespace {
 
-// The sensor_msgs/Image encodings read (8-bit; colour is converted to grey like a colour PNG).
+// The sensor_msgs/Image encodings read; colour is converted to grey like a colour PNG, 16-bit unsigned
+// samples are scaled to 8 bits like a 16-bit PNG (to_8bit_samples, io/dataset.hpp).
 struct Encoding {
   const char* name;
   int channels;
   int to_grey;  // cv::cvtColor code, -1 for grey
+  int bytes;    // per sample: 1 or 2 (16-bit unsigned, byte order from is_bigendian)
 };
 constexpr Encoding kEncodings[] = {
-    {"mono8", 1, -1},
-    {"8UC1", 1, -1},
-    {"bgr8", 3, cv::COLOR_BGR2GRAY},
-    {"rgb8", 3, cv::COLOR_RGB2GRAY},
-    {"bgra8", 4, cv::COLOR_BGRA2GRAY},
-    {"rgba8", 4, cv::COLOR_RGBA2GRAY},
+    {"mono8", 1, -1, 1},
+    {"8UC1", 1, -1, 1},
+    {"bgr8", 3, cv::COLOR_BGR2GRAY, 1},
+    {"rgb8", 3, cv::COLOR_RGB2GRAY, 1},
+    {"bgra8", 4, cv::COLOR_BGRA2GRAY, 1},
+    {"rgba8", 4, cv::COLOR_RGBA2GRAY, 1},
+    {"mono16", 1, -1, 2},
+    {"16UC1", 1, -1, 2},
+    {"bgr16", 3, cv::COLOR_BGR2GRAY, 2},
+    {"rgb16", 3, cv::COLOR_RGB2GRAY, 2},
+    {"bgra16", 4, cv::COLOR_BGRA2GRAY, 2},
+    {"rgba16", 4, cv::COLOR_RGBA2GRAY, 2},
 };
-constexpr const char* kEncodingList = "mono8, bgr8, rgb8, bgra8 or rgba8";
-// Encodings with 16-bit samples: refused like a 16-bit PNG.
-constexpr const char* kSixteenBit[] = {"mono16", "16UC1", "16SC1", "bgr16", "rgb16", "bgra16", "rgba16"};
+constexpr const char* kEncodingList = "mono8, bgr8, rgb8, bgra8, rgba8 or their 16-bit forms (mono16, ...)";
+// Signed samples are not an image of light: refused.
+constexpr const char* kSigned[] = {"16SC1", "8SC1"};
 
 const Encoding* find_encoding(const std::string& name) {
   for (const Encoding& e : kEncodings)
@@ -89,10 +99,9 @@ std::string image_problem(const bag::ImageInfo& info) {
   if (info.compressed) {
     return info.data_bytes == 0 ? "CompressedImage with no data (format '" + info.encoding + "')" : "";
   }
-  for (const char* name : kSixteenBit) {
+  for (const char* name : kSigned) {
     if (info.encoding == name) {
-      return "image has 16-bit samples (encoding '" + info.encoding + "'), expected 8-bit (" + kEncodingList +
-             ")";
+      return "image has signed integer samples (encoding '" + info.encoding + "'), expected " + kEncodingList;
     }
   }
   const Encoding* encoding = find_encoding(info.encoding);
@@ -100,7 +109,8 @@ std::string image_problem(const bag::ImageInfo& info) {
   if (info.width == 0 || info.height == 0) {
     return "image is " + std::to_string(info.width) + "x" + std::to_string(info.height);
   }
-  const std::size_t row_bytes = std::size_t{info.width} * static_cast<std::size_t>(encoding->channels);
+  const std::size_t row_bytes =
+      std::size_t{info.width} * static_cast<std::size_t>(encoding->channels * encoding->bytes);
   if (info.step < row_bytes) {
     return "step " + std::to_string(info.step) + " bytes is less than a row of " +
            std::to_string(info.width) + " " + info.encoding + " pixels (" + std::to_string(row_bytes) +
@@ -139,16 +149,25 @@ cv::Mat read_grey(const bag::BagReader& reader, const std::string& topic, std::s
     }
     return io_detail::to_grey_8bit(image, reader.file(), where);
   }
-  const Encoding& encoding = *find_encoding(raw.info.encoding);
-  const cv::Mat view(static_cast<int>(raw.info.height), static_cast<int>(raw.info.width),
-                     CV_8UC(encoding.channels), raw.data.data(), raw.info.step);
-  cv::Mat grey;
-  if (encoding.to_grey < 0) {
-    grey = view.clone();
-  } else {
-    cv::cvtColor(view, grey, encoding.to_grey);
+  const Encoding* known = find_encoding(raw.info.encoding);
+  if (known == nullptr)  // image_problem() refused it already; kept for the compiler's flow analysis
+    throw DataError(reader.file(), where + ": unknown encoding " + quote_excerpt(raw.info.encoding));
+  const Encoding& encoding = *known;
+  const int type = encoding.bytes == 2 ? CV_16UC(encoding.channels) : CV_8UC(encoding.channels);
+  cv::Mat samples = cv::Mat(static_cast<int>(raw.info.height), static_cast<int>(raw.info.width), type,
+                            raw.data.data(), raw.info.step)
+                        .clone();
+  constexpr bool kHostBigEndian = std::endian::native == std::endian::big;
+  if (encoding.bytes == 2 && raw.info.big_endian != kHostBigEndian) {
+    for (int r = 0; r < samples.rows; ++r) {
+      auto* row = samples.ptr<std::uint16_t>(r);
+      for (int k = 0; k < samples.cols * samples.channels(); ++k)
+        row[k] = static_cast<std::uint16_t>((row[k] >> 8) | (row[k] << 8));
+    }
   }
-  return grey;
+  cv::Mat grey = samples;
+  if (encoding.to_grey >= 0) cv::cvtColor(samples, grey, encoding.to_grey);
+  return to_8bit_samples(grey, reader.file(), where);
 }
 
 // The problems of a topic's messages, reported in message order (the first is the error in strict mode).
