@@ -98,16 +98,7 @@ void make_euroc(const fs::path& dir, bool with_images = true) {
   write_euroc_groundtruth(mav / "state_groundtruth_estimate0/data.csv", gt);
 }
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 TEST(IoEuroc, GeneratedDatasetReadsEverything) {
   const fs::path dir = testing::make_temp_dir("io-euroc");

@@ -22,16 +22,7 @@ cv::Mat grey(int value, int width = 20, int height = 10) {
   return cv::Mat(height, width, CV_8UC1, cv::Scalar(static_cast<double>(value)));
 }
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 TEST(IoFolder, NaturalOrderMixedFormatsAndRate) {
   const fs::path dir = testing::make_temp_dir("io-folder");

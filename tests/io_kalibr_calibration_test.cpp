@@ -47,16 +47,7 @@ cam1:
   resolution: [512, 512]
 )";
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 void expect_error(const DataError& e, const fs::path& file, std::size_t line, const std::string& needle) {
   EXPECT_EQ(e.file(), file) << e.what();

@@ -74,16 +74,7 @@ std::vector<int> all_frames() {
   return v;
 }
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 TEST(IoKitti, GeneratedSequence) {
   const fs::path dir = testing::make_temp_dir("io-kitti") / "05";

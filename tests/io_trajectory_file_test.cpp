@@ -79,16 +79,7 @@ std::vector<std::optional<Timestamp>> frame_times(int n) {
   return times;
 }
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 TEST(IoTrajectoryFile, EveryFormatDetectedAndReadAlike) {
   const Files f = write_formats(testing::make_temp_dir("trajectory-file"));

@@ -83,16 +83,7 @@ void make_tumvi(const fs::path& dir) {
   write_file(dir / "dso/imu_config.yaml", kImuConfig);
 }
 
-template <class Fn>
-DataError catch_data_error(Fn&& fn) {
-  try {
-    fn();
-  } catch (const DataError& e) {
-    return e;
-  }
-  ADD_FAILURE() << "expected a DataError";
-  return DataError("", "none");
-}
+using testing::catch_data_error;
 
 TEST(IoTumVi, MocapGroundTruthAndKalibrCalibration) {
   const fs::path dir = testing::make_temp_dir("io-tumvi");

@@ -1,9 +1,14 @@
-// Helpers shared by the tests: paths to the binary and to the shared data, temporary folders.
+// Helpers shared by the tests: paths to the binary and to the shared data, temporary folders, the error a
+// call throws.
 #pragma once
+
+#include <gtest/gtest.h>
 
 #include <filesystem>
 #include <string>
 #include <vector>
+
+#include "core/error.hpp"
 
 namespace loopgate::testing {
 
@@ -51,6 +56,19 @@ class Child {
   bool reaped_ = false;
   std::string output_;
 };
+
+// Runs `fn`, which must throw DataError, and returns that error (a test failure, and an empty error, when it
+// throws none).
+template <class Fn>
+DataError catch_data_error(Fn&& fn) {
+  try {
+    fn();
+  } catch (const DataError& e) {
+    return e;
+  }
+  ADD_FAILURE() << "expected a DataError";
+  return DataError("", "none");
+}
 
 }  // namespace loopgate::testing
 
