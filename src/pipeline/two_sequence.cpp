@@ -287,6 +287,20 @@ struct TwoSequenceSetup {
   bool aligned(std::size_t q, std::size_t r) const { return tolerance() >= 0 && ranges.aligned(q, r); }
 };
 
+// DIRD descriptors of the reference range, then of the query range (each in parallel, traced by blocks).
+std::pair<DescribedSequence, DescribedSequence> describe_both(const TwoSequenceSetup& setup,
+                                                              const DirdExtractor& extractor) {
+  const AlignedSequences& r = setup.ranges;
+  const int threads = setup.config.run.threads;
+  DescribedSequence ref =
+      describe_sequence(threads, setup.reference, r.reference_first, r.reference_first + r.reference_count,
+                        extractor, setup.stop, setup.blocks("describe reference"));
+  DescribedSequence qry =
+      describe_sequence(threads, setup.query, r.query_first, r.query_first + r.query_count, extractor,
+                        setup.stop, setup.blocks("describe query"));
+  return {std::move(ref), std::move(qry)};
+}
+
 nlohmann::json reference_errors_json(const DescribedSequence& ref) {
   constexpr std::size_t kMaxListed = 200;
   nlohmann::json errors = nlohmann::json::array();
@@ -347,12 +361,7 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   const DirdSimilarity similarity(config.dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref =
-      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor,
-                        setup.stop, setup.blocks("describe reference"));
-  const DescribedSequence qry =
-      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor,
-                        setup.stop, setup.blocks("describe query"));
+  const auto [ref, qry] = describe_both(setup, extractor);
   const double describe_s = seconds_since(t0);
   setup.phase("describe (reference and query)", t0);
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
@@ -547,12 +556,7 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   const DirdExtractor extractor(dird);
 
   auto t0 = Clock::now();
-  const DescribedSequence ref =
-      describe_sequence(config.run.threads, reference, ref_first, ref_first + ref_count, extractor,
-                        setup.stop, setup.blocks("describe reference"));
-  const DescribedSequence qry =
-      describe_sequence(config.run.threads, query, query_first, query_first + query_count, extractor,
-                        setup.stop, setup.blocks("describe query"));
+  const auto [ref, qry] = describe_both(setup, extractor);
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   const CodedSequence ref_codes = code_sequence(ref, standardize);
   const CodedSequence qry_codes = code_sequence(qry, standardize);
