@@ -88,8 +88,9 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   EXPECT_NO_THROW(config.validate());
   int keys = 0;
   GateConfig::fields(config, [&](const char*, auto&) { ++keys; });
-  EXPECT_EQ(keys, 12);
+  EXPECT_EQ(keys, 13);
   EXPECT_EQ(config.gap_frames, 30);
+  EXPECT_FALSE(config.feedback);  // gate.feedback is off by default (issue 13)
   EXPECT_EQ(config.sigma_norm, "max_eigen");
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);
 }

@@ -190,6 +190,31 @@ TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
             "eval.min_travel_m=1e9)");
 }
 
+// gate.feedback (issue 13) needs verified loops while the stream runs: verify.enabled, and not SeqSLAM; the
+// error names the key and where it was set.
+TEST(PipelineConfig, GateFeedbackNeedsVerificationAndAStreamingMethod) {
+  EXPECT_EQ(error_of({"gate.feedback=true", "verify.enabled=true"}), "");
+  EXPECT_EQ(error_of({"gate.feedback=true", "verify.enabled=true", "run.method=dird-seqslam"}), "");
+  EXPECT_EQ(
+      error_of({"gate.feedback=true"}),
+      "gate.feedback: the gate is re-anchored on verified loop closures, and verify.enabled is false: set "
+      "verify.enabled=true or gate.feedback=false (--set gate.feedback=true)");
+  EXPECT_NE(error_of({"gate.feedback=true", "verify.enabled=true", "run.method=seqslam"})
+                .find("gate.feedback: run.method seqslam decides its loops at the end of the stream"),
+            std::string::npos);
+  const std::filesystem::path file = std::filesystem::temp_directory_path() / "loopgate-feedback-origin.yaml";
+  std::ofstream(file) << "verify:\n  enabled: false\ngate:\n  beta_m: 4\n  feedback: true\n";
+  try {
+    load_config<PipelineConfig>(file);
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("gate.feedback: the gate is re-anchored"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("(" + file.string() + ":5)"), std::string::npos) << e.what();
+  }
+  std::filesystem::remove(file);
+  EXPECT_FALSE(PipelineConfig{}.gate.feedback);  // off by default
+}
+
 TEST(PipelineConfig, EchoHasEverySection) {
   PipelineConfig config;
   const auto json = config_to_json(config);

@@ -116,6 +116,8 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   // so every column times the same loop-detection work (a full method's thousands of loops would each be
   // verified); `run` with the config runs them.
   config.verify.enabled = false;
+  // gate.feedback needs the verified loops while the run streams: off with verification.
+  config.gate.feedback = false;
   config.validate();
   return config;
 }

@@ -124,6 +124,21 @@ void PipelineConfig::validate_odometry_none() const {
   }
 }
 
+void PipelineConfig::validate_gate_feedback() const {
+  if (!gate.feedback) return;
+  if (!verify.enabled) {
+    throw ConfigError(
+        "gate.feedback: the gate is re-anchored on verified loop closures, and verify.enabled is false: set "
+        "verify.enabled=true or gate.feedback=false");
+  }
+  if (run.seqslam()) {
+    throw ConfigError(
+        "gate.feedback: run.method seqslam decides its loops at the end of the stream, so no loop exists "
+        "while "
+        "the gate runs: use run.method dird or dird-seqslam, or gate.feedback=false");
+  }
+}
+
 void DirdSeqSlamConfig::validate() const {
   require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
   require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});

@@ -284,6 +284,9 @@ struct PipelineConfig {
   // odometry.source none gives no poses: the modes and options that need them are errors (the same check
   // for `auto` resolving to none is made when the dataset is known, pipeline/odometry_factory.hpp).
   void validate_odometry_none() const;
+  // gate.feedback needs verified loops (verify.enabled) that exist while the stream runs (not SeqSLAM, which
+  // decides at the end of the stream).
+  void validate_gate_feedback() const;
   // How the datasets of this run are opened (run.strict, run.camera_index, section dataset).
   OpenOptions open_options() const;
   void validate() const {
@@ -303,6 +306,7 @@ struct PipelineConfig {
     posegraph.validate();
     if (run.mode == RunMode::kGated) gate.validate_for_sequence_length(match.sequence_length);
     validate_odometry_none();
+    validate_gate_feedback();
     eval.validate();
     output.validate();
   }

@@ -38,6 +38,11 @@ struct GateConfig {
   // covers the rows of the hole). Cells an area would add later to a frozen row (when its column range
   // widens long after the row) are not computed; the rectangle is then the bounding box of what was.
   int row_horizon_frames = 40;
+  // Feedback of verified loop closures into the gate (issue 13, docs/architecture.md § Gate feedback): frame
+  // i's pose and position covariance are re-anchored (stages/gate/reanchor.hpp) through the latest verified
+  // loop whose query frame is at least L = run.max_in_flight + the method's verdict delay frames before i.
+  // Needs verify.enabled and a streaming gated method (not run.method seqslam); no effect without the gate.
+  bool feedback = false;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is GateConfig or const GateConfig).
   template <class Self, class V>
@@ -54,6 +59,7 @@ struct GateConfig {
     v("area_margin_query_frames", self.area_margin_query_frames);
     v("area_margin_reference_frames", self.area_margin_reference_frames);
     v("row_horizon_frames", self.row_horizon_frames);
+    v("feedback", self.feedback);
   }
   // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], beta_m in [0, 1e5],
   // sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000], covariance_tolerance_m2 in [0, 0.25],
