@@ -30,6 +30,7 @@
 
 namespace loopgate {
 
+class GateFeedback;
 class ImageSource;
 class LoopsWriter;
 
@@ -56,6 +57,8 @@ struct MethodContext {
   ImageSource& images;
   LoopsWriter& loops;    // loops.csv (open when the method detects loops)
   std::size_t capacity;  // frames the run may release
+  // gate.feedback (gated methods): verified loops into the pose gate; nullptr when off.
+  GateFeedback* feedback;
 };
 
 class DetectionMethod {
@@ -75,6 +78,9 @@ class DetectionMethod {
   virtual void match(FrameRecord& /*r*/) {}
   // End of stream: flush the matcher, run batch searches.
   virtual void finish() {}
+  // D: frame s's detection() and every loop whose query is s are final once match() of s + D has run
+  // (gate.feedback's lag, gate_feedback.hpp); nullopt when they are final only at the end of the stream.
+  virtual std::optional<int> verdict_delay_frames() const { return std::nullopt; }
 
   // Columns of the frame's frames.csv row that the method knows when the frame reaches the sink (the
   // gate's decision); called once with a default record for the header.

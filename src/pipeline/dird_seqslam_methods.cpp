@@ -67,6 +67,8 @@ class ContrastMatching {
   }
 
   std::optional<std::int64_t> first_loop_seq() const { return first_loop_seq_; }
+  // Rows after which the search's verdict of a row pushed is final.
+  std::int64_t emission_delay() const { return search_.emission_delay(); }
 
   // Every query's best line (dataset frame indices), for the PR sweep.
   std::vector<Detection> ranked() const {
@@ -211,6 +213,11 @@ class DirdSeqSlamGated final : public DetectionMethod {
   }
 
   void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
+  // Row s goes to the search at match(s + horizon) (BasicRowAssembler), its verdict is final L - 1 rows
+  // later.
+  std::optional<int> verdict_delay_frames() const override {
+    return context_.config.gate.row_horizon_frames + static_cast<int>(matching_.emission_delay());
+  }
   std::optional<FrameVerdict> detection(std::size_t seq) override {
     return matching_.detection(seq, distances_.valid(seq), cells_.row_empty(seq));
   }

@@ -15,8 +15,56 @@ PoseGatedCells::PoseGatedCells(const MethodContext& context)
       pose_gate_(context.config.gate, "odometry (gate)"),
       tracker_(context.config.gate, context.config.match.sequence_length, context.config.match.margin),
       frames_(context.capacity),
-      row_cells_(context.capacity, 0) {
+      row_cells_(context.capacity, 0),
+      feedback_(context.feedback) {
   context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
+  if (feedback_) poses_.resize(context.capacity);
+}
+
+std::optional<std::size_t> PoseGatedCells::seq_of(std::size_t frame, std::size_t end_seq) const {
+  std::size_t lo = 0, hi = end_seq;  // seqs.frame() increases with seq
+  while (lo < hi) {
+    const std::size_t mid = lo + (hi - lo) / 2;
+    if (context_.seqs.frame(static_cast<std::int64_t>(mid)) < frame) {
+      lo = mid + 1;
+    } else {
+      hi = mid;
+    }
+  }
+  if (lo < end_seq && context_.seqs.frame(static_cast<std::int64_t>(lo)) == frame) return lo;
+  return std::nullopt;
+}
+
+void PoseGatedCells::reanchor_frame(std::size_t seq, Eigen::Isometry3d& T_w_b, Eigen::Matrix3d& P_m2,
+                                    GateFrame& g) {
+  const std::size_t lag = feedback_->lag_frames();
+  if (lag == 0) throw std::logic_error("gate feedback: the lag L was not set before the run");
+  if (seq < lag) return;
+  const std::size_t last_query_frame = context_.seqs.frame(static_cast<std::int64_t>(seq - lag));
+  std::size_t q = 0, r = 0;
+  const auto usable = [&](const FeedbackLoop& loop) {
+    const auto sq = seq_of(loop.query, seq);
+    const auto sr = seq_of(loop.reference, seq);
+    if (!sq || !sr || !poses_[*sq].stored || !poses_[*sr].stored) return false;
+    q = *sq;
+    r = *sr;
+    return true;
+  };
+  const std::optional<FeedbackLoop> loop = feedback_->anchor_through(last_query_frame, usable);
+  if (!loop) return;
+  LoopAnchor anchor;
+  anchor.T_w_q_odo = poses_[q].T_w_odo;
+  anchor.P_q_odo_m2 = poses_[q].P_odo_m2;
+  anchor.T_w_r = poses_[r].T_w_gate;
+  anchor.P_r_m2 = poses_[r].P_gate_m2;
+  anchor.T_r_q = loop->T_r_q;
+  anchor.P_loop_r_m2 = loop->P_loop_r_m2;
+  const ReanchoredPose pose = reanchor(anchor, T_w_b, P_m2);
+  T_w_b = pose.T_w_i;
+  P_m2 = pose.P_m2;
+  g.anchor_query = static_cast<std::int64_t>(q);
+  g.anchor_reference = static_cast<std::int64_t>(r);
+  g.growth_clamped = pose.growth_clamped;
 }
 
 void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
@@ -25,13 +73,27 @@ void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
   g.decision.frame = seq;
   if (r.usable_pose()) {
     try {
-      g.decision = pose_gate_.process(seq, r.odometry.pose);
+      Eigen::Isometry3d T_w_b = r.odometry.pose.T_w_b;
+      Eigen::Matrix3d P_m2 = r.odometry.pose.position_cov_m2();
+      if (feedback_) reanchor_frame(r.seq, T_w_b, P_m2, g);
+      g.decision = pose_gate_.process(seq, T_w_b.translation(), P_m2);
+      if (feedback_) {
+        poses_[r.seq] = FramePoses{true, r.odometry.pose.T_w_b, r.odometry.pose.position_cov_m2(), T_w_b,
+                                   0.5 * (P_m2 + P_m2.transpose())};
+        if (g.anchor_query >= 0) {
+          ++frames_reanchored_;
+          growth_clamped_ += g.growth_clamped ? 1 : 0;
+          const std::pair anchor(g.anchor_query, g.anchor_reference);
+          if (anchors_used_.empty() || anchors_used_.back() != anchor) anchors_used_.push_back(anchor);
+        }
+      }
       g.ran = true;
       ++frames_gate_ran_;
       if (g.decision.gated) ++frames_gated_;
     } catch (const DataError& e) {
       add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
       ++gate_errors_;
+      g.anchor_query = g.anchor_reference = -1;
       g.decision = GateDecision{};
       g.decision.frame = seq;
     }
@@ -79,6 +141,12 @@ void PoseGatedCells::add_frame_cells(const FrameRecord& r, CsvRow& row) const {
   row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
   row.add("gated", g.decision.gated ? "y" : "n");
   row.add("area_id", std::to_string(g.area_id));
+  if (feedback_) {
+    row.add("gate_sigma_m", g.ran ? format_fixed(g.decision.sigma_m, 6) : "");
+    const bool anchored = g.anchor_query >= 0;
+    row.add("gate_anchor_i", anchored ? std::to_string(context_.seqs.label(g.anchor_query)) : "");
+    row.add("gate_anchor_j", anchored ? std::to_string(context_.seqs.label(g.anchor_reference)) : "");
+  }
 }
 
 // candidate_areas.csv: one rectangle per area (the bounding box of its cells; rows = query frames i,
@@ -130,6 +198,16 @@ nlohmann::json PoseGatedCells::summary(std::size_t end_seq) const {
       {"cells", cells},
       {"rows_with_cells", rows},
       {"kdtree_frames", pose_gate_.frames_in_tree()}};
+  nlohmann::json feedback = {{"enabled", feedback_ != nullptr}};
+  if (feedback_) {
+    feedback["lag_frames"] = feedback_->lag_frames();
+    feedback["frames_reanchored"] = frames_reanchored_;
+    feedback["anchor_loops"] = anchors_used_.size();
+    feedback["growth_clamped"] = growth_clamped_;
+    feedback["frames_waited"] = feedback_->frames_waited();
+    feedback["wait_ms"] = feedback_->wait_ms();
+  }
+  out["gate"]["feedback"] = std::move(feedback);
   return out;
 }
 

@@ -18,6 +18,7 @@
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <opencv2/core/mat.hpp>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -27,9 +28,11 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_record.hpp"
 #include "pipeline/frame_steps.hpp"
+#include "pipeline/gate_feedback.hpp"
 #include "pipeline/parallel_handoff.hpp"
 #include "stages/gate/candidate_areas.hpp"
 #include "stages/gate/pose_gate.hpp"
+#include "stages/gate/reanchor.hpp"
 
 namespace loopgate {
 
@@ -39,8 +42,11 @@ class PoseGatedCells {
   explicit PoseGatedCells(const MethodContext& context);
 
   // The gate's decision for frame r.seq (frames without a usable pose are not gated and not stored) and
-  // the candidate-area update. `describe_own_frame`: the method wants frame r.seq's descriptor at its own
-  // time even when the gate does not ask for it (e.g. every k-th frame for causal statistics).
+  // the candidate-area update. With gate.feedback (context.feedback) the pose and covariance the gate uses
+  // are re-anchored through the latest verified loop of a query frame <= frame(seq - L) (waiting for the
+  // loop closer until every such loop is verified, gate_feedback.hpp). `describe_own_frame`: the method wants
+  // frame r.seq's descriptor at its own time even when the gate does not ask for it (e.g. every k-th frame
+  // for causal statistics).
   void gate(FrameRecord& r, bool describe_own_frame = false);
 
   // The method also wants the descriptor of `frame` (<= by_seq), outside the cells (gated SeqSLAM: the
@@ -59,7 +65,9 @@ class PoseGatedCells {
   bool row_empty(std::size_t seq) const { return row_cells_[seq] == 0; }
   void finish() { tracker_.finish(); }
 
-  // frames.csv: nearest_frame, gate_d_m, gate_threshold_m, gated, area_id.
+  // frames.csv: nearest_frame, gate_d_m, gate_threshold_m, gated, area_id; with gate.feedback also
+  // gate_sigma_m (the sigma the gate used), gate_anchor_i, gate_anchor_j (the loop it was re-anchored
+  // through).
   void add_frame_cells(const FrameRecord& r, CsvRow& row) const;
   // candidate_areas.csv, candidate_cells.csv and descriptors.csv (`computed(seq)`: the descriptor exists)
   // for the frames [0, end_seq).
@@ -77,7 +85,22 @@ class PoseGatedCells {
     int area_id = -1;
     std::vector<std::int64_t> describe;  // seqs whose descriptors this frame's describe computes
     std::vector<CellSpan> cells;         // cells its match computes
+    std::int64_t anchor_query = -1;      // gate.feedback: the loop (seqs) the pose was re-anchored through
+    std::int64_t anchor_reference = -1;
+    bool growth_clamped = false;  // the odometry's covariance growth since the loop was not PSD
   };
+  // gate.feedback: the poses of a frame the gate stored (by seq).
+  struct FramePoses {
+    bool stored = false;
+    Eigen::Isometry3d T_w_odo = Eigen::Isometry3d::Identity();  // the odometry's
+    Eigen::Matrix3d P_odo_m2 = Eigen::Matrix3d::Zero();
+    Eigen::Isometry3d T_w_gate = Eigen::Isometry3d::Identity();  // what the gate used (the map)
+    Eigen::Matrix3d P_gate_m2 = Eigen::Matrix3d::Zero();
+  };
+  // gate.feedback: re-anchors (T_w_b, P_m2) of frame seq in place when a verified loop applies.
+  void reanchor_frame(std::size_t seq, Eigen::Isometry3d& T_w_b, Eigen::Matrix3d& P_m2, GateFrame& g);
+  // The sequence number of dataset frame `frame` among [0, end_seq), if it was released.
+  std::optional<std::size_t> seq_of(std::size_t frame, std::size_t end_seq) const;
 
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
   PoseGate pose_gate_;
@@ -86,6 +109,11 @@ class PoseGatedCells {
   std::vector<std::uint32_t> row_cells_;  // cells per row (match node)
   std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
   std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
+  GateFeedback* feedback_ = nullptr;                                      // gate.feedback (nullptr: off)
+  std::vector<FramePoses> poses_;                                         // by seq, only with feedback
+  std::size_t frames_reanchored_ = 0, growth_clamped_ = 0;
+  std::vector<std::pair<std::int64_t, std::int64_t>>
+      anchors_used_;  // (q, r) seqs of the loops used, distinct
 };
 
 // The describe step of a gated method: work(seq, image) for every frame of `seqs` (several in parallel),

@@ -193,6 +193,7 @@ void LoopCloser::work() {
       loop = queue_.front();
     }
     LoopResult result = verify_one(loop);
+    if (result_listener_) result_listener_(loop, result.result);
     bool solve_now = false;
     {
       std::lock_guard lock(mutex_);

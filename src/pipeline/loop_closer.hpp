@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -48,6 +49,11 @@ class LoopCloser {
   void record_pose(std::size_t frame, const std::optional<Eigen::Isometry3d>& T_w_b);
   // A loop accepted by the method (match node or end of stream); queued in this order.
   void submit(const Detection& loop);
+  // Called on the worker thread with every loop as its verification ends (verified, rejected or skipped), in
+  // submission order, before the streaming solve it may start (gate.feedback, gate_feedback.hpp). Set before
+  // the first submit().
+  using ResultListener = std::function<void(const Detection& loop, const VerifyResult& result)>;
+  void set_result_listener(ResultListener listener) { result_listener_ = std::move(listener); }
   // frames.csv's "geometry" cell of frame `frame` once every loop of that query frame is verified
   // (empty when it has none), nullopt while one is pending.
   std::optional<std::string> geometry_cell(std::size_t frame) const;
@@ -111,6 +117,7 @@ class LoopCloser {
   std::vector<LoopResult> results_;    // in submission order
   std::vector<int> pending_by_frame_;  // loops of query frame f queued, not yet verified
   bool stopping_ = false;
+  ResultListener result_listener_;
   std::thread worker_;
 
   // Worker-only (and finish(), after the join).

@@ -23,6 +23,8 @@ class LoopMatching {
   explicit LoopMatching(const MethodContext& context);
 
   SequenceMatcher& matcher() { return matcher_; }
+  // Frames after which the matcher's verdict of a row pushed is final (its NMS delay).
+  std::int64_t emission_delay() const { return matcher_.emission_delay(); }
   // The row S(., seq) of frame `seq` (the next one) to the matcher.
   void push(std::size_t seq, const std::vector<SimilarityEntry>& row);
   // End of stream: the matcher's last rows.

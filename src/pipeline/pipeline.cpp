@@ -67,6 +67,36 @@ void PipelineRun::produce(const std::function<void(FrameMsg)>& put) {
   }
 }
 
+void PipelineRun::connect_gate_feedback() {
+  const std::optional<int> delay = method_->verdict_delay_frames();
+  if (!delay || !closer_.active()) {
+    throw ConfigError("gate.feedback: run.method " + method_->name() + " (" + method_->mode() +
+                      ") gives no verified loop while the stream runs: set gate.feedback=false");
+  }
+  // The rule (gate_feedback.hpp): frame i's gate uses the verified loops of query frames <= frame(i - L).
+  const auto lag = static_cast<std::size_t>(config_.run.max_in_flight + *delay);
+  feedback_.set_lag(lag);
+  closer_.set_result_listener([this](const Detection& loop, const VerifyResult& result) {
+    if (!result.verified) {
+      feedback_.done(loop.query, nullptr);
+      return;
+    }
+    FeedbackLoop verified;
+    verified.query = loop.query;
+    verified.reference = loop.reference;
+    verified.T_r_q = result.T_j_i;
+    verified.P_loop_r_m2 = result.cov.topLeftCorner<3, 3>();
+    feedback_.done(loop.query, &verified);
+  });
+  outputs_.set_final_listener([this](std::size_t frame) { feedback_.final_through(frame); });
+  feedback_on_ = true;
+  spdlog::info(
+      "gate.feedback: on: the gate of frame i is re-anchored through the latest loop verified among the "
+      "query "
+      "frames <= i - {} (run.max_in_flight {} + the method's verdict delay {} frames)",
+      lag, config_.run.max_in_flight, *delay);
+}
+
 RunResult PipelineRun::run() {
   // A previous run's outputs in the folder go first: an output this run fails to write must be absent, not
   // an older one beside the new others (the folder is locked by the command; inputs were checked not to be

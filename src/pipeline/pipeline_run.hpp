@@ -18,6 +18,7 @@
 #include "io/dataset.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
+#include "pipeline/gate_feedback.hpp"
 #include "pipeline/loop_closer.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/odometry_factory.hpp"
@@ -55,7 +56,8 @@ class PipelineRun {
         truth_pairs_(load_truth_pairs(config.eval, dataset)),
         seqs_(range_.second - range_.first),
         images_(dataset, seqs_),
-        method_(make_detection_method({config, seqs_, images_, loops_, seqs_.capacity()},
+        method_(make_detection_method({config, seqs_, images_, loops_, seqs_.capacity(),
+                                       feedback_wanted(config) ? &feedback_ : nullptr},
                                       dataset.has_images(), dataset.root())),
         closer_(config, dataset, range_.first, range_.second, method_->detects()),
         steps_(config, dataset, make_odometry_source(config.odometry, config.ekf, dataset), images_,
@@ -63,7 +65,17 @@ class PipelineRun {
         outputs_(config, out_dir, *method_, seqs_, clock_, steps_.odometry_source().needs_images(),
                  seqs_.capacity(), &closer_),
         replay_(config.run, dataset, range_.first, clock_) {
-    if (closer_.active()) loops_.set_listener([this](const Detection& loop) { closer_.submit(loop); });
+    if (feedback_wanted(config)) {
+      connect_gate_feedback();
+    } else if (config.gate.feedback) {
+      spdlog::info("gate.feedback: no effect: run.mode {} has no pose gate", enum_name(config.run.mode));
+    }
+    if (closer_.active()) {
+      loops_.set_listener([this](const Detection& loop) {
+        if (feedback_on_) feedback_.submitted(loop.query);  // before the closer can finish it
+        closer_.submit(loop);
+      });
+    }
   }
 
   RunResult run();
@@ -107,6 +119,12 @@ class PipelineRun {
     replay_.wake();
   }
   bool stop_requested() const { return (stop_ && stop_->load()) || failed_.load(); }
+  // gate.feedback acts: a gated run (the config refuses it without verify.enabled and with SeqSLAM).
+  static bool feedback_wanted(const PipelineConfig& config) {
+    return config.gate.feedback && config.verify.enabled && config.run.mode == RunMode::kGated;
+  }
+  // gate.feedback: the lag L, the closer's results and the sink's final verdicts into feedback_.
+  void connect_gate_feedback();
   void produce(const std::function<void(FrameMsg)>& put);  // the producer: replay clock, frame records
   std::vector<std::string> missing_outputs() const;
   // After the drain: the method's end-of-stream work in the arena (pipeline.cpp), then close_run().
@@ -139,6 +157,8 @@ class PipelineRun {
   SeqIndex seqs_;
   ImageSource images_;
   LoopsWriter loops_;
+  GateFeedback feedback_;     // gate.feedback: verified loops to the gate (gate_feedback.hpp)
+  bool feedback_on_ = false;  // set by the constructor, before the run
   std::unique_ptr<DetectionMethod> method_;
   LoopCloser closer_;  // verification + pose graph of the accepted loops, on its own thread
   FrameSteps steps_;

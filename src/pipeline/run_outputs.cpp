@@ -224,13 +224,18 @@ void RunOutputs::write_timing_row(std::vector<std::string> cells, std::size_t fr
 // Writes the held frames.csv rows whose detection is final, in order. At the end of the stream a row
 // without one (a failed run) is written with empty detection cells.
 void RunOutputs::write_ready_rows(bool end_of_stream) {
+  // The detections first, in order, also behind a row that waits for its loops' verification: the verdicts
+  // final now are published (final_listener_) whether or not their rows can be written yet.
+  for (HeldRow& held : held_) {
+    if (held.final) continue;
+    held.verdict = method_.detection(held.seq);
+    if (!held.verdict && !end_of_stream) break;
+    held.final = true;
+    if (held.verdict && final_listener_) final_listener_(held.frame);
+  }
   while (!held_.empty()) {
     HeldRow& held = held_.front();
-    if (!held.final) {
-      held.verdict = method_.detection(held.seq);
-      if (!held.verdict && !end_of_stream) return;
-      held.final = true;
-    }
+    if (!held.final) return;
     const std::optional<FrameVerdict>& verdict = held.verdict;
     // A loop frame's row also waits for the verification of its loops (the loop closer's worker).
     std::optional<std::string> geometry;

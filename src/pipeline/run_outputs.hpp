@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <deque>
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,11 @@ class RunOutputs {
              const LoopCloser* closer = nullptr);
 
   void open();
+  // Called by the sink with the dataset frame of every held row whose detection became final, in order
+  // (gate.feedback: every loop of a query frame <= it was submitted). Set before the run starts.
+  void set_final_listener(std::function<void(std::size_t frame)> listener) {
+    final_listener_ = std::move(listener);
+  }
   // The frame leaving the graph: its frames.csv row (or held), trajectory, counters, timing, trace.
   void sink(FrameRecord& r);
   // After the drain (and the method's finish()): every held row, with empty detection cells when the method
@@ -93,6 +99,7 @@ class RunOutputs {
     std::vector<std::string> timing;      // its timing.csv row when loops are verified (waits with it)
   };
   std::deque<HeldRow> held_;
+  std::function<void(std::size_t)> final_listener_;
 };
 
 }  // namespace loopgate

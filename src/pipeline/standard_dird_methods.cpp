@@ -87,6 +87,7 @@ class StandardDird {
 
   bool valid(std::size_t seq) const { return distances_.valid(seq); }
   LoopMatching& loops() { return loops_; }
+  const LoopMatching& loops() const { return loops_; }
   std::optional<FrameVerdict> detection(std::size_t seq, bool outside_areas) {
     return loops_.detection(seq, valid(seq), outside_areas);
   }
@@ -190,6 +191,11 @@ class StandardDirdGated final : public DetectionMethod {
   }
 
   void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
+  // Row s goes to the matcher at match(s + horizon) (RowAssembler), its verdict is final NMS-delay rows
+  // later.
+  std::optional<int> verdict_delay_frames() const override {
+    return context_.config.gate.row_horizon_frames + static_cast<int>(dird_.loops().emission_delay());
+  }
   std::optional<FrameVerdict> detection(std::size_t seq) override {
     return dird_.detection(seq, cells_.row_empty(seq));
   }
