@@ -3,7 +3,8 @@
 
 Usage: /usr/bin/python3 scripts/check_includes.py SRC_DIR
 
-SRC_DIR is the source root (src/): it holds core/, bag/, io/, sim/, eval/, stages/, pipeline/ and app/, and
+SRC_DIR is the source root (src/): it holds core/, bag/, io/, sim/, eval/, stages/, parallel/, pipeline/ and app/,
+and
 project includes are written relative to it ("stages/gate/pose_gate.hpp"). A quoted include that names a
 file next to the including one ("../x.hpp", "x.hpp") is resolved as the compiler would.
 
@@ -15,7 +16,7 @@ import os
 import re
 import sys
 
-MODULES = ("core", "bag", "io", "sim", "eval", "stages", "pipeline", "app")
+MODULES = ("core", "bag", "io", "sim", "eval", "stages", "parallel", "pipeline", "app")
 SOURCE_SUFFIXES = (".cpp", ".hpp", ".h", ".cc", ".hh", ".inl", ".ipp")
 
 # (does the rule apply to a file of this module, modules it must not include, the rule as printed);
@@ -23,7 +24,12 @@ SOURCE_SUFFIXES = (".cpp", ".hpp", ".h", ".cc", ".hh", ".inl", ".ipp")
 RULES = (
     (lambda m: m in ("stages", "core"), ("pipeline", "io"),
      "stages/ and core/ must not include pipeline/ or io/"),
-    (lambda m: m == "core", ("stages", "io", "pipeline", "sim", "eval", "app"), "core/ includes only core/"),
+    (lambda m: m == "core", ("stages", "io", "pipeline", "sim", "eval", "app", "parallel"),
+     "core/ includes only core/"),
+    (lambda m: m == "parallel", ("stages", "io", "pipeline", "sim", "eval", "app", "bag"),
+     "parallel/ includes only core/ (and TBB)"),
+    (lambda m: m not in ("parallel", "pipeline", "sim"), ("parallel",),
+     "only pipeline/ and sim/ include parallel/ (TBB's parallel loops)"),
     (lambda m: m == "io", ("stages", "pipeline"), "io/ must not include stages/ or pipeline/"),
     (lambda m: m == "eval", ("pipeline", "stages", "sim", "app"),
      "eval/ must not include pipeline/, stages/, sim/ or app/"),
@@ -33,8 +39,8 @@ RULES = (
      "bag/ includes no other module (it is built as C++17 for the ROS1 headers)"),
     (lambda m: m not in ("io", "bag"), ("bag",), "only io/ includes bag/ (ROS1 bags are read as a Dataset)"),
 )
-TBB_ALLOWED = ("pipeline", "sim")
-TBB_RULE = "only pipeline/ and sim/ include TBB (a stage is plain code, no threads)"
+TBB_ALLOWED = ("pipeline", "sim", "parallel")
+TBB_RULE = "only pipeline/, sim/ and parallel/ include TBB (a stage is plain code, no threads)"
 ROS_ALLOWED = ("bag",)
 ROS_RULE = "only bag/ includes ROS1 headers (their generated messages do not compile as C++20)"
 ROS_PREFIXES = ("ros/", "rosbag/", "sensor_msgs/", "std_msgs/", "geometry_msgs/")

@@ -11,7 +11,7 @@
 #include <set>
 #include <thread>
 
-#include "pipeline/parallel_handoff.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/time_accounting.hpp"
 
 namespace loopgate {

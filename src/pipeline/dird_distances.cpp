@@ -8,8 +8,8 @@
 #include <stdexcept>
 
 #include "io/dataset.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/frame_steps.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "stages/dird/dird_similarity.hpp"
 
 namespace loopgate {

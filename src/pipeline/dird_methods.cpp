@@ -9,13 +9,13 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "core/thread_cpu_time.hpp"
 #include "io/dataset.hpp"
 #include "pipeline/descriptor_store.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
 #include "pipeline/loop_matching.hpp"
-#include "pipeline/thread_cpu_time.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/row_assembler.hpp"
 #include "stages/match/sequence_matcher.hpp"

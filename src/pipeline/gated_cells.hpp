@@ -24,12 +24,12 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/csv_row.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_record.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gate_feedback.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "stages/gate/candidate_areas.hpp"
 #include "stages/gate/pose_gate.hpp"
 #include "stages/gate/reanchor.hpp"

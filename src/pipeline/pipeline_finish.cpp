@@ -8,11 +8,11 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/thread_cpu_time.hpp"
 #include "io/writers.hpp"
 #include "pipeline/pipeline_run.hpp"
 #include "pipeline/run_checks.hpp"
 #include "pipeline/run_summary.hpp"
-#include "pipeline/thread_cpu_time.hpp"
 
 namespace loopgate::pipeline_internal {
 

@@ -16,13 +16,13 @@
 #include <unordered_map>
 
 #include "io/dataset.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gate_feedback.hpp"
 #include "pipeline/loop_closer.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/odometry_factory.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_outputs.hpp"

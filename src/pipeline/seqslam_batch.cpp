@@ -7,7 +7,7 @@
 #include <stdexcept>
 #include <string>
 
-#include "pipeline/parallel_handoff.hpp"
+#include "parallel/parallel_handoff.hpp"
 
 namespace loopgate {
 

@@ -23,11 +23,11 @@
 #include <mutex>
 #include <stdexcept>
 
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
 #include "pipeline/loops_writer.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/seqslam/seqslam_gated.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"

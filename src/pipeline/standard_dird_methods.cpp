@@ -27,12 +27,12 @@
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/dird_distances.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
 #include "pipeline/loop_matching.hpp"
-#include "pipeline/parallel_handoff.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/dird/dird_standardize.hpp"

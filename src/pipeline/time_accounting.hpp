@@ -18,8 +18,8 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 
+#include "core/thread_cpu_time.hpp"
 #include "pipeline/frame_record.hpp"
-#include "pipeline/thread_cpu_time.hpp"
 
 namespace loopgate {
 

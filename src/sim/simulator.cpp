@@ -1,8 +1,6 @@
 #include "sim/simulator.hpp"
 
 #include <spdlog/spdlog.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -20,6 +18,7 @@
 #include "io/file_guard.hpp"
 #include "io/trajectory_io.hpp"
 #include "io/writers.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "sim/renderer.hpp"
 
 namespace loopgate::sim {
@@ -520,19 +519,19 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   for (std::size_t begin = 0; begin < n; begin += batch) {
     const std::size_t end = std::min(n, begin + batch);
     const auto t_render = std::chrono::steady_clock::now();
-    tbb::parallel_for(
-        tbb::blocked_range<std::size_t>(begin, end), [&](const tbb::blocked_range<std::size_t>& range) {
-          for (std::size_t f = range.begin(); f != range.end(); ++f) {
-            const double phase = plan.illumination_phase[f];
-            const std::vector<SpotLight> lights = lighting.lights(phase, plan.T_w_c[f]);
-            const cv::Mat image = renderer.render(
-                plan.T_w_c[f], lighting.illumination(phase),
-                mix_seed(static_cast<std::uint64_t>(s.seed), kFrameNoiseStream, f), lights, &frame_stats[f]);
-            if (!cv::imencode(".png", image, encoded[f - begin], png_params)) {
-              throw std::runtime_error("PNG encoding failed for frame " + std::to_string(f));
-            }
-          }
-        });
+    // The hand-over to the render tasks is explicit (parallel_handoff.hpp) so that ThreadSanitizer sees that
+    // they read the plan, the world and the lights after this thread built them.
+    parallel_for_with_handoff(end - begin, [&](std::size_t index) {
+      const std::size_t f = begin + index;
+      const double phase = plan.illumination_phase[f];
+      const std::vector<SpotLight> lights = lighting.lights(phase, plan.T_w_c[f]);
+      const cv::Mat image = renderer.render(
+          plan.T_w_c[f], lighting.illumination(phase),
+          mix_seed(static_cast<std::uint64_t>(s.seed), kFrameNoiseStream, f), lights, &frame_stats[f]);
+      if (!cv::imencode(".png", image, encoded[index], png_params)) {
+        throw std::runtime_error("PNG encoding failed for frame " + std::to_string(f));
+      }
+    });
     render_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t_render).count();
     for (std::size_t f = begin; f < end; ++f) {
       const std::string name = std::to_string(plan.frame_t_ns[f]) + ".png";

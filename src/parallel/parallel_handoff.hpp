@@ -21,7 +21,7 @@
 #include <cstdint>
 #include <thread>
 
-#include "pipeline/thread_cpu_time.hpp"
+#include "core/thread_cpu_time.hpp"
 
 namespace loopgate {
 
