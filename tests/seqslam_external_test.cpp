@@ -83,8 +83,9 @@ std::vector<SeqSlamMatch> run_parallel(const SeqSlamImages& ref, const SeqSlamIm
   });
   const double minimum = *std::min_element(minima.begin(), minima.end());
   std::vector<SeqSlamMatch> matches(m);
+  // Two phases: a query's sequence reads the columns around it, which may lie in another worker's block.
+  split([&](int, std::size_t b, std::size_t e) { seqslam_subtract(M, minimum, b, e); });
   split([&](int, std::size_t b, std::size_t e) {
-    seqslam_subtract(M, minimum, b, e);
     for (std::size_t q = b; q < e; ++q) matches[q] = seqslam_match_query(M, q, config);
   });
   return matches;
