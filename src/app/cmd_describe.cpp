@@ -52,6 +52,7 @@ cv::Mat read_image(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw DataError(path, "no such image file");
   require_regular_file(path, "the image");  // a directory, a FIFO: say what it is
+  image_codecs_ready();
   cv::Mat image = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
   if (image.empty()) throw DataError(path, "cannot decode image, expected an 8-bit PNG, JPEG or PGM file");
   image = to_8bit_samples(image, path, "");  // 16-bit unsigned scaled to 8 bits, as `run` does

@@ -9,6 +9,7 @@
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 #include <string_view>
 
 #include "core/error.hpp"
@@ -45,6 +46,16 @@ std::vector<std::optional<Timestamp>> Dataset::source_times() const {
     times[index] = frame_t_ns(frame);
   }
   return times;
+}
+
+void image_codecs_ready() {
+  static const bool ready = [] {
+    std::vector<unsigned char> png;
+    const cv::Mat pixel(1, 1, CV_8UC1, cv::Scalar(0));
+    return cv::imencode(".png", pixel, png) && !cv::imdecode(png, cv::IMREAD_UNCHANGED).empty();
+  }();
+  if (!ready)
+    throw std::runtime_error("OpenCV cannot encode and decode PNG images (imgcodecs without libpng?)");
 }
 
 cv::Mat to_8bit_samples(const cv::Mat& image, const std::filesystem::path& file, const std::string& where) {
@@ -237,6 +248,7 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
     throw DataError(entry.image, where + ": cannot read image file");
   }
   cv::Mat image;
+  image_codecs_ready();
   try {
     if (!bytes.empty()) image = cv::imdecode(bytes, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {

@@ -100,6 +100,14 @@ class Dataset {
 // none).
 cv::Mat to_8bit_samples(const cv::Mat& image, const std::filesystem::path& file, const std::string& where);
 
+// Call before any cv::imread / imdecode / imencode / imwrite that may run on more than one thread. OpenCV
+// builds its table of codecs in a function-local static on first use; from a worker thread that first use
+// races, as far as ThreadSanitizer can see, with every other thread's use, because the guard's fast path is
+// inlined in the uninstrumented library. This initialises the table once inside a static of ours (an encode
+// and a decode of a 1x1 PNG), whose guard ThreadSanitizer does see, so every caller is ordered after the
+// table was built. Cheap after the first call (one guard check).
+void image_codecs_ready();
+
 // Opens `dir`, detecting the layout: EuRoC (mav0/ or cam0/ inside), KITTI (image_0/ .. image_3/ or
 // times.txt), else an image folder; a file ending in .bag is a ROS1 bag (open_rosbag). Throws DataError
 // naming the path when nothing usable is there.

@@ -138,6 +138,7 @@ cv::Mat read_grey(const bag::BagReader& reader, const std::string& topic, std::s
     throw DataError(reader.file(), where + ": " + problem);
   if (raw.info.compressed) {
     cv::Mat image;
+    image_codecs_ready();
     try {
       image = cv::imdecode(raw.data, cv::IMREAD_UNCHANGED);
     } catch (const cv::Exception& e) {
