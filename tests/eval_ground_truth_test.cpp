@@ -119,6 +119,11 @@ TEST(EvalGroundTruth, ARevisitNeedsTravelInBetween) {
   const auto gt = LoopGroundTruth::from_positions(p, config);
   for (std::size_t i = 0; i < 50; ++i) EXPECT_FALSE(gt.is_positive(i)) << i;
   EXPECT_FALSE(gt.is_true_match(35, 12));
+  // The same place without travel: not a true loop, and not judged either (neither true nor false).
+  EXPECT_TRUE(gt.is_same_place_without_travel(35, 12));
+  EXPECT_FALSE(gt.is_same_place_without_travel(35, 3));         // 6 m apart: a plain false match
+  EXPECT_FALSE(gt.is_same_place_without_travel(55, 4));         // a true loop
+  EXPECT_FALSE(hovering.is_same_place_without_travel(35, 12));  // no travel rule: judged (true)
   // The way back revisits the way out (the hover's 1 m climb does not count in xy): 9 m and more of travel.
   for (std::size_t i = 51; i < 60; ++i) {
     ASSERT_TRUE(gt.is_positive(i)) << i;

@@ -98,5 +98,37 @@ TEST(EvalPrecisionRecall, PositionTruthCountsFutureMatchesForPrecisionOnly) {
   EXPECT_EQ(pr.curve[1].recalled, 1u);
 }
 
+// eval.min_travel_m: a detection at the right place but without travel in between (a drone hovering) is
+// neither a true nor a false loop. It is dropped before the best-per-query choice, counted in not_judged, and
+// the query's next detection is judged instead.
+TEST(EvalPrecisionRecall, SamePlaceWithoutTravelIsNotJudged) {
+  std::vector<Eigen::Vector3d> p;
+  for (int i = 0; i < 10; ++i) p.emplace_back(i, 0, 0);      // out along x: frames 0..9
+  for (int k = 0; k < 10; ++k) p.emplace_back(9.0, 0, 0);    // hovering at x = 9: frames 10..19
+  for (int k = 0; k < 10; ++k) p.emplace_back(9 - k, 0, 0);  // back: frames 20..29
+  GroundTruthConfig config;
+  config.radius_m = 0.5;
+  config.gap_frames = 3;
+  config.plane = "xy";
+  config.min_travel_m = 2.0;
+  const auto gt = LoopGroundTruth::from_positions(p, config);
+  // q15 -> 9 and q18 -> 11: the hover (x = 9, 0 m of path): not judged; q18's next detection, -> 2, is 7 m
+  // away: false; q25 -> 4: x = 4 both, 10 m of path: true; q26 -> 0: false.
+  const std::vector<Detection> d{{18, 11, 0.1}, {18, 2, 0.15}, {25, 4, 0.2}, {26, 0, 0.3}, {15, 9, 0.05}};
+  const PrResult pr = evaluate_precision_recall(d, gt);
+  EXPECT_EQ(pr.not_judged, 2u);
+  EXPECT_EQ(pr.queries_with_detection, 3u);  // 18 (judged on its next detection), 25, 26
+  ASSERT_EQ(pr.curve.size(), 3u);
+  EXPECT_EQ(pr.curve[0].true_positives, 0u);  // q18 -> 2 at 0.15
+  EXPECT_EQ(pr.curve[1].true_positives, 1u);  // q25 -> 4
+  EXPECT_EQ(pr.curve[2].detections, 3u);
+  // Without the travel rule the hovering pairs are true matches and judged.
+  config.min_travel_m = 0.0;
+  const PrResult without_rule = evaluate_precision_recall(d, LoopGroundTruth::from_positions(p, config));
+  EXPECT_EQ(without_rule.not_judged, 0u);
+  EXPECT_EQ(without_rule.queries_with_detection, 4u);
+  EXPECT_EQ(without_rule.curve[0].true_positives, 1u);  // q15 -> 9
+}
+
 }  // namespace
 }  // namespace loopgate

@@ -189,6 +189,7 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
       {"loops", at({"loops"})},
       {"loops true", at({"evaluation", "loop_truth", "loops_true"})},
       {"loops false", at({"evaluation", "loop_truth", "loops_false"})},
+      {"loops without travel", at({"evaluation", "loop_truth", "loops_without_travel"})},
       {"positive query frames", at({"evaluation", "precision_recall", "positives"})},
       {"average precision", at({"evaluation", "precision_recall", "average_precision"}, 3)},
       {"recall at 1 (top match)", at({"evaluation", "precision_recall", "recall_at_1"}, 3)},

@@ -129,6 +129,14 @@ bool LoopGroundTruth::is_true_match(std::size_t query, std::size_t reference) co
   return std::binary_search(refs.begin(), refs.end(), reference);
 }
 
+bool LoopGroundTruth::is_same_place_without_travel(std::size_t query, std::size_t reference) const {
+  if (positions_.empty() || min_travel_m_ <= 0.0) return false;
+  if (query >= positions_.size() || reference >= positions_.size()) return false;
+  const double d = (positions_[query] - positions_[reference]).norm();
+  return std::isfinite(d) && d <= accept_radius_m_ &&
+         std::abs(travel_m_[query] - travel_m_[reference]) < min_travel_m_;
+}
+
 std::vector<std::pair<std::size_t, std::size_t>> LoopGroundTruth::pairs() const {
   std::vector<std::pair<std::size_t, std::size_t>> out;
   for (std::size_t q = 0; q < references_.size(); ++q)

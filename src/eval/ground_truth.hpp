@@ -62,6 +62,11 @@ class LoopGroundTruth {
   // Positions: GT positions of query and reference within r_accept (in the configured plane), whatever
   // their order or gap, and at least min_travel_m of ground-truth path apart. Pairs: the pair is listed.
   bool is_true_match(std::size_t query, std::size_t reference) const;
+  // Positions only: the same place (within r_accept) but less than min_travel_m of path apart, e.g. a
+  // drone hovering or a car at a light. Such a detection is neither a true nor a false loop: it is not
+  // judged (dropped before the PR sweep and counted apart), because the place is right and only the
+  // definition of a revisit excludes it. Always false for pairs and when min_travel_m is 0.
+  bool is_same_place_without_travel(std::size_t query, std::size_t reference) const;
   bool uses_positions() const { return !positions_.empty(); }
   // All true loop pairs (query, reference), query ascending.
   std::vector<std::pair<std::size_t, std::size_t>> pairs() const;

@@ -37,17 +37,28 @@ std::vector<Detection> best_detection_per_query(const std::vector<Detection>& de
   return out;
 }
 
+std::vector<Detection> judged_detections(const std::vector<Detection>& detections,
+                                         const LoopGroundTruth& ground_truth) {
+  std::vector<Detection> out;
+  out.reserve(detections.size());
+  for (const Detection& d : detections)
+    if (!ground_truth.is_same_place_without_travel(d.query, d.reference)) out.push_back(d);
+  return out;
+}
+
 PrResult evaluate_precision_recall(const std::vector<Detection>& detections,
                                    const LoopGroundTruth& ground_truth, const PrConfig& config) {
   config.validate();
   const bool lower = config.lower_is_better();
-  std::vector<Detection> best = best_detection_per_query(detections, lower);
+  const std::vector<Detection> judged = judged_detections(detections, ground_truth);
+  std::vector<Detection> best = best_detection_per_query(judged, lower);
   std::stable_sort(best.begin(), best.end(), [lower](const Detection& a, const Detection& b) {
     return lower ? a.score < b.score : a.score > b.score;
   });
   PrResult result;
   result.positives = ground_truth.positive_count();
   result.queries_with_detection = best.size();
+  result.not_judged = detections.size() - judged.size();
   std::size_t accepted = 0, tp = 0, recalled = 0;
   for (std::size_t i = 0; i < best.size(); ++i) {
     const Detection& d = best[i];

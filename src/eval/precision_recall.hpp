@@ -45,6 +45,7 @@ struct PrResult {
   std::vector<PrPoint> curve;  // one point per distinct best-detection score, most confident first
   std::size_t positives = 0;   // positive query frames of the ground truth
   std::size_t queries_with_detection = 0;
+  std::size_t not_judged = 0;  // detections dropped as the same place without travel (not true, not false)
   double average_precision = 0.0;
   double recall_at_100 = 0.0;  // highest recall with precision = 1
   double recall_at_99 = 0.0;
@@ -55,7 +56,13 @@ struct PrResult {
 std::vector<Detection> best_detection_per_query(const std::vector<Detection>& detections,
                                                 bool lower_is_better);
 
-// Sweeps the score threshold over the best detection per query. A detection is a true positive
+// The detections a ground truth judges: those that are not the same place without travel
+// (LoopGroundTruth::is_same_place_without_travel), in their order.
+std::vector<Detection> judged_detections(const std::vector<Detection>& detections,
+                                         const LoopGroundTruth& ground_truth);
+
+// Sweeps the score threshold over the best judged detection per query (detections of the same place
+// without travel are dropped first and counted in not_judged). A detection is a true positive
 // when ground_truth.is_true_match(query, reference). Precision = TP / accepted; recall = accepted
 // positive queries with a TP / positive queries (a TP of a non-positive query, e.g. a match to a
 // later frame, counts for precision but not for recall, so recall stays <= 1).

@@ -11,13 +11,16 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
   pr_config.score_order = score_order;
   pr_config.validate();
   const PrResult pr = evaluate_precision_recall(ranked, truth, pr_config);
+  // Loops at the same place without travel (hovering, a stop) are neither true nor false: counted apart.
+  const std::vector<Detection> judged = judged_detections(loops, truth);
   std::size_t loops_true = 0, best_true = 0;
-  for (const Detection& d : loops) loops_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
-  const std::vector<Detection> best = best_detection_per_query(loops, pr_config.lower_is_better());
+  for (const Detection& d : judged) loops_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
+  const std::vector<Detection> best = best_detection_per_query(judged, pr_config.lower_is_better());
   for (const Detection& d : best) best_true += truth.is_true_match(d.query, d.reference) ? 1 : 0;
-  // R@1: positives whose top-ranked candidate (accepted or not) is a true match.
+  // R@1: positives whose top-ranked judged candidate (accepted or not) is a true match.
   std::size_t top1_true = 0;
-  for (const Detection& d : best_detection_per_query(ranked, pr_config.lower_is_better())) {
+  for (const Detection& d :
+       best_detection_per_query(judged_detections(ranked, truth), pr_config.lower_is_better())) {
     if (truth.is_positive(d.query) && truth.is_true_match(d.query, d.reference)) ++top1_true;
   }
   nlohmann::json curve = nlohmann::json::array();
@@ -31,7 +34,8 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
   return {{"loop_truth",
            {{"loops", loops.size()},
             {"loops_true", loops_true},
-            {"loops_false", loops.size() - loops_true},
+            {"loops_false", judged.size() - loops_true},
+            {"loops_without_travel", loops.size() - judged.size()},
             {"query_frames_with_loops", best.size()},
             {"query_best_loop_true", best_true},
             {"query_best_loop_false", best.size() - best_true}}},
@@ -39,6 +43,7 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
            {{"score_order", pr_config.score_order},
             {"positives", pr.positives},
             {"queries_with_detection", pr.queries_with_detection},
+            {"not_judged_without_travel", pr.not_judged},
             {"average_precision", pr.average_precision},
             {"recall_at_100", pr.recall_at_100},
             {"recall_at_99", pr.recall_at_99},

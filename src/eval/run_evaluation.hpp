@@ -18,13 +18,16 @@
 
 namespace loopgate {
 
-// {"loop_truth": {loops, loops_true, loops_false, query_frames_with_loops, query_best_loop_true,
-//                 query_best_loop_false},
-//  "precision_recall": {score_order, positives, queries_with_detection, average_precision, recall_at_100,
+// {"loop_truth": {loops, loops_true, loops_false, loops_without_travel, query_frames_with_loops,
+//                 query_best_loop_true, query_best_loop_false},
+//  "precision_recall": {score_order, positives, queries_with_detection, not_judged_without_travel,
+//                       average_precision, recall_at_100,
 //                       recall_at_99, recall_at_95, recall_at_1 (positives whose top-ranked detection is
 //                       true), curve: [{threshold, precision, recall, detections, true_positives}, ...]}}
 // `loops`: the reported detections (loops.csv); `ranked`: the detections the PR sweep runs over (DIRD: the
-// loops; SeqSLAM: every query's match, accepted or not). Indices as `truth` expects them.
+// loops; SeqSLAM: every query's match, accepted or not). Indices as `truth` expects them. Detections of the
+// same place without travel (LoopGroundTruth::is_same_place_without_travel) are not judged: loops = true +
+// false + without_travel, and the PR sweep and R@1 run over the judged ones only.
 nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
                                     const LoopGroundTruth& truth, const std::string& score_order);
 
