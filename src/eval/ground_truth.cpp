@@ -120,21 +120,23 @@ std::size_t LoopGroundTruth::positive_count() const {
 
 bool LoopGroundTruth::is_true_match(std::size_t query, std::size_t reference) const {
   if (query >= references_.size() || reference >= references_.size()) return false;
-  if (!positions_.empty()) {
-    const double d = (positions_[query] - positions_[reference]).norm();
-    return std::isfinite(d) && d <= accept_radius_m_ &&
-           std::abs(travel_m_[query] - travel_m_[reference]) >= min_travel_m_;
-  }
+  if (!positions_.empty()) return within_accept_radius(query, reference) && !without_travel(query, reference);
   const auto& refs = references_[query];
   return std::binary_search(refs.begin(), refs.end(), reference);
 }
 
 bool LoopGroundTruth::is_same_place_without_travel(std::size_t query, std::size_t reference) const {
-  if (positions_.empty() || min_travel_m_ <= 0.0) return false;
-  if (query >= positions_.size() || reference >= positions_.size()) return false;
+  if (positions_.empty() || query >= positions_.size() || reference >= positions_.size()) return false;
+  return within_accept_radius(query, reference) && without_travel(query, reference);
+}
+
+bool LoopGroundTruth::within_accept_radius(std::size_t query, std::size_t reference) const {
   const double d = (positions_[query] - positions_[reference]).norm();
-  return std::isfinite(d) && d <= accept_radius_m_ &&
-         std::abs(travel_m_[query] - travel_m_[reference]) < min_travel_m_;
+  return std::isfinite(d) && d <= accept_radius_m_;
+}
+
+bool LoopGroundTruth::without_travel(std::size_t query, std::size_t reference) const {
+  return std::abs(travel_m_[query] - travel_m_[reference]) < min_travel_m_;
 }
 
 std::vector<std::pair<std::size_t, std::size_t>> LoopGroundTruth::pairs() const {

@@ -72,6 +72,10 @@ class LoopGroundTruth {
   std::vector<std::pair<std::size_t, std::size_t>> pairs() const;
 
  private:
+  // Positions only, indices in range: within r_accept; less than min_travel_m of path apart (never when 0).
+  bool within_accept_radius(std::size_t query, std::size_t reference) const;
+  bool without_travel(std::size_t query, std::size_t reference) const;
+
   std::vector<std::vector<std::size_t>> references_;
   std::vector<Eigen::Vector3d> positions_;  // projected (unused axis zeroed); empty for pairs
   std::vector<double> travel_m_;            // ground-truth path length from frame 0 (3-D); empty for pairs

@@ -517,10 +517,10 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   entries.reserve(n);
   std::vector<RenderStats> frame_stats(n);
   double render_s = 0.0;
+  image_codecs_ready();  // OpenCV's codec table built before the render tasks encode (io/dataset.hpp)
   for (std::size_t begin = 0; begin < n; begin += batch) {
     const std::size_t end = std::min(n, begin + batch);
     const auto t_render = std::chrono::steady_clock::now();
-    image_codecs_ready();  // OpenCV's codec table built before the tasks encode (io/dataset.hpp)
     // The hand-over to the render tasks is explicit (parallel_handoff.hpp) so that ThreadSanitizer sees that
     // they read the plan, the world and the lights after this thread built them.
     parallel_for_with_handoff(end - begin, [&](std::size_t index) {
