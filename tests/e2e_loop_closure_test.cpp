@@ -35,7 +35,8 @@ fs::path simulate(const std::string& name, const std::string& extra) {
 }
 
 // configs/demo.yaml with verify.enabled=true (the demo config has it off) in full mode with loops forced
-// between frames ~5 m apart.
+// between frames ~5 m apart. Such loops tell the pose graph nothing the odometry does not know, so the
+// loop closer would skip them (verify.min_sigma_gain, tested below): here every one is verified.
 fs::path run_forced(const fs::path& sim, int threads, const std::string& extra = "") {
   const fs::path out = testing::make_temp_dir("e2e-closure-out-" + std::to_string(threads));
   int status = -1;
@@ -43,7 +44,7 @@ fs::path run_forced(const fs::path& sim, int threads, const std::string& extra =
       run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
               sim.string() + " --out " + out.string() + " --mode full --threads " + std::to_string(threads) +
               " --set match.margin=4 --set dird_seqslam.min_score=0 --set output.progress=off --set "
-              "verify.enabled=true " +
+              "verify.enabled=true --set verify.min_sigma_gain=0 " +
               extra,
           &status);
   EXPECT_EQ(status, 0) << output;
@@ -160,7 +161,7 @@ TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
               sim.string() + " --out " + out.string() +
               " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
               "dird_seqslam.min_score=0 "
-              "--set output.progress=off --set verify.enabled=true",
+              "--set output.progress=off --set verify.enabled=true --set verify.min_sigma_gain=0",
           &status);
   ASSERT_EQ(status, 0) << output;
   EXPECT_NE(output.find("ATE corrected (m)"), std::string::npos) << output;
@@ -204,6 +205,29 @@ TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {
     EXPECT_NE(row[7].find("image too small for features (64x32"), std::string::npos) << row[7];
   }
   // Nothing verified: the corrected trajectory is the odometry's.
+  EXPECT_NEAR(summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
+              summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
+}
+
+// With the default verify.min_sigma_gain (1) a loop is verified only when the odometry's position sigma grew
+// from j to i by a loop edge's sigma: the forced loops, a few frames apart, are all skipped with that reason,
+// nothing is decoded for them, and the corrected trajectory is the odometry's.
+TEST(E2eLoopClosure, LoopsTheOdometryAlreadyKnowsAreNotVerified) {
+  const fs::path sim = simulate("e2e-closure-known", "");
+  const fs::path out = run_forced(sim, 2, "--set verify.min_sigma_gain=1");
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  ASSERT_GT(summary["loops"].get<int>(), 0);
+  EXPECT_EQ(summary["loops_verified"].get<int>(), 0);
+  EXPECT_EQ(summary["loops_rejected_geometry"].get<int>(), 0);
+  EXPECT_EQ(summary["loops_skipped_geometry"].get<int>(), summary["loops"].get<int>());
+  EXPECT_EQ(summary["loop_closure"]["verify"]["count"].get<int>(), 0);
+  const auto rows = read_csv(out / "loop_edges.csv");
+  ASSERT_FALSE(rows.empty());
+  for (const auto& row : rows) {
+    EXPECT_EQ(row[3], "skipped");
+    EXPECT_NE(row[7].find("skipped: odometry sigma grew 0."), std::string::npos) << row[7];
+    EXPECT_NE(row[7].find(" m from j to i < 0.300 m (a loop edge's)"), std::string::npos) << row[7];
+  }
   EXPECT_NEAR(summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
               summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
 }

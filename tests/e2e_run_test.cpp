@@ -86,8 +86,8 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
     EXPECT_EQ(summary["stages"][stage]["calls"].get<int>(), 60) << stage;
   }
   EXPECT_EQ(read_csv(out / "timing.csv").size(), 60u);
-  // trace.json (issue 14): the process named (method, mode, dataset), every stage of every frame a span on a named track, the
-  // end-of-stream work as spans on the producer's track.
+  // trace.json (issue 14): the process named (method, mode, dataset), every stage of every frame a span on a
+  // named track, the end-of-stream work as spans on the producer's track.
   const auto trace = nlohmann::json::parse(read_file(out / "trace.json"));
   std::string process_name;
   std::map<int, std::string> track_names;

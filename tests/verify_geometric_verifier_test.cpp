@@ -3,7 +3,9 @@
 // reason, never an exception.
 #include <gtest/gtest.h>
 
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
+#include <random>
 
 #include "core/error.hpp"
 #include "stages/verify/geometric_verifier.hpp"
@@ -130,6 +132,43 @@ TEST(GeometricVerifier, CachedFeaturesGiveTheSameResultAndItIsOffByDefault) {
   const OrbFeatures tiny = verifier.detect(cv::Mat(32, 64, CV_8UC1, cv::Scalar(100)));
   EXPECT_NE(verifier.verify(tiny, tiny, s.j.T_w_b, tiny, s.n.T_w_b).reason.find("image too small"),
             std::string::npos);
+}
+
+// The matcher gives exactly the matches of OpenCV's brute-force knn matcher with the ratio test, on random
+// descriptors with planted near copies (unique best matches), exact copies of one train row (a tie for the
+// best: no match), ORB's 32-byte rows and a width that is not a multiple of 8 bytes.
+TEST(GeometricVerifier, RatioMatchIsOpenCvsKnnMatchWithTheRatioTest) {
+  std::mt19937 rng(7);
+  for (const int cols : {32, 13}) {
+    cv::Mat train(300, cols, CV_8U), query(200, cols, CV_8U);
+    cv::randu(train, 0, 256);
+    cv::randu(query, 0, 256);
+    for (int r = 0; r < 100; ++r) {  // near copies: a few bits flipped
+      train.row(static_cast<int>(rng() % 300)).copyTo(query.row(r));
+      for (int b = 0; b < 1 + r % 12; ++b)
+        query.at<std::uint8_t>(r, static_cast<int>(rng() % cols)) ^= 1U << (rng() % 8);
+    }
+    train.row(5).copyTo(train.row(6));  // a tie for the best match of query row 150
+    train.row(5).copyTo(query.row(150));
+    for (const double ratio : {0.6, 0.8, 1.0}) {
+      std::vector<std::vector<cv::DMatch>> knn;
+      cv::BFMatcher(cv::NORM_HAMMING).knnMatch(query, train, knn, 2);
+      std::vector<int> expected(static_cast<std::size_t>(query.rows), -1);
+      for (const auto& m : knn) {
+        if (m.size() == 2 && m[0].distance < ratio * m[1].distance)
+          expected[static_cast<std::size_t>(m[0].queryIdx)] = m[0].trainIdx;
+      }
+      const std::vector<int> got = ratio_match_hamming(query, train, ratio);
+      EXPECT_EQ(got, expected) << cols << " bytes, ratio " << ratio;
+      EXPECT_EQ(got[150], -1);
+      if (ratio < 1.0) {
+        EXPECT_GT(std::count_if(got.begin(), got.end(), [](int k) { return k >= 0; }), 80);
+      }
+    }
+  }
+  EXPECT_EQ(ratio_match_hamming(cv::Mat(3, 32, CV_8U, cv::Scalar(1)), cv::Mat(1, 32, CV_8U), 0.8),
+            std::vector<int>(3, -1));  // one train row: no second best
+  EXPECT_THROW(ratio_match_hamming(cv::Mat(3, 32, CV_8U), cv::Mat(3, 16, CV_8U), 0.8), std::invalid_argument);
 }
 
 TEST(GeometricVerifier, RejectsAnUnrelatedView) {

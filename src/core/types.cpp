@@ -1,11 +1,18 @@
 #include "core/types.hpp"
 
+#include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <cmath>
 
 namespace loopgate {
 
 Timestamp s_to_ns(double t_s) {
   return static_cast<Timestamp>(std::llround(t_s * kNsPerS));
+}
+
+double PoseEstimate::position_sigma_m() const {
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(position_cov_m2(), Eigen::EigenvaluesOnly);
+  return std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
 }
 
 const char* to_string(OdometryStatus status) {

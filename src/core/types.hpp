@@ -54,6 +54,8 @@ struct PoseEstimate {
   OdometryStatus status = OdometryStatus::kInitialising;
 
   Eigen::Matrix3d position_cov_m2() const { return cov.topLeftCorner<3, 3>(); }
+  // sqrt of the largest eigenvalue of the position covariance (frames.csv's sigma_m), metres.
+  double position_sigma_m() const;
 };
 
 // What a loop detector concluded for one query frame: one vocabulary for every method (DIRD's sequence

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <numeric>
 
 #include "core/error.hpp"
@@ -50,6 +51,7 @@ LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std
       verifier_(config.verify, dataset.camera()) {
   if (!active_) return;
   poses_.resize(last_ - first_);
+  sigma_m_.assign(last_ - first_, 0.0);
   pending_by_frame_.assign(last_ - first_, 0);
   if (!dataset.has_images()) {
     unusable_ = "geometry: the dataset has no images";
@@ -73,9 +75,10 @@ LoopCloser::~LoopCloser() {
   }
 }
 
-void LoopCloser::record_pose(std::size_t frame, const std::optional<Eigen::Isometry3d>& T_w_b) {
+void LoopCloser::record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m) {
   if (!active_ || frame < first_ || frame >= last_) return;
   poses_[frame - first_] = T_w_b;
+  sigma_m_[frame - first_] = sigma_m;
 }
 
 std::optional<Eigen::Isometry3d> LoopCloser::pose_of(std::size_t frame) const {
@@ -123,6 +126,16 @@ std::string LoopCloser::skip_reason(const Detection& loop) const {
   const auto near = [](std::size_t a, std::size_t b, int window) {
     return (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
   };
+  // A loop the odometry already knows: its position uncertainty grew less between j and i than a loop edge's
+  // own (standing still, hovering, the frames just before a query). Such an edge corrects nothing.
+  if (verify_config_.min_sigma_gain > 0 && pose_of(loop.query) && pose_of(loop.reference)) {
+    const double s_i = sigma_m_[loop.query - first_], s_j = sigma_m_[loop.reference - first_];
+    const double gain_m = std::sqrt(std::max(0.0, s_i * s_i - s_j * s_j));
+    const double need_m = verify_config_.min_sigma_gain * verify_config_.sigma_position_m;
+    if (gain_m < need_m)
+      return fmt::format("skipped: odometry sigma grew {:.3f} m from j to i < {:.3f} m (a loop edge's)",
+                         gain_m, need_m);
+  }
   int tried_for_query = 0;
   for (auto it = results_.rbegin(); it != results_.rend(); ++it) {
     const LoopResult& r = *it;
@@ -482,7 +495,7 @@ nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& da
   LoopCloser closer(config, dataset, track.first_frame, track.last_frame, true);
   if (!closer.active()) throw std::logic_error("correct_after_run: verify.enabled is false");
   for (std::size_t k = 0; k < track.tracked_frames.size(); ++k)
-    closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b);
+    closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b, track.tracked_sigma_m[k]);
   for (const Detection& loop : track.loops) closer.submit(loop);
   closer.finish();
   closer.write_edges(run_dir);

@@ -45,8 +45,10 @@ class LoopCloser {
   LoopCloser& operator=(const LoopCloser&) = delete;
 
   bool active() const { return active_; }
-  // The odometry node (serial), once per frame: the pose the verifier and the graph use (nullopt: none).
-  void record_pose(std::size_t frame, const std::optional<Eigen::Isometry3d>& T_w_b);
+  // The odometry node (serial), once per frame with a usable pose: the pose the verifier and the graph use,
+  // and its position sigma (PoseEstimate::position_sigma_m; verify.min_sigma_gain). Frames never recorded
+  // have no pose.
+  void record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m);
   // A loop accepted by the method (match node or end of stream); queued in this order.
   void submit(const Detection& loop);
   // Called on the worker thread with every loop as its verification ends (verified, rejected or skipped), in
@@ -88,7 +90,7 @@ class LoopCloser {
     double verify_ms = 0;
     bool outlier = false;  // switched off by the final solve
     double chi2 = 0;
-    bool skipped = false;  // not verified by choice (verify.max_per_query, skip_after_*_frames)
+    bool skipped = false;  // not verified by choice (min_sigma_gain, max_per_query, skip_after_*_frames)
   };
   static std::vector<std::string> verification_cells(const LoopResult& r);
   void work();
@@ -110,6 +112,7 @@ class LoopCloser {
   GeometricVerifier verifier_;
   std::string unusable_;  // the reason no loop can be verified (empty: they can)
   std::vector<std::optional<Eigen::Isometry3d>> poses_;  // by frame - first, written once each
+  std::vector<double> sigma_m_;                          // by frame - first: the pose's position sigma
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;

@@ -141,7 +141,8 @@ RunResult PipelineRun::run() {
                                     body(kDecode, false, [this](FrameRecord& r) { steps_.decode(r); }));
     odometry = std::make_unique<Node>(*g, serial, body(kOdometry, true, [this](FrameRecord& r) {
       steps_.odometry(r);
-      closer_.record_pose(r.frame, r.usable_pose() ? std::optional(r.odometry.pose.T_w_b) : std::nullopt);
+      if (r.usable_pose())
+        closer_.record_pose(r.frame, r.odometry.pose.T_w_b, r.odometry.pose.position_sigma_m());
     }));
     gate =
         std::make_unique<Node>(*g, serial, body(kGate, true, [this](FrameRecord& r) { method_->gate(r); }));

@@ -63,6 +63,7 @@ struct RunTrack {
   std::size_t first_frame = 0, last_frame = 0;  // the run's frame range [first, last)
   std::vector<std::size_t> tracked_frames;      // the frame of each tracked pose
   std::vector<StampedPose> tracked_poses;       // the odometry's estimates (status tracking; the ATE's poses)
+  std::vector<double> tracked_sigma_m;          // their position sigma (PoseEstimate::position_sigma_m)
   std::vector<Detection> loops;                 // as loops.csv, dataset frames
 };
 

@@ -120,7 +120,11 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   }
   result.summary = make_run_summary(parts, result, std::move(evaluation));
   result.summary["problems"] = problems;
-  result.track = {range_.first, range_.second, outputs_.tracked_frames(), outputs_.tracked_poses(),
+  result.track = {range_.first,
+                  range_.second,
+                  outputs_.tracked_frames(),
+                  outputs_.tracked_poses(),
+                  outputs_.tracked_sigma_m(),
                   loops_.loops()};
   if (config_.output.trace) {
     outputs_.trace().name_process(fmt::format("loopgate run: {} ({}) on {}", method_->name(), method_->mode(),

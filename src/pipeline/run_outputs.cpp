@@ -3,7 +3,6 @@
 #include <spdlog/fmt/fmt.h>
 #include <unistd.h>
 
-#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -62,13 +61,7 @@ void RunOutputs::add_frame_cells(const FrameRecord& r, const std::string& status
   row.add("qy", cell(q.y()));
   row.add("qz", cell(q.z()));
   row.add("qw", cell(q.w()));
-  double sigma_m = 0;
-  if (r.has_pose) {
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver(pose.position_cov_m2(),
-                                                                Eigen::EigenvaluesOnly);
-    sigma_m = std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
-  }
-  row.add("sigma_m", cell(sigma_m));
+  row.add("sigma_m", cell(r.has_pose ? pose.position_sigma_m() : 0.0));
   row.add("odom_status", r.has_pose ? to_string(pose.status) : "none");
   row.add("imu_samples", std::to_string(r.imu.samples.size()));
   row.add("decoded", r.decoded ? "y" : "n");
@@ -141,6 +134,7 @@ void RunOutputs::sink(FrameRecord& r) {
     trajectory_.write(r.t_ns, pose.T_w_b);
     tracked_frames_.push_back(r.frame);
     tracked_poses_.push_back({r.t_ns, pose.T_w_b});
+    tracked_sigma_m_.push_back(pose.position_sigma_m());
   }
   counters_.count(r, status, reason);
   r.image.release();

@@ -54,6 +54,8 @@ class RunOutputs {
   const std::vector<StampedPose>& tracked_poses() const { return tracked_poses_; }
   // The frame of each of tracked_poses().
   const std::vector<std::size_t>& tracked_frames() const { return tracked_frames_; }
+  // The odometry's position sigma (PoseEstimate::position_sigma_m) of each of tracked_poses().
+  const std::vector<double>& tracked_sigma_m() const { return tracked_sigma_m_; }
   std::uint64_t frames_through() const { return next_seq_; }
   // The time accounting's measurements summed over the frames through the sink.
   const StageTimes& frame_times() const { return frame_times_; }
@@ -89,6 +91,7 @@ class RunOutputs {
   StageTimes frame_times_;                   // time accounting: sums over the frames through the sink
   std::vector<StampedPose> tracked_poses_;   // odometry poses with status tracking (ATE in summary.json)
   std::vector<std::size_t> tracked_frames_;  // the frame of each tracked pose
+  std::vector<double> tracked_sigma_m_;      // the position sigma of each tracked pose
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection
     std::size_t seq = 0;

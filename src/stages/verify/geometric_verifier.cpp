@@ -4,9 +4,13 @@
 
 #include <Eigen/SVD>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/features2d.hpp>
+#include <stdexcept>
 #include <vector>
 
 #include "core/error.hpp"
@@ -16,20 +20,6 @@ namespace loopgate {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-
-// query index -> train index of the matches passing the ratio test (-1: none).
-std::vector<int> ratio_match(const cv::Mat& query, const cv::Mat& train, double ratio) {
-  std::vector<int> out(static_cast<std::size_t>(query.rows), -1);
-  if (query.empty() || train.rows < 2) return out;
-  cv::BFMatcher matcher(cv::NORM_HAMMING);
-  std::vector<std::vector<cv::DMatch>> knn;
-  matcher.knnMatch(query, train, knn, 2);
-  for (const auto& m : knn) {
-    if (m.size() < 2) continue;
-    if (m[0].distance < ratio * m[1].distance) out[static_cast<std::size_t>(m[0].queryIdx)] = m[0].trainIdx;
-  }
-  return out;
-}
 
 // Linear triangulation of normalised points x_a (camera a = reference) and x_b with T_b_a; the point in a.
 Eigen::Vector3d triangulate(const Eigen::Vector2d& x_a, const Eigen::Vector2d& x_b,
@@ -48,12 +38,68 @@ Eigen::Vector3d triangulate(const Eigen::Vector2d& x_a, const Eigen::Vector2d& x
   return X.head<3>() / X.w();
 }
 
+// Binary descriptors as rows of 64-bit words (zero-padded), so that a distance is a few popcounts.
+std::vector<std::uint64_t> as_words(const cv::Mat& descriptors, std::size_t words) {
+  std::vector<std::uint64_t> out(static_cast<std::size_t>(descriptors.rows) * words, 0);
+  const auto bytes = static_cast<std::size_t>(descriptors.cols);
+  for (int r = 0; r < descriptors.rows; ++r)
+    std::memcpy(out.data() + static_cast<std::size_t>(r) * words, descriptors.ptr<std::uint8_t>(r), bytes);
+  return out;
+}
+
+// For each query row: the train row at the smallest Hamming distance, that distance and the second smallest
+// (a tie for the smallest makes both equal). Built twice, with and without the popcnt instruction, and picked
+// at load time by the CPU.
+__attribute__((target_clones("popcnt", "default"))) void best_two(const std::uint64_t* query,
+                                                                  std::size_t queries,
+                                                                  const std::uint64_t* train,
+                                                                  std::size_t trains, std::size_t words,
+                                                                  int* best, int* d1, int* d2) {
+  for (std::size_t q = 0; q < queries; ++q) {
+    const std::uint64_t* a = query + q * words;
+    int first = std::numeric_limits<int>::max(), second = first, index = -1;
+    for (std::size_t t = 0; t < trains; ++t) {
+      const std::uint64_t* b = train + t * words;
+      int d = 0;
+      for (std::size_t w = 0; w < words; ++w) d += __builtin_popcountll(a[w] ^ b[w]);
+      if (d < first) {
+        second = first;
+        first = d;
+        index = static_cast<int>(t);
+      } else if (d < second) {
+        second = d;
+      }
+    }
+    best[q] = index;
+    d1[q] = first;
+    d2[q] = second;
+  }
+}
+
 }  // namespace
+
+std::vector<int> ratio_match_hamming(const cv::Mat& query, const cv::Mat& train, double ratio) {
+  std::vector<int> out(static_cast<std::size_t>(query.rows), -1);
+  if (query.empty() || train.rows < 2) return out;
+  if (query.type() != CV_8U || train.type() != CV_8U || query.cols != train.cols)
+    throw std::invalid_argument("ratio_match_hamming: descriptors must be CV_8U rows of the same width");
+  const std::size_t words = (static_cast<std::size_t>(query.cols) + 7) / 8;
+  const std::vector<std::uint64_t> q = as_words(query, words);
+  const std::vector<std::uint64_t> t = as_words(train, words);
+  std::vector<int> best(out.size()), d1(out.size()), d2(out.size());
+  best_two(q.data(), out.size(), t.data(), static_cast<std::size_t>(train.rows), words, best.data(),
+           d1.data(), d2.data());
+  for (std::size_t k = 0; k < out.size(); ++k)
+    if (static_cast<double>(d1[k]) < ratio * static_cast<double>(d2[k])) out[k] = best[k];
+  return out;
+}
 
 void VerifyConfig::validate() const {
   if (features < 50) throw ConfigError("verify.features: must be >= 50");
   if (orb_patch_px < 5) throw ConfigError("verify.orb_patch_px: must be >= 5");
   if (orb_fast_threshold < 1) throw ConfigError("verify.orb_fast_threshold: must be >= 1");
+  if (!(std::isfinite(min_sigma_gain) && min_sigma_gain >= 0.0))
+    throw ConfigError("verify.min_sigma_gain: must be a finite number >= 0 (0: verify regardless)");
   if (max_per_query < 0) throw ConfigError("verify.max_per_query: must be >= 0 (0: no limit)");
   if (skip_after_verified_frames < 0) throw ConfigError("verify.skip_after_verified_frames: must be >= 0");
   if (skip_after_rejected_frames < 0) throw ConfigError("verify.skip_after_rejected_frames: must be >= 0");
@@ -145,7 +191,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
 
   // Points of j triangulated with its neighbour, in camera j.
   std::vector<Eigen::Vector3d> p_cj(fj.keypoints.size(), Eigen::Vector3d::Constant(std::nan("")));
-  const std::vector<int> jn = ratio_match(fj.descriptors, fn.descriptors, config_.ratio);
+  const std::vector<int> jn = ratio_match_hamming(fj.descriptors, fn.descriptors, config_.ratio);
   const Eigen::Vector3d centre_n_in_j = T_cn_cj.inverse().translation();
   for (std::size_t a = 0; a < jn.size(); ++a) {
     if (jn[a] < 0) continue;
@@ -169,7 +215,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
   cv::Mat point_descriptors(static_cast<int>(point_rows.size()), fj.descriptors.cols, fj.descriptors.type());
   for (std::size_t r = 0; r < point_rows.size(); ++r)
     fj.descriptors.row(point_rows[r]).copyTo(point_descriptors.row(static_cast<int>(r)));
-  const std::vector<int> ij = ratio_match(fi.descriptors, point_descriptors, config_.ratio);
+  const std::vector<int> ij = ratio_match_hamming(fi.descriptors, point_descriptors, config_.ratio);
   std::vector<cv::Point3d> object;
   std::vector<cv::Point2d> image;
   for (std::size_t a = 0; a < ij.size(); ++a) {

@@ -39,6 +39,10 @@ struct VerifyConfig {
   double sigma_rotation_rad = 0.02;
   // Which loops are verified (the loop closer; 0 = no limit / no skipping). A revisit gives one loop per
   // query frame; one verified edge every few frames is all the pose graph needs.
+  // A loop (i, j) is verified only when the odometry's position sigma grew from j to i by at least
+  // min_sigma_gain x sigma_position_m (sqrt(sigma_i^2 - sigma_j^2)): an edge no more certain than what the
+  // odometry already knows corrects nothing (standing still, hovering). 0: verify regardless.
+  double min_sigma_gain = 1.0;
   int max_per_query = 0;               // loops verified per query frame (the first ones submitted)
   int skip_after_verified_frames = 0;  // skip (i, j) when (i', j') was verified with |i-i'|, |j-j'| <= N
   int skip_after_rejected_frames = 0;  // the same after a rejected (i', j')
@@ -61,6 +65,7 @@ struct VerifyConfig {
     v("max_translation_m", self.max_translation_m);
     v("sigma_position_m", self.sigma_position_m);
     v("sigma_rotation_rad", self.sigma_rotation_rad);
+    v("min_sigma_gain", self.min_sigma_gain);
     v("max_per_query", self.max_per_query);
     v("skip_after_verified_frames", self.skip_after_verified_frames);
     v("skip_after_rejected_frames", self.skip_after_rejected_frames);
@@ -93,6 +98,11 @@ struct OrbFeatures {
   std::vector<Eigen::Vector2d> xy;  // undistorted normalised coordinates
   cv::Size image_size;
 };
+
+// Query row -> train row of the Hamming nearest neighbour passing Lowe's ratio test (best < ratio x second
+// best), -1 where none: the matches cv::BFMatcher(NORM_HAMMING).knnMatch(k = 2) gives with that test (a tie
+// for the best fails it either way), without the distance matrix and the sort. Rows of CV_8U of equal width.
+std::vector<int> ratio_match_hamming(const cv::Mat& query, const cv::Mat& train, double ratio);
 
 class GeometricVerifier {
  public:
