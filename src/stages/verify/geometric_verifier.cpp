@@ -48,13 +48,10 @@ std::vector<std::uint64_t> as_words(const cv::Mat& descriptors, std::size_t word
 }
 
 // For each query row: the train row at the smallest Hamming distance, that distance and the second smallest
-// (a tie for the smallest makes both equal). Built twice, with and without the popcnt instruction, and picked
-// at load time by the CPU.
-__attribute__((target_clones("popcnt", "default"))) void best_two(const std::uint64_t* query,
-                                                                  std::size_t queries,
-                                                                  const std::uint64_t* train,
-                                                                  std::size_t trains, std::size_t words,
-                                                                  int* best, int* d1, int* d2) {
+// (a tie for the smallest makes both equal).
+[[gnu::always_inline]] inline void best_two_body(const std::uint64_t* query, std::size_t queries,
+                                                 const std::uint64_t* train, std::size_t trains,
+                                                 std::size_t words, int* best, int* d1, int* d2) {
   for (std::size_t q = 0; q < queries; ++q) {
     const std::uint64_t* a = query + q * words;
     int first = std::numeric_limits<int>::max(), second = first, index = -1;
@@ -73,6 +70,24 @@ __attribute__((target_clones("popcnt", "default"))) void best_two(const std::uin
     best[q] = index;
     d1[q] = first;
     d2[q] = second;
+  }
+}
+
+// The same compiled for the popcnt instruction, called when the CPU has it (a plain check, not an ifunc:
+// ifunc resolvers run before the sanitizers' runtimes start and crash the tsan build).
+[[gnu::target("popcnt")]] void best_two_popcnt(const std::uint64_t* query, std::size_t queries,
+                                               const std::uint64_t* train, std::size_t trains,
+                                               std::size_t words, int* best, int* d1, int* d2) {
+  best_two_body(query, queries, train, trains, words, best, d1, d2);
+}
+
+void best_two(const std::uint64_t* query, std::size_t queries, const std::uint64_t* train, std::size_t trains,
+              std::size_t words, int* best, int* d1, int* d2) {
+  static const bool has_popcnt = __builtin_cpu_supports("popcnt");
+  if (has_popcnt) {
+    best_two_popcnt(query, queries, train, trains, words, best, d1, d2);
+  } else {
+    best_two_body(query, queries, train, trains, words, best, d1, d2);
   }
 }
 
