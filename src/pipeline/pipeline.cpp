@@ -141,7 +141,7 @@ RunResult PipelineRun::run() {
                                     body(kDecode, false, [this](FrameRecord& r) { steps_.decode(r); }));
     odometry = std::make_unique<Node>(*g, serial, body(kOdometry, true, [this](FrameRecord& r) {
       steps_.odometry(r);
-      if (r.usable_pose())
+      if (closer_.active() && r.usable_pose())
         closer_.record_pose(r.frame, r.odometry.pose.T_w_b, r.odometry.pose.position_sigma_m());
     }));
     gate =

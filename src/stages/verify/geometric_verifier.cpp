@@ -47,11 +47,11 @@ std::vector<std::uint64_t> as_words(const cv::Mat& descriptors, std::size_t word
   return out;
 }
 
-// For each query row: the train row at the smallest Hamming distance, that distance and the second smallest
-// (a tie for the smallest makes both equal).
-[[gnu::always_inline]] inline void best_two_body(const std::uint64_t* query, std::size_t queries,
-                                                 const std::uint64_t* train, std::size_t trains,
-                                                 std::size_t words, int* best, int* d1, int* d2) {
+// For each query row: the train row at the smallest Hamming distance when it passes the ratio test against
+// the second smallest (a tie for the smallest fails it), else -1.
+[[gnu::always_inline]] inline void ratio_match_body(const std::uint64_t* query, std::size_t queries,
+                                                    const std::uint64_t* train, std::size_t trains,
+                                                    std::size_t words, double ratio, int* out) {
   for (std::size_t q = 0; q < queries; ++q) {
     const std::uint64_t* a = query + q * words;
     int first = std::numeric_limits<int>::max(), second = first, index = -1;
@@ -67,28 +67,16 @@ std::vector<std::uint64_t> as_words(const cv::Mat& descriptors, std::size_t word
         second = d;
       }
     }
-    best[q] = index;
-    d1[q] = first;
-    d2[q] = second;
+    out[q] = static_cast<double>(first) < ratio * static_cast<double>(second) ? index : -1;
   }
 }
 
 // The same compiled for the popcnt instruction, called when the CPU has it (a plain check, not an ifunc:
 // ifunc resolvers run before the sanitizers' runtimes start and crash the tsan build).
-[[gnu::target("popcnt")]] void best_two_popcnt(const std::uint64_t* query, std::size_t queries,
-                                               const std::uint64_t* train, std::size_t trains,
-                                               std::size_t words, int* best, int* d1, int* d2) {
-  best_two_body(query, queries, train, trains, words, best, d1, d2);
-}
-
-void best_two(const std::uint64_t* query, std::size_t queries, const std::uint64_t* train, std::size_t trains,
-              std::size_t words, int* best, int* d1, int* d2) {
-  static const bool has_popcnt = __builtin_cpu_supports("popcnt");
-  if (has_popcnt) {
-    best_two_popcnt(query, queries, train, trains, words, best, d1, d2);
-  } else {
-    best_two_body(query, queries, train, trains, words, best, d1, d2);
-  }
+[[gnu::target("popcnt")]] void ratio_match_popcnt(const std::uint64_t* query, std::size_t queries,
+                                                  const std::uint64_t* train, std::size_t trains,
+                                                  std::size_t words, double ratio, int* out) {
+  ratio_match_body(query, queries, train, trains, words, ratio, out);
 }
 
 }  // namespace
@@ -101,11 +89,14 @@ std::vector<int> ratio_match_hamming(const cv::Mat& query, const cv::Mat& train,
   const std::size_t words = (static_cast<std::size_t>(query.cols) + 7) / 8;
   const std::vector<std::uint64_t> q = as_words(query, words);
   const std::vector<std::uint64_t> t = as_words(train, words);
-  std::vector<int> best(out.size()), d1(out.size()), d2(out.size());
-  best_two(q.data(), out.size(), t.data(), static_cast<std::size_t>(train.rows), words, best.data(),
-           d1.data(), d2.data());
-  for (std::size_t k = 0; k < out.size(); ++k)
-    if (static_cast<double>(d1[k]) < ratio * static_cast<double>(d2[k])) out[k] = best[k];
+  static const bool has_popcnt = __builtin_cpu_supports("popcnt");
+  if (has_popcnt) {
+    ratio_match_popcnt(q.data(), out.size(), t.data(), static_cast<std::size_t>(train.rows), words, ratio,
+                       out.data());
+  } else {
+    ratio_match_body(q.data(), out.size(), t.data(), static_cast<std::size_t>(train.rows), words, ratio,
+                     out.data());
+  }
   return out;
 }
 
