@@ -1,9 +1,11 @@
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <cmath>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "stages/odometry/drift_odometry.hpp"
 
 namespace loopgate {
@@ -98,6 +100,50 @@ TEST(OdometryDrift, CovarianceConsistentWithDriftMonteCarlo) {
   EXPECT_NEAR(sum_nees / kRuns, 3.0, 0.6);
 }
 
+// The step covariance (the pose graph's odometry edges) against the spread of the estimated step
+// T_prev_this over seeds: position whitened by the prediction, rotation about the heading axis by variance.
+TEST(OdometryDrift, StepCovarianceConsistentWithTheStepsMonteCarlo) {
+  OdometryConfig config;
+  config.drift_heading_sigma_rad_per_sqrt_m = 0.002;
+  config.drift_scale_sigma_per_sqrt_m = 0.003;
+  config.drift_position_sigma_m_per_sqrt_m = 0.02;
+  constexpr int kRuns = 2000;
+  constexpr int kFrame = 80;
+  const Eigen::Isometry3d T_step_true = circle_pose(kFrame - 1).inverse() * circle_pose(kFrame);
+  Eigen::Matrix3d empirical_p = Eigen::Matrix3d::Zero();
+  double empirical_yaw = 0;
+  PoseCov predicted = PoseCov::Zero();
+  for (int seed = 0; seed < kRuns; ++seed) {
+    config.seed = seed;
+    DriftOdometry odometry(config, Eigen::Vector3d::UnitZ());
+    Eigen::Isometry3d T_previous = Eigen::Isometry3d::Identity();
+    for (int k = 0; k <= kFrame; ++k) {
+      OdometryInput input;
+      input.frame = static_cast<std::size_t>(k);
+      input.t_ns = k * 100'000'000LL;
+      input.T_w_b_true = circle_pose(k);
+      const OdometryOutput out = odometry.process(input);
+      ASSERT_EQ(out.step_cov.has_value(), k > 0) << "frame " << k;
+      if (k == kFrame) {
+        const Eigen::Isometry3d T_step = T_previous.inverse() * out.pose.T_w_b;
+        const Eigen::Vector3d e_p = T_step_true.translation() - T_step.translation();
+        const Eigen::Vector3d e_r = so3_log(T_step.rotation().transpose() * T_step_true.rotation());
+        empirical_p += e_p * e_p.transpose() / kRuns;
+        empirical_yaw += e_r.z() * e_r.z() / kRuns;
+        predicted = *out.step_cov;
+      }
+      T_previous = out.pose.T_w_b;
+    }
+  }
+  const Eigen::Matrix3d P = predicted.topLeftCorner<3, 3>();
+  const Eigen::Matrix3d L = P.llt().matrixL();
+  const Eigen::Matrix3d whitened =
+      L.triangularView<Eigen::Lower>().solve(L.triangularView<Eigen::Lower>().solve(empirical_p).transpose());
+  EXPECT_LT((whitened - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff(), 0.12) << whitened;
+  EXPECT_NEAR(empirical_yaw / predicted(5, 5), 1.0, 0.12);
+  EXPECT_NEAR(predicted(3, 3), 0.0, 1e-15);  // no roll or pitch in this model
+}
+
 TEST(OdometryDrift, LostWithoutTruthHoldsLastEstimate) {
   DriftOdometry odometry(OdometryConfig{}, Eigen::Vector3d::UnitZ());
   OdometryInput input;
@@ -107,6 +153,11 @@ TEST(OdometryDrift, LostWithoutTruthHoldsLastEstimate) {
   input.t_ns = 1;
   const auto lost = odometry.process(input);
   EXPECT_EQ(lost.pose.status, OdometryStatus::kLost);
+  EXPECT_FALSE(lost.step_cov.has_value());
+  input.T_w_b_true = circle_pose(1);
+  EXPECT_FALSE(odometry.process(input).step_cov.has_value()) << "no step from a lost frame";
+  input.T_w_b_true = circle_pose(2);
+  EXPECT_TRUE(odometry.process(input).step_cov.has_value());
   EXPECT_FALSE(lost.reason.empty());
   EXPECT_TRUE(lost.pose.T_w_b.isApprox(first.pose.T_w_b, 0.0));
 }

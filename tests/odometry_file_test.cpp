@@ -51,6 +51,26 @@ TEST(OdometryFile, InterpolatesPoseAndGrowsCovariance) {
   EXPECT_GT(later.pose.cov(0, 0), out.pose.cov(0, 0));
 }
 
+TEST(OdometryFile, StepCovarianceIsTheModelsGrowthSinceThePreviousPose) {
+  OdometryConfig config;
+  config.file_sigma2_b_m2_per_m = 0.01;
+  config.file_rot_sigma2_b_rad2_per_m = 1e-5;
+  config.file_max_gap_s = 0.5;
+  auto poses = line();
+  poses.erase(poses.begin() + 3, poses.begin() + 8);  // no pose between 12 s and 18 s: lost in between
+  FileOdometry odometry(config, poses);
+  EXPECT_FALSE(at(odometry, 10 * kS).step_cov.has_value()) << "the first pose has no step";
+  const auto second = at(odometry, 11 * kS);
+  ASSERT_TRUE(second.step_cov.has_value());
+  const double step_m = odometry.distance_at(11 * kS) - odometry.distance_at(10 * kS);
+  EXPECT_NEAR((*second.step_cov)(0, 0), 0.01 * step_m, 1e-12);
+  EXPECT_NEAR((*second.step_cov)(4, 4), 1e-5 * step_m, 1e-15);
+  EXPECT_EQ((*second.step_cov)(0, 3), 0.0);
+  EXPECT_EQ(at(odometry, 15 * kS).pose.status, OdometryStatus::kLost);
+  EXPECT_FALSE(at(odometry, 18 * kS).step_cov.has_value()) << "no step from a lost pose";
+  EXPECT_TRUE(at(odometry, 19 * kS).step_cov.has_value());
+}
+
 TEST(OdometryFile, ExactPosesAndEnds) {
   FileOdometry odometry(OdometryConfig{}, line());
   EXPECT_EQ(at(odometry, 10 * kS).pose.status, OdometryStatus::kTracking);

@@ -442,4 +442,43 @@ PoseEstimate Msckf::pose_estimate(const Eigen::Isometry3d& T_b_i) const {
   return out;
 }
 
+std::pair<Eigen::Isometry3d, PoseCov> Msckf::relative_pose(std::size_t index,
+                                                           const Eigen::Isometry3d& T_b_i) const {
+  const PoseClone& clone = clones_.at(index);
+  const Eigen::Matrix3d R_r = clone.q_w_i.toRotationMatrix();
+  const Eigen::Matrix3d R_i = state_.q_w_i.toRotationMatrix();
+  // E = T_r_i between the two IMU poses, then B = X^-1 E X in body frames (X = T_i_b).
+  const Eigen::Matrix3d R_E = R_r.transpose() * R_i;
+  const Eigen::Vector3d p_E = R_r.transpose() * (state_.p_w_m - clone.p_w_m);
+  const Eigen::Isometry3d T_i_b = T_b_i.inverse();
+  const Eigen::Matrix3d R_X = T_i_b.rotation();
+  const Eigen::Vector3d p_X = T_i_b.translation();
+  Eigen::Isometry3d T_r_i = Eigen::Isometry3d::Identity();
+  T_r_i.linear() = R_E;
+  T_r_i.translation() = p_E;
+  const Eigen::Isometry3d T_r_b = T_i_b.inverse() * T_r_i * T_i_b;
+  // [dp_E; dtheta_E] = J_E [dtheta_r, dp_r, dtheta_i, dp_i] (right perturbations, world positions):
+  //   dp_E = [p_E]x dtheta_r - R_r^T dp_r + R_r^T dp_i,  dtheta_E = -R_E^T dtheta_r + dtheta_i.
+  Eigen::Matrix<double, 6, 12> J_E = Eigen::Matrix<double, 6, 12>::Zero();
+  J_E.block<3, 3>(0, 0) = skew(p_E);
+  J_E.block<3, 3>(0, 3) = -R_r.transpose();
+  J_E.block<3, 3>(0, 9) = R_r.transpose();
+  J_E.block<3, 3>(3, 0) = -R_E.transpose();
+  J_E.block<3, 3>(3, 6).setIdentity();
+  // In body frames: dp_B = R_X^T (dp_E - R_E [p_X]x dtheta_E), dtheta_B = R_X^T dtheta_E.
+  PoseCov J_B = PoseCov::Zero();
+  J_B.topLeftCorner<3, 3>() = R_X.transpose();
+  J_B.topRightCorner<3, 3>() = -R_X.transpose() * R_E * skew(p_X);
+  J_B.bottomRightCorner<3, 3>() = R_X.transpose();
+  const Eigen::Index c = kImuErrorDim + kCloneDim * static_cast<Eigen::Index>(index);
+  Eigen::Matrix<double, 12, 12> P_joint;
+  P_joint.topLeftCorner<6, 6>() = P_.block<6, 6>(c, c);
+  P_joint.topRightCorner<6, 6>() = P_.block<6, 6>(c, 0);
+  P_joint.bottomLeftCorner<6, 6>() = P_.block<6, 6>(0, c);
+  P_joint.bottomRightCorner<6, 6>() = P_.block<6, 6>(0, 0);
+  const Eigen::Matrix<double, 6, 12> J = J_B * J_E;
+  const PoseCov cov = J * P_joint * J.transpose();
+  return {T_r_b, 0.5 * (cov + cov.transpose())};
+}
+
 }  // namespace loopgate

@@ -10,8 +10,10 @@
 #include <span>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
+#include "core/pose_covariance.hpp"
 #include "core/types.hpp"
 #include "stages/ekf/chi_square.hpp"
 #include "stages/ekf/ekf_config.hpp"
@@ -76,6 +78,12 @@ class Msckf {
 
   // Pose of the body frame (T_b_i: IMU -> body) with the 6 x 6 covariance [position, rotation (right)].
   PoseEstimate pose_estimate(const Eigen::Isometry3d& T_b_i) const;
+
+  // The body pose now relative to the body pose of clone `index` of clones() (T_r_b), and its covariance
+  // from the joint covariance of the two (core/pose_covariance.hpp's convention: position in r's body frame,
+  // rotation a right perturbation in the current body frame).
+  std::pair<Eigen::Isometry3d, PoseCov> relative_pose(std::size_t index,
+                                                      const Eigen::Isometry3d& T_b_i) const;
 
  private:
   struct FeatureTrack {

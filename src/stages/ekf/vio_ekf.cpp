@@ -87,6 +87,7 @@ void VioEkf::initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_c
       std::pow(config_.init_sigma_accel_bias_mps2, 2) * I3;
   filter_.initialize(state, P0);
   few_feature_frames_ = 0;
+  previous_anchored_.reset();
 }
 
 bool VioEkf::try_initialize(const EkfFrameInput& input) {
@@ -176,6 +177,7 @@ double VioEkf::median_disparity_px(const std::vector<FeatureObservation>& observ
 EkfFrameOutput VioEkf::lost(std::size_t frame, const std::string& reason) {
   spdlog::warn("ekf: lost at frame {}: {}; re-initialising", frame, reason);
   filter_.reset();
+  previous_anchored_.reset();
   EkfFrameOutput out;
   if (last_good_.has_value()) out.pose = *last_good_;
   out.pose.status = OdometryStatus::kLost;
@@ -279,8 +281,31 @@ EkfFrameOutput VioEkf::update_filter(const EkfFrameInput& input, const std::vect
                            std::to_string(few_feature_frames_) + " frames");
   }
   out.pose.status = OdometryStatus::kTracking;
+  out.step_cov = step_cov(input.t_ns);
   last_good_ = out.pose;
   return out;
+}
+
+std::optional<PoseCov> VioEkf::step_cov(Timestamp t_ns) {
+  // The anchor: the newest clone before this image (this image's own clone, if any, is the newest).
+  const auto& clones = filter_.clones();
+  std::optional<std::size_t> anchor;
+  for (std::size_t k = clones.size(); k-- > 0;) {
+    if (clones[k].t_ns < t_ns) {
+      anchor = k;
+      break;
+    }
+  }
+  const std::optional<AnchoredPose> previous = previous_anchored_;
+  previous_anchored_.reset();
+  if (!anchor) return std::nullopt;
+  auto [T_r_b, cov] = filter_.relative_pose(*anchor, T_b_i_);
+  previous_anchored_ = AnchoredPose{clones[*anchor].id, t_ns, T_r_b, cov};
+  if (!previous) return std::nullopt;
+  if (clones[*anchor].t_ns == previous->image_t_ns) return cov;  // the previous image is the anchor
+  if (clones[*anchor].id == previous->clone_id)
+    return step_pose_cov(previous->T_r_b, previous->cov, T_r_b, cov);
+  return std::nullopt;
 }
 
 }  // namespace loopgate

@@ -44,6 +44,11 @@ struct EkfFrameOutput {
   bool zero_velocity = false;       // a zero-velocity update was applied
   double tracking_ms = 0;           // wall time of the KLT front end for this image
   double filter_ms = 0;             // wall time of propagation + update
+  // The covariance of this pose relative to the previous image's (T_prev_this; core/pose_covariance.hpp),
+  // from the filter's joint covariance of this pose and the newest clone before it: exact (to first order)
+  // when the previous image is that clone, the step between two poses relative to the same clone
+  // (step_pose_cov) otherwise. nullopt on the first tracked image and after a loss.
+  std::optional<PoseCov> step_cov;
 };
 
 // Noise used by the filter: config overrides (> 0) or the calibration, times config.imu_noise_inflation.
@@ -95,6 +100,15 @@ class VioEkf {
   int few_feature_frames_ = 0;
   int frames_since_clone_ = 0;
   std::optional<PoseEstimate> last_good_;
+  // The previous tracked image's pose relative to its anchor clone (step_cov).
+  struct AnchoredPose {
+    std::uint64_t clone_id = 0;
+    Timestamp image_t_ns = 0;
+    Eigen::Isometry3d T_r_b = Eigen::Isometry3d::Identity();
+    PoseCov cov = PoseCov::Zero();
+  };
+  std::optional<AnchoredPose> previous_anchored_;
+  std::optional<PoseCov> step_cov(Timestamp t_ns);
 };
 
 }  // namespace loopgate

@@ -18,6 +18,7 @@ OdometryOutput DriftOdometry::process(const OdometryInput& input) {
     out.pose.cov = last_cov_;
     out.pose.status = OdometryStatus::kLost;
     out.reason = "no ground truth at this frame";
+    previous_tracked_ = false;
     return out;
   }
   const Eigen::Isometry3d& T_true = *input.T_w_b_true;
@@ -48,6 +49,22 @@ OdometryOutput DriftOdometry::process(const OdometryInput& input) {
     cov_ = F * cov_ * F.transpose();
     cov_.topLeftCorner<3, 3>() += var_p_step * Eigen::Matrix3d::Identity();
     cov_ = 0.5 * (cov_ + cov_.transpose());
+    if (previous_tracked_) {
+      // The step from the previous estimate, in its body frame: the common heading error cancels; what is
+      // left is this step's heading increment (about the axis), the scale error on the step (its marginal:
+      // the scale is a random walk, so steps far apart are correlated, which independent edges do not say)
+      // and the position noise.
+      const Eigen::Matrix3d R_a = last_true_T_w_b_.rotation().transpose();  // world -> previous body
+      const Eigen::Vector3d step_a = R_a * delta_p;
+      const Eigen::Vector3d turn_a = R_a * axis_w_.cross(delta_p);
+      const Eigen::Vector3d axis_b = T_true.rotation().transpose() * axis_w_;
+      PoseCov step = PoseCov::Zero();
+      step.topLeftCorner<3, 3>() = var_p_step * Eigen::Matrix3d::Identity() +
+                                   cov_(4, 4) * step_a * step_a.transpose() +
+                                   var_psi_step * turn_a * turn_a.transpose();
+      step.bottomRightCorner<3, 3>() = var_psi_step * axis_b * axis_b.transpose();
+      out.step_cov = step;
+    }
   }
   last_true_T_w_b_ = T_true;
   const Eigen::Matrix3d R_drift = Eigen::AngleAxisd(psi_rad_, axis_w_).toRotationMatrix();
@@ -66,6 +83,7 @@ OdometryOutput DriftOdometry::process(const OdometryInput& input) {
   out.pose.T_w_b = estimate_T_w_b_;
   out.pose.cov = cov;
   out.pose.status = OdometryStatus::kTracking;
+  previous_tracked_ = true;
   return out;
 }
 

@@ -7,7 +7,9 @@
 // The covariance propagates the same model linearised about the truth, with the state
 // x = [dp (3), psi, s]: psi and s gain sigma^2 d, then dp_k = dp_{k-1} + (a x dp) psi_k + dp s_k + w.
 // Position block = Cov(dp) + initial_sigma_m^2 I; rotation block (right perturbation of T_w_b) =
-// var(psi) (R^T a)(R^T a)^T + initial_sigma_rad^2 I; cross terms from Cov(dp, psi).
+// var(psi) (R^T a)(R^T a)^T + initial_sigma_rad^2 I; cross terms from Cov(dp, psi). The step covariance
+// (OdometryOutput::step_cov) is the relative pose's: position noise, the scale's marginal on the step and
+// the heading increment.
 #pragma once
 
 #include <Eigen/Core>
@@ -38,6 +40,7 @@ class DriftOdometry : public OdometrySource {
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
   bool initialised_ = false;
+  bool previous_tracked_ = false;  // the previous frame had an estimate (its step covariance is known)
   Eigen::Isometry3d last_true_T_w_b_ = Eigen::Isometry3d::Identity();
   Eigen::Isometry3d estimate_T_w_b_ = Eigen::Isometry3d::Identity();
   Eigen::Matrix<double, 6, 6> last_cov_ = Eigen::Matrix<double, 6, 6>::Zero();

@@ -89,6 +89,7 @@ OdometryOutput EkfOdometry::process(const OdometryInput& input) {
   out.pose.t_ns = input.t_ns;  // a lost frame carries the last good pose: stamp it with this frame
   out.reason = result.reason;
   out.tracked_features = result.tracked_features;
+  out.step_cov = result.step_cov;  // body-to-body: the same in the dataset world
   if (out.pose.status == OdometryStatus::kTracking) last_pose_ = out.pose;
   last_ = std::move(result);
   return out;

@@ -61,6 +61,15 @@ OdometryOutput FileOdometry::process(const OdometryInput& input) {
       (config_.file_rot_sigma2_a_rad2 + config_.file_rot_sigma2_b_rad2_per_m * d_m) *
       Eigen::Matrix3d::Identity();
   out.pose.status = lost ? OdometryStatus::kLost : OdometryStatus::kTracking;
+  // The model's variance grows by b per metre: the step's is b times the distance since the previous pose.
+  if (!lost && previous_d_m_) {
+    const double step_m = std::max(0.0, d_m - *previous_d_m_);
+    PoseCov step = PoseCov::Zero();
+    step.topLeftCorner<3, 3>().diagonal().setConstant(config_.file_sigma2_b_m2_per_m * step_m);
+    step.bottomRightCorner<3, 3>().diagonal().setConstant(config_.file_rot_sigma2_b_rad2_per_m * step_m);
+    out.step_cov = step;
+  }
+  previous_d_m_ = lost ? std::nullopt : std::optional<double>(d_m);
   return out;
 }
 

@@ -4,6 +4,7 @@
 // d the distance travelled along the trajectory up to the frame time.
 #pragma once
 
+#include <optional>
 #include <vector>
 
 #include "stages/odometry/odometry_source.hpp"
@@ -26,6 +27,7 @@ class FileOdometry : public OdometrySource {
   OdometryConfig config_;
   std::vector<StampedPose> poses_;
   std::vector<double> cumulative_m_;
+  std::optional<double> previous_d_m_;  // distance at the previous tracked pose (step_cov)
 };
 
 }  // namespace loopgate

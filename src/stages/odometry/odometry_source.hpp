@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "core/pose_covariance.hpp"
 #include "core/trajectory_format.hpp"
 #include "core/types.hpp"
 #include "stages/ekf/ekf_config.hpp"
@@ -96,6 +97,10 @@ struct OdometryOutput {
   PoseEstimate pose;
   std::string reason;         // why the status is not tracking (empty when tracking)
   int tracked_features = -1;  // visual sources: features tracked in this image; -1 = not a visual source
+  // The covariance of this pose relative to the previous pose this source estimated (T_prev_this;
+  // core/pose_covariance.hpp's convention), for the pose graph's odometry edges (posegraph.odometry_cov).
+  // nullopt: unknown (the first pose, after a lost frame).
+  std::optional<PoseCov> step_cov;
 };
 
 class OdometrySource {
