@@ -3,7 +3,9 @@
 // at every ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). No
 // verifier can give better edges or more of them, so the ATE printed is the best any loop closure reaches
 // on this odometry and route with this graph; a target below it needs better odometry (or a Sim(3) graph),
-// not better loops. Prints figures; not a timed benchmark.
+// not better loops. Prints figures; not a timed benchmark. Its odometry edges take the fixed model
+// (posegraph.odometry_cov model: the run's files do not hold the odometry's step covariances), so it is the
+// floor of that graph; loopgate's default graph (odometry_cov odometry) is not bounded by it.
 //
 //   build/release/bench_pipeline_loop_oracle RUN_DIR DATASET [--every N] [--sigma-position-m S]
 //       [--sigma-rotation-rad R]
@@ -73,7 +75,7 @@ int run(const Options& o) {
   if (node_of.size() < 2) throw DataError(o.run_dir / "trajectory.tum", "fewer than 2 poses at frame times");
   for (std::size_t n = 1; n < graph.node_count(); ++n) {
     const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
-    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.odometry_cov(T_a_b));
+    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.model_cov(T_a_b));
   }
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
   cov.diagonal() << Eigen::Vector3d::Constant(o.sigma_position_m * o.sigma_position_m),

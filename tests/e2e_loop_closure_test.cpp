@@ -82,6 +82,10 @@ TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
   ASSERT_TRUE(summary.contains("trajectory_accuracy_corrected"));
   EXPECT_TRUE(summary["trajectory_accuracy_corrected"].contains("rmse_m"));
   EXPECT_GT(summary["loop_closure"]["verify"]["count"].get<int>(), 0);
+  // The odometry edges carry the odometry's own covariance (drift source here), scaled by what the loops
+  // show.
+  EXPECT_EQ(summary["loop_closure"]["odometry_cov"], "odometry");
+  EXPECT_GE(summary["loop_closure"]["odometry_cov_scale"].get<double>(), 1.0);
 
   EXPECT_EQ(header(one / "loop_edges.csv"), (std::vector<std::string>{"i",
                                                                       "j",
@@ -230,6 +234,24 @@ TEST(E2eLoopClosure, LoopsTheOdometryAlreadyKnowsAreNotVerified) {
   }
   EXPECT_NEAR(summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
               summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
+}
+
+// posegraph.odometry_cov model: the fixed sigma model instead; another correction, as deterministic.
+TEST(E2eLoopClosure, TheFixedOdometryModelStillCorrects) {
+  const fs::path sim = simulate("e2e-closure-model-sim", "");
+  // run_forced reuses its output folder per thread count: read each run's files before the next.
+  const fs::path own = run_forced(sim, 2);
+  const std::string own_loops = read_file(own / "loops.csv");
+  const std::string own_corrected = read_file(own / "trajectory_corrected.tum");
+  const fs::path model_one = run_forced(sim, 1, "--set posegraph.odometry_cov=model");
+  const fs::path model = run_forced(sim, 2, "--set posegraph.odometry_cov=model");
+  const auto summary = nlohmann::json::parse(read_file(model / "summary.json"));
+  EXPECT_EQ(summary["loop_closure"]["odometry_cov"], "model");
+  EXPECT_EQ(summary["loop_closure"]["odometry_cov_scale"].get<double>(), 1.0);
+  EXPECT_GT(summary["loops_verified"].get<int>(), 0);
+  EXPECT_EQ(own_loops, read_file(model / "loops.csv"));  // the same loops, verified alike
+  EXPECT_NE(own_corrected, read_file(model / "trajectory_corrected.tum"));
+  EXPECT_EQ(read_file(model / "trajectory_corrected.tum"), read_file(model_one / "trajectory_corrected.tum"));
 }
 
 TEST(E2eLoopClosure, OffByDefault) {

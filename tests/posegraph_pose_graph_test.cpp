@@ -1,6 +1,7 @@
 // The pose graph on toy graphs with known solutions, and the robust loss against a wrong loop.
 #include <gtest/gtest.h>
 
+#include <Eigen/Cholesky>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -59,7 +60,7 @@ PoseGraph graph_of(const Drive& d, const PoseGraphConfig& config, std::size_t pe
   for (const auto& T : d.odometry) graph.add_node(T);
   for (std::size_t k = 1; k < d.odometry.size(); ++k) {
     const Eigen::Isometry3d T_a_b = d.odometry[k - 1].inverse() * d.odometry[k];
-    graph.add_edge(k - 1, k, EdgeKind::kOdometry, T_a_b, config.odometry_cov(T_a_b));
+    graph.add_edge(k - 1, k, EdgeKind::kOdometry, T_a_b, config.model_cov(T_a_b));
   }
   // True loops of the second lap onto the first.
   for (std::size_t l = 0; l < loops; ++l) {
@@ -132,6 +133,47 @@ TEST(PoseGraph, SameResultFromTheInitialPosesWhateverSolvedBefore) {
     EXPECT_EQ(a.pose(k).translation(), b.pose(k).translation()) << k;
 }
 
+// Loops whose errors come from an odometry k_true times less certain than it claims.
+std::vector<LoopInnovation> innovations(double k_true, int count, int wrong, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  std::uniform_real_distribution<double> length(0.5, 3.0);
+  std::vector<LoopInnovation> out;
+  for (int n = 0; n < count; ++n) {
+    LoopInnovation loop;
+    const double l =
+        length(rng);  // odometry covariances of different sizes, as loops over short and long stretches
+    loop.odometry_cov = cov(0.05 * l, 0.004 * l);
+    loop.loop_cov = cov(0.1, 0.005);
+    const Eigen::Matrix<double, 6, 6> S = k_true * loop.odometry_cov + loop.loop_cov;
+    const Eigen::Matrix<double, 6, 6> L = S.llt().matrixL();
+    Eigen::Matrix<double, 6, 1> z;
+    for (int i = 0; i < 6; ++i) z(i) = n01(rng);
+    loop.error = L * z;
+    if (n < wrong) loop.error *= 30.0;  // a wrong loop that verification let through
+    out.push_back(loop);
+  }
+  return out;
+}
+
+TEST(PoseGraph, OdometryCovarianceScaleFromTheLoops) {
+  // An odometry 9 times overconfident (3 times in sigma): the loops show it.
+  const double k = odometry_cov_scale_from_loops(innovations(9.0, 400, 0, 1), 3, 1e6);
+  EXPECT_GT(k, 9.0 / 1.3);
+  EXPECT_LT(k, 9.0 * 1.3);
+  // A fifth of the loops wrong moves the median, not by much.
+  const double k_wrong = odometry_cov_scale_from_loops(innovations(9.0, 400, 80, 2), 3, 1e6);
+  EXPECT_GT(k_wrong, 9.0 / 1.3);
+  EXPECT_LT(k_wrong, 9.0 * 2.0);
+  // An odometry as certain as it claims, or more: never scaled down.
+  EXPECT_NEAR(odometry_cov_scale_from_loops(innovations(1.0, 400, 0, 3), 3, 1e6), 1.0, 0.3);
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(0.1, 400, 0, 4), 3, 1e6), 1.0);
+  // Too few loops to tell, or loops beyond any scale.
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(9.0, 2, 0, 5), 3, 1e6), 1.0);
+  EXPECT_EQ(odometry_cov_scale_from_loops({}, 3, 1e6), 1.0);
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(9.0, 5, 5, 6), 3, 4.0), 4.0);
+}
+
 TEST(PoseGraph, BadEdgesAndConfigAreRejected) {
   PoseGraphConfig config;
   PoseGraph graph(config);
@@ -144,6 +186,16 @@ TEST(PoseGraph, BadEdgesAndConfigAreRejected) {
                std::invalid_argument);
   config.loss = "tukey";
   EXPECT_THROW(config.validate(), ConfigError);
+  config = PoseGraphConfig{};
+  config.odometry_cov = "filter";
+  try {
+    config.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("posegraph.odometry_cov: 'filter' is not one of: model, odometry"),
+              std::string::npos)
+        << e.what();
+  }
   config = PoseGraphConfig{};
   config.node_every_frames = 0;
   try {

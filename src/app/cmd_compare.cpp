@@ -415,7 +415,8 @@ int compare_command(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
-    const RunResult result = run_pipeline(config, *dataset, out_dir / method, signals.flag());
+    const RunResult result =
+        run_pipeline(config, *dataset, out_dir / method, signals.flag(), base.verify.enabled);
     std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);
     summaries[method] = result.summary;
     if (base.verify.enabled && !result.failed && !result.interrupted)

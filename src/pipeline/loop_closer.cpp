@@ -9,6 +9,7 @@
 #include <numeric>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loops_writer.hpp"
@@ -52,6 +53,10 @@ LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std
   if (!active_) return;
   poses_.resize(last_ - first_);
   sigma_m_.assign(last_ - first_, 0.0);
+  if (graph_config_.odometry_cov == "odometry") {
+    step_cov_.assign(last_ - first_, PoseCov::Zero());
+    has_step_cov_.assign(last_ - first_, 0);
+  }
   pending_by_frame_.assign(last_ - first_, 0);
   if (!dataset.has_images()) {
     unusable_ = "geometry: the dataset has no images";
@@ -75,10 +80,70 @@ LoopCloser::~LoopCloser() {
   }
 }
 
-void LoopCloser::record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m) {
+void LoopCloser::record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m,
+                             const std::optional<PoseCov>& step_cov) {
   if (!active_ || frame < first_ || frame >= last_) return;
   poses_[frame - first_] = T_w_b;
   sigma_m_[frame - first_] = sigma_m;
+  if (!step_cov_.empty() && step_cov) {
+    step_cov_[frame - first_] = *step_cov;
+    has_step_cov_[frame - first_] = 1;
+  }
+}
+
+PoseCov LoopCloser::odometry_edge_cov(std::size_t a, std::size_t b, double scale) const {
+  const Eigen::Isometry3d& T_w_a = *poses_[a - first_];
+  const Eigen::Isometry3d& T_w_b = *poses_[b - first_];
+  if (step_cov_.empty()) return graph_config_.model_cov(T_w_a.inverse() * T_w_b);
+  PoseCov cov = PoseCov::Zero();
+  const Eigen::Isometry3d* T_w_prev = &T_w_a;
+  for (std::size_t f = a + 1; f <= b; ++f) {
+    if (!poses_[f - first_]) continue;
+    if (!has_step_cov_[f - first_]) return graph_config_.model_cov(T_w_a.inverse() * T_w_b);
+    const Eigen::Isometry3d& T_w_f = *poses_[f - first_];
+    cov = compose_pose_cov(T_w_a.inverse() * *T_w_prev, cov, T_w_prev->inverse() * T_w_f,
+                           step_cov_[f - first_]);
+    T_w_prev = &T_w_f;
+  }
+  return graph_config_.with_floors(scale * cov);
+}
+
+double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std::size_t span) const {
+  if (step_cov_.empty()) return 1.0;
+  if (graph_config_.odometry_cov_scale > 0) return graph_config_.odometry_cov_scale;
+  // Each recorded frame's covariance relative to the start of its chain of step covariances (a frame without
+  // one starts a chain): the odometry's covariance of T_j_i is then step_pose_cov of j's and i's.
+  std::vector<std::int64_t> chain(span, -1);
+  std::vector<PoseCov> cov(span, PoseCov::Zero());
+  std::vector<Eigen::Isometry3d> T_o_f(span, Eigen::Isometry3d::Identity());
+  std::int64_t chains = -1;
+  std::optional<std::size_t> previous;
+  for (std::size_t k = 0; k < span; ++k) {
+    if (!poses_[k]) continue;
+    if (!previous || !has_step_cov_[k]) {
+      chain[k] = ++chains;
+    } else {
+      const std::size_t p = *previous;
+      chain[k] = chain[p];
+      T_o_f[k] = T_o_f[p] * (poses_[p]->inverse() * *poses_[k]);
+      cov[k] = compose_pose_cov(T_o_f[p], cov[p], poses_[p]->inverse() * *poses_[k], step_cov_[k]);
+    }
+    previous = k;
+  }
+  std::vector<LoopInnovation> innovations;
+  for (const LoopResult& r : loops) {
+    if (r.loop.query < first_ || r.loop.reference < first_) continue;
+    const std::size_t i = r.loop.query - first_, j = r.loop.reference - first_;
+    if (i >= span || j >= i || chain[i] < 0 || chain[i] != chain[j]) continue;
+    LoopInnovation innovation;
+    const Eigen::Isometry3d T_j_i = T_o_f[j].inverse() * T_o_f[i];
+    innovation.error.head<3>() = r.result.T_j_i.translation() - T_j_i.translation();
+    innovation.error.tail<3>() = so3_log(T_j_i.rotation().transpose() * r.result.T_j_i.rotation());
+    innovation.odometry_cov = step_pose_cov(T_o_f[j], cov[j], T_o_f[i], cov[i]);
+    innovation.loop_cov = r.result.cov;
+    innovations.push_back(innovation);
+  }
+  return odometry_cov_scale_from_loops(innovations, 3, 1e6);
 }
 
 std::optional<Eigen::Isometry3d> LoopCloser::pose_of(std::size_t frame) const {
@@ -264,9 +329,10 @@ double LoopCloser::solve(std::size_t last, bool final) {
     node_of[k] = static_cast<std::int64_t>(graph.add_node(*poses_[k]));
     frames.push_back(first_ + k);
   }
+  const double scale = odometry_cov_scale(loops, span);
   for (std::size_t n = 1; n < frames.size(); ++n) {
     const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
-    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, graph_config_.odometry_cov(T_a_b));
+    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, odometry_edge_cov(frames[n - 1], frames[n], scale));
   }
   // Loop edges (the loop's query and reference frame must both be nodes), keyed by (i, j) for the report.
   std::vector<std::pair<std::pair<std::size_t, std::size_t>, std::size_t>> edge_of_loop;
@@ -283,8 +349,9 @@ double LoopCloser::solve(std::size_t last, bool final) {
   const SolveReport report = graph.optimize(final, final ? 0.0 : graph_config_.max_solve_s);
   const double ms = ms_since(start);
   spdlog::debug(
-      "posegraph: {} nodes, {} loop edges ({} outliers), {} iterations, cost {:.3g} -> {:.3g}, {:.1f} ms",
-      graph.node_count(), report.loop_edges, report.outliers, report.iterations, report.initial_cost,
+      "posegraph: {} nodes, {} loop edges ({} outliers), odometry covariance x {:.3g}, {} iterations, cost "
+      "{:.3g} -> {:.3g}, {:.1f} ms",
+      graph.node_count(), report.loop_edges, report.outliers, scale, report.iterations, report.initial_cost,
       report.final_cost, ms);
   if (!final) {
     solve_ms_.push_back(ms);
@@ -292,6 +359,7 @@ double LoopCloser::solve(std::size_t last, bool final) {
   }
   final_solve_ms_ = ms;
   final_report_ = report;
+  final_odometry_cov_scale_ = scale;
   nodes_ = frames;
   node_poses_.clear();
   for (std::size_t n = 0; n < graph.node_count(); ++n) node_poses_.push_back(graph.pose(n));
@@ -452,6 +520,8 @@ nlohmann::json LoopCloser::summary() const {
           {"skipped", skipped},
           {"graph_outliers", outliers},
           {"graph_nodes", nodes_.size()},
+          {"odometry_cov", graph_config_.odometry_cov},
+          {"odometry_cov_scale", final_odometry_cov_scale_},
           {"verify", stats_json(verify_ms)},
           {"optimize_streaming", stats_json(solve_ms_)},
           {"optimize_final",
@@ -495,7 +565,8 @@ nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& da
   LoopCloser closer(config, dataset, track.first_frame, track.last_frame, true);
   if (!closer.active()) throw std::logic_error("correct_after_run: verify.enabled is false");
   for (std::size_t k = 0; k < track.tracked_frames.size(); ++k)
-    closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b, track.tracked_sigma_m[k]);
+    closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b, track.tracked_sigma_m[k],
+                       k < track.tracked_step_cov.size() ? track.tracked_step_cov[k] : std::nullopt);
   for (const Detection& loop : track.loops) closer.submit(loop);
   closer.finish();
   closer.write_edges(run_dir);

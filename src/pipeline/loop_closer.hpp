@@ -23,6 +23,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "core/pose_covariance.hpp"
 #include "core/types.hpp"
 #include "eval/precision_recall.hpp"
 #include "stages/posegraph/pose_graph.hpp"
@@ -46,9 +47,11 @@ class LoopCloser {
 
   bool active() const { return active_; }
   // The odometry node (serial), once per frame with a usable pose: the pose the verifier and the graph use,
-  // and its position sigma (PoseEstimate::position_sigma_m; verify.min_sigma_gain). Frames never recorded
+  // its position sigma (PoseEstimate::position_sigma_m; verify.min_sigma_gain) and its step covariance from
+  // the previous recorded pose (OdometryOutput::step_cov; posegraph.odometry_cov). Frames never recorded
   // have no pose.
-  void record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m);
+  void record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m,
+                   const std::optional<PoseCov>& step_cov);
   // A loop accepted by the method (match node or end of stream); queued in this order.
   void submit(const Detection& loop);
   // Called on the worker thread with every loop as its verification ends (verified, rejected or skipped), in
@@ -113,6 +116,16 @@ class LoopCloser {
   std::string unusable_;  // the reason no loop can be verified (empty: they can)
   std::vector<std::optional<Eigen::Isometry3d>> poses_;  // by frame - first, written once each
   std::vector<double> sigma_m_;                          // by frame - first: the pose's position sigma
+  // By frame - first (posegraph.odometry_cov odometry only): the step covariance from the previous recorded
+  // pose, and whether the source gave one.
+  std::vector<PoseCov> step_cov_;
+  std::vector<char> has_step_cov_;
+  // The covariance of the odometry edge between the recorded frames a < b: the step covariances composed
+  // times `scale`, or the model's when a frame between them has none (or posegraph.odometry_cov is model).
+  PoseCov odometry_edge_cov(std::size_t a, std::size_t b, double scale) const;
+  // posegraph.odometry_cov_scale, or when it is 0 the scale the verified `loops` show
+  // (odometry_cov_scale_from_loops). Frames up to index `span` of poses_.
+  double odometry_cov_scale(const std::vector<LoopResult>& loops, std::size_t span) const;
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;
@@ -132,7 +145,8 @@ class LoopCloser {
   std::unordered_map<std::size_t, FrameMs> ms_by_frame_;
   double final_solve_ms_ = 0;
   SolveReport final_report_;
-  std::vector<std::size_t> nodes_;  // frames of the final graph's nodes
+  double final_odometry_cov_scale_ = 1.0;  // the final solve's (posegraph.odometry_cov odometry)
+  std::vector<std::size_t> nodes_;         // frames of the final graph's nodes
   std::vector<Eigen::Isometry3d> node_poses_;
 };
 

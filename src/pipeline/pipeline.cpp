@@ -142,7 +142,8 @@ RunResult PipelineRun::run() {
     odometry = std::make_unique<Node>(*g, serial, body(kOdometry, true, [this](FrameRecord& r) {
       steps_.odometry(r);
       if (closer_.active() && r.usable_pose())
-        closer_.record_pose(r.frame, r.odometry.pose.T_w_b, r.odometry.pose.position_sigma_m());
+        closer_.record_pose(r.frame, r.odometry.pose.T_w_b, r.odometry.pose.position_sigma_m(),
+                            r.odometry.step_cov);
     }));
     gate =
         std::make_unique<Node>(*g, serial, body(kGate, true, [this](FrameRecord& r) { method_->gate(r); }));
@@ -231,11 +232,12 @@ void PipelineRun::finish_stream(tbb::task_arena& arena, RunResult& result, doubl
 }  // namespace pipeline_internal
 
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
-                       const std::filesystem::path& out_dir, const std::atomic<bool>* stop) {
+                       const std::filesystem::path& out_dir, const std::atomic<bool>* stop,
+                       bool keep_step_cov) {
   if (dataset.frame_count() == 0) throw DataError(dataset.root(), "dataset has no frames");
   require_poses_if_needed(config, dataset);
   refuse_outputs_over_inputs(config, out_dir);
-  pipeline_internal::PipelineRun run(config, dataset, out_dir, stop);
+  pipeline_internal::PipelineRun run(config, dataset, out_dir, stop, keep_step_cov);
   return run.run();
 }
 

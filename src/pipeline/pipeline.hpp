@@ -48,6 +48,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/pose_covariance.hpp"
 #include "core/types.hpp"
 #include "eval/precision_recall.hpp"
 #include "pipeline/pipeline_config.hpp"
@@ -64,7 +65,10 @@ struct RunTrack {
   std::vector<std::size_t> tracked_frames;      // the frame of each tracked pose
   std::vector<StampedPose> tracked_poses;       // the odometry's estimates (status tracking; the ATE's poses)
   std::vector<double> tracked_sigma_m;          // their position sigma (PoseEstimate::position_sigma_m)
-  std::vector<Detection> loops;                 // as loops.csv, dataset frames
+  // Their step covariances (OdometryOutput::step_cov) when the pose graph uses them (posegraph.odometry_cov
+  // odometry) and loop closure is on (verify.enabled, or run_pipeline's keep_step_cov); else empty.
+  std::vector<std::optional<PoseCov>> tracked_step_cov;
+  std::vector<Detection> loops;  // as loops.csv, dataset frames
 };
 
 struct RunResult {
@@ -112,7 +116,10 @@ void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesys
 // false, PR curve, AP, recall at 100/99/95% precision, gate coverage). `config` must be valid (load_config /
 // apply_config validate it, once). `stop` (may be null) is polled by the producer. Throws
 // ConfigError/DataError for problems found before the graph starts (refuse_outputs_over_inputs among them).
+// `keep_step_cov`: RunTrack::tracked_step_cov is filled also without verify.enabled (compare verifies and
+// corrects each method after its timed run).
 RunResult run_pipeline(const PipelineConfig& config, const Dataset& dataset,
-                       const std::filesystem::path& out_dir, const std::atomic<bool>* stop = nullptr);
+                       const std::filesystem::path& out_dir, const std::atomic<bool>* stop = nullptr,
+                       bool keep_step_cov = false);
 
 }  // namespace loopgate

@@ -125,6 +125,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
                   outputs_.tracked_frames(),
                   outputs_.tracked_poses(),
                   outputs_.tracked_sigma_m(),
+                  outputs_.tracked_step_cov(),
                   loops_.loops()};
   if (config_.output.trace) {
     outputs_.trace().name_process(fmt::format("loopgate run: {} ({}) on {}", method_->name(), method_->mode(),

@@ -47,7 +47,7 @@ struct EndOfStreamWork {
 class PipelineRun {
  public:
   PipelineRun(const PipelineConfig& config, const Dataset& dataset, const std::filesystem::path& out_dir,
-              const std::atomic<bool>* stop)
+              const std::atomic<bool>* stop, bool keep_step_cov)
       : config_(config),
         dataset_(dataset),
         out_dir_(out_dir),
@@ -63,7 +63,7 @@ class PipelineRun {
         steps_(config, dataset, make_odometry_source(config.odometry, config.ekf, dataset), images_,
                method_->needs_every_image()),
         outputs_(config, out_dir, *method_, seqs_, clock_, steps_.odometry_source().needs_images(),
-                 seqs_.capacity(), &closer_),
+                 seqs_.capacity(), &closer_, keep_step_cov),
         replay_(config.run, dataset, range_.first, clock_) {
     if (feedback_wanted(config)) {
       connect_gate_feedback();

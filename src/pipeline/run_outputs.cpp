@@ -27,7 +27,8 @@ std::string join_messages(const std::vector<std::string>& messages) {
 
 RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
                        DetectionMethod& method, const SeqIndex& seqs, const RunClock& clock,
-                       bool visual_odometry, std::size_t total_frames, const LoopCloser* closer)
+                       bool visual_odometry, std::size_t total_frames, const LoopCloser* closer,
+                       bool keep_step_cov)
     : config_(config),
       out_dir_(out_dir),
       method_(method),
@@ -39,6 +40,8 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
       profiler_({kStageNames.begin(), kStageNames.end()}) {
   const std::string& progress = config.output.progress;
   show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
+  keep_step_cov_ = config.posegraph.enabled && config.posegraph.odometry_cov == "odometry" &&
+                   (config.verify.enabled || keep_step_cov);
 }
 
 // frames.csv: the frame, its pose (x..qw, sigma_m = sqrt of the largest eigenvalue of the position
@@ -135,6 +138,7 @@ void RunOutputs::sink(FrameRecord& r) {
     tracked_frames_.push_back(r.frame);
     tracked_poses_.push_back({r.t_ns, pose.T_w_b});
     tracked_sigma_m_.push_back(pose.position_sigma_m());
+    if (keep_step_cov_) tracked_step_cov_.push_back(r.odometry.step_cov);
   }
   counters_.count(r, status, reason);
   r.image.release();

@@ -9,6 +9,7 @@
 #include <deque>
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -29,7 +30,7 @@ class RunOutputs {
   // `visual_odometry`: frames.csv gets tracked_features; `total_frames`: for the progress line.
   RunOutputs(const PipelineConfig& config, const std::filesystem::path& out_dir, DetectionMethod& method,
              const SeqIndex& seqs, const RunClock& clock, bool visual_odometry, std::size_t total_frames,
-             const LoopCloser* closer = nullptr);
+             const LoopCloser* closer = nullptr, bool keep_step_cov = false);
 
   void open();
   // Called by the sink with the dataset frame of every held row whose detection became final, in order
@@ -56,6 +57,9 @@ class RunOutputs {
   const std::vector<std::size_t>& tracked_frames() const { return tracked_frames_; }
   // The odometry's position sigma (PoseEstimate::position_sigma_m) of each of tracked_poses().
   const std::vector<double>& tracked_sigma_m() const { return tracked_sigma_m_; }
+  // Their step covariances (OdometryOutput::step_cov), kept when the pose graph uses them and loop closure is
+  // on (verify.enabled or keep_step_cov; else empty: 288 bytes a frame).
+  const std::vector<std::optional<PoseCov>>& tracked_step_cov() const { return tracked_step_cov_; }
   std::uint64_t frames_through() const { return next_seq_; }
   // The time accounting's measurements summed over the frames through the sink.
   const StageTimes& frame_times() const { return frame_times_; }
@@ -80,6 +84,7 @@ class RunOutputs {
   std::size_t total_frames_;
   const LoopCloser* closer_;  // frames.csv "geometry": a loop frame's row waits for its verification
   bool show_progress_ = false;
+  bool keep_step_cov_ = false;
   std::int64_t last_progress_ns_ = 0;
 
   CsvWriter frames_csv_;
@@ -92,6 +97,7 @@ class RunOutputs {
   std::vector<StampedPose> tracked_poses_;   // odometry poses with status tracking (ATE in summary.json)
   std::vector<std::size_t> tracked_frames_;  // the frame of each tracked pose
   std::vector<double> tracked_sigma_m_;      // the position sigma of each tracked pose
+  std::vector<std::optional<PoseCov>> tracked_step_cov_;  // verify.enabled only
   std::uint64_t next_seq_ = 0;
   struct HeldRow {  // a frames.csv row waiting for its detection
     std::size_t seq = 0;

@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -67,6 +68,10 @@ void PoseGraphConfig::validate() const {
     throw ConfigError("posegraph.odometry_sigma_rotation_rad_per_sqrt_m: must be a finite number >= 0");
   if (!positive(odometry_sigma_rotation_floor_rad))
     throw ConfigError("posegraph.odometry_sigma_rotation_floor_rad: must be a finite number > 0");
+  if (odometry_cov != "model" && odometry_cov != "odometry")
+    throw ConfigError("posegraph.odometry_cov: '" + odometry_cov + "' is not one of: model, odometry");
+  if (!non_negative(odometry_cov_scale))
+    throw ConfigError("posegraph.odometry_cov_scale: must be a finite number >= 0 (0: from the loops)");
   if (loss != "cauchy" && loss != "huber" && loss != "none")
     throw ConfigError("posegraph.loss: '" + loss + "' is not one of: cauchy, huber, none");
   if (!positive(loss_scale)) throw ConfigError("posegraph.loss_scale: must be a finite number > 0");
@@ -75,7 +80,7 @@ void PoseGraphConfig::validate() const {
   if (!non_negative(max_solve_s)) throw ConfigError("posegraph.max_solve_s: must be a finite number >= 0");
 }
 
-Eigen::Matrix<double, 6, 6> PoseGraphConfig::odometry_cov(const Eigen::Isometry3d& T_a_b) const {
+Eigen::Matrix<double, 6, 6> PoseGraphConfig::model_cov(const Eigen::Isometry3d& T_a_b) const {
   const double root_d = std::sqrt(T_a_b.translation().norm());
   const double sigma_p = odometry_sigma_position_floor_m + odometry_sigma_position_m_per_sqrt_m * root_d;
   const double sigma_r = odometry_sigma_rotation_floor_rad + odometry_sigma_rotation_rad_per_sqrt_m * root_d;
@@ -83,6 +88,41 @@ Eigen::Matrix<double, 6, 6> PoseGraphConfig::odometry_cov(const Eigen::Isometry3
   cov.topLeftCorner<3, 3>().diagonal().setConstant(sigma_p * sigma_p);
   cov.bottomRightCorner<3, 3>().diagonal().setConstant(sigma_r * sigma_r);
   return cov;
+}
+
+Eigen::Matrix<double, 6, 6> PoseGraphConfig::with_floors(const Eigen::Matrix<double, 6, 6>& cov) const {
+  Matrix6d out = cov;
+  out.topLeftCorner<3, 3>().diagonal().array() +=
+      odometry_sigma_position_floor_m * odometry_sigma_position_floor_m;
+  out.bottomRightCorner<3, 3>().diagonal().array() +=
+      odometry_sigma_rotation_floor_rad * odometry_sigma_rotation_floor_rad;
+  return out;
+}
+
+double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
+                                     double max_scale) {
+  constexpr double kChi2MedianDof6 = 5.348120627447;
+  if (loops.empty() || loops.size() < min_loops) return 1.0;
+  std::vector<double> nis(loops.size());
+  const auto median_nis = [&](double k) {
+    for (std::size_t n = 0; n < loops.size(); ++n) {
+      const Matrix6d S = k * loops[n].odometry_cov + loops[n].loop_cov;
+      nis[n] = loops[n].error.dot(S.ldlt().solve(loops[n].error));
+    }
+    const auto mid = nis.begin() + static_cast<std::ptrdiff_t>(nis.size() / 2);
+    std::nth_element(nis.begin(), mid, nis.end());
+    if (nis.size() % 2 == 1) return *mid;
+    return 0.5 * (*mid + *std::max_element(nis.begin(), mid));
+  };
+  if (median_nis(1.0) <= kChi2MedianDof6) return 1.0;
+  if (median_nis(max_scale) > kChi2MedianDof6) return max_scale;
+  // The median NIS falls as k grows: bisection on log k.
+  double lo = 0.0, hi = std::log(max_scale);
+  for (int it = 0; it < 60; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (median_nis(std::exp(mid)) > kChi2MedianDof6 ? lo : hi) = mid;
+  }
+  return std::exp(hi);
 }
 
 PoseGraph::PoseGraph(const PoseGraphConfig& config) : config_(config) {}

@@ -22,7 +22,14 @@ namespace loopgate {
 struct PoseGraphConfig {
   bool enabled = true;
   int node_every_frames = 1;  // a node every N tracked frames (and one at every loop frame)
-  // Odometry edge of length d metres: sigma = floor + per_sqrt_m * sqrt(d), position and rotation.
+  // The odometry edges' covariance. "odometry": the odometry's own, its step covariances
+  // (OdometryOutput::step_cov) composed from node to node, plus the floors below squared; an edge over a
+  // frame whose source gave none (the first pose, after a loss) falls back to the model. "model": a fixed
+  // model of edge length d metres, sigma = floor + per_sqrt_m * sqrt(d), position and rotation.
+  std::string odometry_cov = "odometry";
+  // odometry_cov odometry: the odometry's covariances times this; 0: from the verified loops
+  // (odometry_cov_scale_from_loops), 1 when fewer than 3 loops are verified.
+  double odometry_cov_scale = 0.0;
   double odometry_sigma_position_m_per_sqrt_m = 0.02;
   double odometry_sigma_position_floor_m = 0.005;
   double odometry_sigma_rotation_rad_per_sqrt_m = 0.002;
@@ -38,6 +45,8 @@ struct PoseGraphConfig {
   static void fields(Self& self, V&& v) {
     v("enabled", self.enabled);
     v("node_every_frames", self.node_every_frames);
+    v("odometry_cov", self.odometry_cov);
+    v("odometry_cov_scale", self.odometry_cov_scale);
     v("odometry_sigma_position_m_per_sqrt_m", self.odometry_sigma_position_m_per_sqrt_m);
     v("odometry_sigma_position_floor_m", self.odometry_sigma_position_floor_m);
     v("odometry_sigma_rotation_rad_per_sqrt_m", self.odometry_sigma_rotation_rad_per_sqrt_m);
@@ -52,8 +61,27 @@ struct PoseGraphConfig {
   void validate() const;  // throws ConfigError naming posegraph.KEY and its bound
 
   // The covariance of an odometry edge T_a_b under this model.
-  Eigen::Matrix<double, 6, 6> odometry_cov(const Eigen::Isometry3d& T_a_b) const;
+  Eigen::Matrix<double, 6, 6> model_cov(const Eigen::Isometry3d& T_a_b) const;
+  // An odometry edge's covariance from the odometry's own: `cov` plus the floors squared on the diagonal.
+  Eigen::Matrix<double, 6, 6> with_floors(const Eigen::Matrix<double, 6, 6>& cov) const;
 };
+
+// One verified loop (i, j) seen from the odometry: the error of the loop's T_j_i against the odometry's
+// (core/pose_covariance.hpp's convention) and the covariances of the two.
+struct LoopInnovation {
+  Eigen::Matrix<double, 6, 1> error = Eigen::Matrix<double, 6, 1>::Zero();
+  Eigen::Matrix<double, 6, 6> odometry_cov = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 6> loop_cov = Eigen::Matrix<double, 6, 6>::Identity();
+};
+
+// The factor k >= 1 for the odometry's covariances such that the median over the loops of
+// e^T (k C_odometry + C_loop)^-1 e is the chi-square median of 6 dof (5.348): an odometry that claims to
+// know the relative pose of a loop's two frames better than the verified loops show (a filter's
+// overconfidence) gets its covariance scaled up by what the loops show. Never scaled down (1 when the loops
+// agree at least as well as predicted), at most max_scale; the median lets up to half the loops be wrong.
+// 1 with fewer than min_loops loops.
+double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
+                                     double max_scale);
 
 enum class EdgeKind { kOdometry, kLoop };
 
