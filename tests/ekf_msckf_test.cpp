@@ -168,7 +168,7 @@ RunResult run_filter(const RunSettings& settings) {
       // A body frame apart from the IMU's, so that the extrinsic's terms are exercised.
       Eigen::Isometry3d T_b_i = Eigen::Isometry3d::Identity();
       T_b_i.linear() = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
-      T_b_i.translation() = Eigen::Vector3d(0.3, -0.2, 0.5);
+      T_b_i.translation() = Eigen::Vector3d(3.0, -2.0, 5.0);  // metres: its lever arm must show
       const auto [T_r_b, cov] = filter.relative_pose(0, T_b_i);
       const double t_r = ns_to_s(filter.clones().front().t_ns);
       const Eigen::Isometry3d T_r_b_true =

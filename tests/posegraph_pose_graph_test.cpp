@@ -187,6 +187,16 @@ TEST(PoseGraph, BadEdgesAndConfigAreRejected) {
   config.loss = "tukey";
   EXPECT_THROW(config.validate(), ConfigError);
   config = PoseGraphConfig{};
+  config.odometry_cov_scale = -1;
+  try {
+    config.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("posegraph.odometry_cov_scale"), std::string::npos) << e.what();
+  }
+  config.odometry_cov_scale = std::nan("");
+  EXPECT_THROW(config.validate(), ConfigError);
+  config = PoseGraphConfig{};
   config.odometry_cov = "filter";
   try {
     config.validate();
