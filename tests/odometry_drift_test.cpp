@@ -21,17 +21,33 @@ Eigen::Isometry3d circle_pose(int k) {
   return T;
 }
 
-std::vector<PoseEstimate> run(const OdometryConfig& config, int frames) {
+// The source's outputs on `frames` frames of the circle, 10 Hz.
+std::vector<OdometryOutput> run_outputs(const OdometryConfig& config, int frames) {
   DriftOdometry odometry(config, Eigen::Vector3d::UnitZ());
-  std::vector<PoseEstimate> out;
+  std::vector<OdometryOutput> out;
   for (int k = 0; k < frames; ++k) {
     OdometryInput input;
     input.frame = static_cast<std::size_t>(k);
     input.t_ns = k * 100'000'000LL;
     input.T_w_b_true = circle_pose(k);
-    out.push_back(odometry.process(input).pose);
+    out.push_back(odometry.process(input));
   }
   return out;
+}
+
+std::vector<PoseEstimate> run(const OdometryConfig& config, int frames) {
+  std::vector<PoseEstimate> poses;
+  for (const OdometryOutput& out : run_outputs(config, frames)) poses.push_back(out.pose);
+  return poses;
+}
+
+// Drift strong enough for the Monte-Carlo tests to see every term of the model.
+OdometryConfig strong_drift() {
+  OdometryConfig config;
+  config.drift_heading_sigma_rad_per_sqrt_m = 0.002;
+  config.drift_scale_sigma_per_sqrt_m = 0.003;
+  config.drift_position_sigma_m_per_sqrt_m = 0.02;
+  return config;
 }
 
 TEST(OdometryDrift, DeterministicBySeed) {
@@ -76,10 +92,7 @@ TEST(OdometryDrift, CovarianceGrowsWithDistance) {
 // The covariance matches the drift it describes: over many seeds, the mean squared position error is
 // the predicted trace (within Monte-Carlo noise), and the normalised error squared averages 3.
 TEST(OdometryDrift, CovarianceConsistentWithDriftMonteCarlo) {
-  OdometryConfig config;
-  config.drift_heading_sigma_rad_per_sqrt_m = 0.002;
-  config.drift_scale_sigma_per_sqrt_m = 0.003;
-  config.drift_position_sigma_m_per_sqrt_m = 0.02;
+  OdometryConfig config = strong_drift();
   constexpr int kRuns = 300;
   constexpr int kFrames = 150;
   double sum_sq_m2 = 0;
@@ -103,10 +116,7 @@ TEST(OdometryDrift, CovarianceConsistentWithDriftMonteCarlo) {
 // The step covariance (the pose graph's odometry edges) against the spread of the estimated step
 // T_prev_this over seeds: position whitened by the prediction, rotation about the heading axis by variance.
 TEST(OdometryDrift, StepCovarianceConsistentWithTheStepsMonteCarlo) {
-  OdometryConfig config;
-  config.drift_heading_sigma_rad_per_sqrt_m = 0.002;
-  config.drift_scale_sigma_per_sqrt_m = 0.003;
-  config.drift_position_sigma_m_per_sqrt_m = 0.02;
+  OdometryConfig config = strong_drift();
   constexpr int kRuns = 2000;
   constexpr int kFrame = 80;
   const Eigen::Isometry3d T_step_true = circle_pose(kFrame - 1).inverse() * circle_pose(kFrame);
@@ -115,25 +125,14 @@ TEST(OdometryDrift, StepCovarianceConsistentWithTheStepsMonteCarlo) {
   PoseCov predicted = PoseCov::Zero();
   for (int seed = 0; seed < kRuns; ++seed) {
     config.seed = seed;
-    DriftOdometry odometry(config, Eigen::Vector3d::UnitZ());
-    Eigen::Isometry3d T_previous = Eigen::Isometry3d::Identity();
-    for (int k = 0; k <= kFrame; ++k) {
-      OdometryInput input;
-      input.frame = static_cast<std::size_t>(k);
-      input.t_ns = k * 100'000'000LL;
-      input.T_w_b_true = circle_pose(k);
-      const OdometryOutput out = odometry.process(input);
-      ASSERT_EQ(out.step_cov.has_value(), k > 0) << "frame " << k;
-      if (k == kFrame) {
-        const Eigen::Isometry3d T_step = T_previous.inverse() * out.pose.T_w_b;
-        const Eigen::Vector3d e_p = T_step_true.translation() - T_step.translation();
-        const Eigen::Vector3d e_r = so3_log(T_step.rotation().transpose() * T_step_true.rotation());
-        empirical_p += e_p * e_p.transpose() / kRuns;
-        empirical_yaw += e_r.z() * e_r.z() / kRuns;
-        predicted = *out.step_cov;
-      }
-      T_previous = out.pose.T_w_b;
-    }
+    const std::vector<OdometryOutput> outputs = run_outputs(config, kFrame + 1);
+    for (int k = 0; k <= kFrame; ++k) ASSERT_EQ(outputs[k].step_cov.has_value(), k > 0) << "frame " << k;
+    const Eigen::Isometry3d T_step = outputs[kFrame - 1].pose.T_w_b.inverse() * outputs[kFrame].pose.T_w_b;
+    const Eigen::Vector3d e_p = T_step_true.translation() - T_step.translation();
+    const Eigen::Vector3d e_r = so3_log(T_step.rotation().transpose() * T_step_true.rotation());
+    empirical_p += e_p * e_p.transpose() / kRuns;
+    empirical_yaw += e_r.z() * e_r.z() / kRuns;
+    predicted = *outputs[kFrame].step_cov;
   }
   const Eigen::Matrix3d P = predicted.topLeftCorner<3, 3>();
   const Eigen::Matrix3d L = P.llt().matrixL();
