@@ -94,15 +94,15 @@ void LoopCloser::record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, 
 PoseCov LoopCloser::odometry_edge_cov(std::size_t a, std::size_t b, double scale) const {
   const Eigen::Isometry3d& T_w_a = *poses_[a - first_];
   const Eigen::Isometry3d& T_w_b = *poses_[b - first_];
-  if (step_cov_.empty()) return graph_config_.model_cov(T_w_a.inverse() * T_w_b);
+  const Eigen::Isometry3d T_a_w = T_w_a.inverse();
+  if (step_cov_.empty()) return graph_config_.model_cov(T_a_w * T_w_b);
   PoseCov cov = PoseCov::Zero();
   const Eigen::Isometry3d* T_w_prev = &T_w_a;
   for (std::size_t f = a + 1; f <= b; ++f) {
     if (!poses_[f - first_]) continue;
-    if (!has_step_cov_[f - first_]) return graph_config_.model_cov(T_w_a.inverse() * T_w_b);
+    if (!has_step_cov_[f - first_]) return graph_config_.model_cov(T_a_w * T_w_b);
     const Eigen::Isometry3d& T_w_f = *poses_[f - first_];
-    cov = compose_pose_cov(T_w_a.inverse() * *T_w_prev, cov, T_w_prev->inverse() * T_w_f,
-                           step_cov_[f - first_]);
+    cov = compose_pose_cov(T_a_w * *T_w_prev, cov, T_w_prev->inverse() * T_w_f, step_cov_[f - first_]);
     T_w_prev = &T_w_f;
   }
   return graph_config_.with_floors(scale * cov);
