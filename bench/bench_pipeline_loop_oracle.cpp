@@ -1,16 +1,20 @@
-// The floor of loop correction on a route (issue 13): a finished run's odometry (trajectory.tum) in the pose
-// graph the loop closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance -
-// at every ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). No
-// verifier can give better edges or more of them, so the ATE printed is the best any loop closure reaches
-// on this odometry and route with this graph; a target below it needs better odometry (or a Sim(3) graph),
-// not better loops. Prints figures; not a timed benchmark. Its odometry edges take the fixed model
-// (posegraph.odometry_cov model: the run's files do not hold the odometry's step covariances), so it is the
-// floor of that graph; loopgate's default graph (odometry_cov odometry) is not bounded by it.
+// The floor of loop correction on a route (issue 13): a finished run's odometry in the pose graph the loop
+// closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance - at every
+// ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). No verifier can give
+// better edges or more of them, so the ATE printed is the best any loop closure reaches on this odometry and
+// route with this graph; a target below it needs better odometry (or a Sim(3) graph), not better loops.
+// Prints figures; not a timed benchmark.
+//
+// The odometry edges are the run's own: the nodes and odometry edges of RUN_DIR/pose_graph.g2o (written by a
+// run with verify.enabled: the odometry's covariances scaled as that run scaled them; its loop edges are
+// dropped; an odometry edge is one between consecutive nodes). With --model, or without that file, the nodes
+// are the poses of trajectory.tum and the edges take the fixed model (posegraph.odometry_cov model).
 //
 //   build/release/bench_pipeline_loop_oracle RUN_DIR DATASET [--every N] [--sigma-position-m S]
-//       [--sigma-rotation-rad R]
+//       [--sigma-rotation-rad R] [--model]
 #include <spdlog/fmt/fmt.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
@@ -21,6 +25,7 @@
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
+#include "io/g2o_file.hpp"
 #include "io/trajectory_io.hpp"
 #include "pipeline/run_metrics.hpp"
 #include "stages/ekf/vio_ekf.hpp"
@@ -36,6 +41,7 @@ struct Options {
   int every = 5;
   double sigma_position_m = 0.1;
   double sigma_rotation_rad = 0.005;
+  bool model = false;
 };
 
 // truth_loops.csv as the run writes it: header "i,j", then one pair per line.
@@ -61,22 +67,48 @@ double rmse(const nlohmann::json& accuracy) {
 int run(const Options& o) {
   const auto dataset = open_dataset(o.dataset);
   if (!dataset->has_ground_truth()) throw DataError(o.dataset, "the oracle needs ground truth");
-  const std::vector<StampedPose> odometry = read_tum(o.run_dir / "trajectory.tum");
-  std::map<Timestamp, std::size_t> frame_of;
-  for (std::size_t f = 0; f < dataset->frame_count(); ++f) frame_of[dataset->frame_t_ns(f)] = f;
   PoseGraphConfig config;
   PoseGraph graph(config);
   std::map<std::size_t, std::size_t> node_of;  // frame -> node
-  for (const StampedPose& pose : odometry) {
-    const auto it = frame_of.lower_bound(pose.t_ns - 1000);  // TUM keeps 1 ns; allow its rounding
-    if (it == frame_of.end() || it->first > pose.t_ns + 1000) continue;
-    node_of[it->second] = graph.add_node(pose.T_w_b);
+  const fs::path graph_file = o.run_dir / "pose_graph.g2o";
+  std::string edges_from;
+  if (!o.model && fs::exists(graph_file)) {
+    G2oGraph run_graph = read_g2o(graph_file);
+    std::sort(run_graph.vertices.begin(), run_graph.vertices.end(),
+              [](const G2oVertex& a, const G2oVertex& b) { return a.id < b.id; });
+    for (const G2oVertex& v : run_graph.vertices) {
+      if (v.id < 0 || static_cast<std::size_t>(v.id) >= dataset->frame_count())
+        throw DataError(graph_file, fmt::format("vertex {} is not a frame of the dataset", v.id));
+      node_of[static_cast<std::size_t>(v.id)] = graph.add_node(v.T_w_b);
+    }
+    std::size_t dropped = 0;
+    for (const G2oEdge& e : run_graph.edges) {
+      const std::size_t a = node_of.at(static_cast<std::size_t>(e.a));
+      const std::size_t b = node_of.at(static_cast<std::size_t>(e.b));
+      if (b != a + 1) {
+        ++dropped;
+        continue;
+      }
+      graph.add_edge(a, b, EdgeKind::kOdometry, e.T_a_b, e.information.inverse());
+    }
+    edges_from =
+        fmt::format("the run's odometry edges ({}; its {} loop edges dropped)", graph_file.string(), dropped);
+  } else {
+    const std::vector<StampedPose> odometry = read_tum(o.run_dir / "trajectory.tum");
+    std::map<Timestamp, std::size_t> frame_of;
+    for (std::size_t f = 0; f < dataset->frame_count(); ++f) frame_of[dataset->frame_t_ns(f)] = f;
+    for (const StampedPose& pose : odometry) {
+      const auto it = frame_of.lower_bound(pose.t_ns - 1000);  // TUM keeps 1 ns; allow its rounding
+      if (it == frame_of.end() || it->first > pose.t_ns + 1000) continue;
+      node_of[it->second] = graph.add_node(pose.T_w_b);
+    }
+    for (std::size_t n = 1; n < graph.node_count(); ++n) {
+      const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
+      graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.model_cov(T_a_b));
+    }
+    edges_from = "the fixed model's odometry edges (trajectory.tum)";
   }
-  if (node_of.size() < 2) throw DataError(o.run_dir / "trajectory.tum", "fewer than 2 poses at frame times");
-  for (std::size_t n = 1; n < graph.node_count(); ++n) {
-    const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
-    graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.model_cov(T_a_b));
-  }
+  if (node_of.size() < 2) throw DataError(o.run_dir, "fewer than 2 poses at frame times");
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
   cov.diagonal() << Eigen::Vector3d::Constant(o.sigma_position_m * o.sigma_position_m),
       Eigen::Vector3d::Constant(o.sigma_rotation_rad * o.sigma_rotation_rad);
@@ -105,6 +137,7 @@ int run(const Options& o) {
   std::vector<StampedPose> before;
   for (std::size_t k = 0; k < graph.node_count(); ++k)
     before.push_back({corrected[k].t_ns, graph.initial_pose(k)});
+  std::printf("odometry edges: %s\n", edges_from.c_str());
   std::printf(
       "%s: %zu nodes, %zu perfect loop edges (one per %d query frames of %zu ground-truth pairs; %zu "
       "switched "
@@ -131,6 +164,8 @@ int main(int argc, char** argv) {
         o.every = std::stoi(value());
       } else if (args[k] == "--sigma-position-m") {
         o.sigma_position_m = std::stod(value());
+      } else if (args[k] == "--model") {
+        o.model = true;
       } else if (args[k] == "--sigma-rotation-rad") {
         o.sigma_rotation_rad = std::stod(value());
       } else {
@@ -138,10 +173,10 @@ int main(int argc, char** argv) {
       }
     }
     if (positional.size() != 2 || o.every < 1 || o.sigma_position_m <= 0 || o.sigma_rotation_rad <= 0) {
-      std::fprintf(
-          stderr,
-          "usage: %s RUN_DIR DATASET [--every N>=1] [--sigma-position-m S>0] [--sigma-rotation-rad R>0]\n",
-          argv[0]);
+      std::fprintf(stderr,
+                   "usage: %s RUN_DIR DATASET [--every N>=1] [--sigma-position-m S>0] [--sigma-rotation-rad "
+                   "R>0] [--model]\n",
+                   argv[0]);
       return 2;
     }
     o.run_dir = positional[0];

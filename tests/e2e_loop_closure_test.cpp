@@ -6,10 +6,14 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "io/g2o_file.hpp"
+#include "io/trajectory_io.hpp"
+#include "stages/posegraph/pose_graph.hpp"
 #include "test_support.hpp"
 
 namespace loopgate {
@@ -67,6 +71,50 @@ std::vector<std::vector<std::string>> edges_without_timing(const fs::path& out) 
   auto rows = read_csv(out / "loop_edges.csv");
   for (auto& row : rows) row.pop_back();
   return rows;
+}
+
+// pose_graph.g2o holds the final solve's graph: solved again as it stands (the same loss on the edges that
+// join non-consecutive nodes, the loops), it gives trajectory_corrected.tum's poses at its nodes.
+void expect_graph_file_gives_the_corrected_trajectory(const fs::path& out) {
+  const G2oGraph file = read_g2o(out / "pose_graph.g2o");
+  std::vector<std::string> frames_header;
+  const auto frames = read_csv(out / "frames.csv", &frames_header);
+  const auto column = [&](const std::string& name) {
+    return static_cast<std::size_t>(std::find(frames_header.begin(), frames_header.end(), name) -
+                                    frames_header.begin());
+  };
+  std::map<std::int64_t, Timestamp> t_of_frame;
+  for (const auto& row : frames)
+    t_of_frame[std::stoll(row[column("frame")])] = std::stoll(row[column("t_ns")]);
+  std::map<Timestamp, Eigen::Isometry3d> corrected;
+  for (const StampedPose& p : read_tum(out / "trajectory_corrected.tum")) corrected[p.t_ns] = p.T_w_b;
+
+  ASSERT_GE(file.vertices.size(), 2u);
+  ASSERT_EQ(file.fixed, std::vector<std::int64_t>{file.vertices.front().id});
+  PoseGraph graph{PoseGraphConfig{}};
+  std::map<std::int64_t, std::size_t> node_of;
+  for (const G2oVertex& v : file.vertices) node_of[v.id] = graph.add_node(v.T_w_b);
+  std::size_t loops = 0;
+  for (const G2oEdge& e : file.edges) {
+    const std::size_t a = node_of.at(e.a), b = node_of.at(e.b);
+    const bool odometry = b == a + 1;
+    loops += odometry ? 0 : 1;
+    graph.add_edge(a, b, odometry ? EdgeKind::kOdometry : EdgeKind::kLoop, e.T_a_b, e.information.inverse());
+  }
+  EXPECT_EQ(file.edges.size() - loops, file.vertices.size() - 1);  // a chain of odometry edges
+  EXPECT_GT(loops, 0u);
+  graph.optimize(true, 0.0);
+  double worst_m = 0;
+  for (const G2oVertex& v : file.vertices) {
+    const auto t = t_of_frame.find(v.id);
+    ASSERT_NE(t, t_of_frame.end()) << "vertex " << v.id << " is not a frame of frames.csv";
+    // trajectory_corrected.tum keeps 1 ns.
+    const auto it = corrected.lower_bound(t->second - 1);
+    ASSERT_NE(it, corrected.end());
+    ASSERT_LE(std::abs(it->first - t->second), 1) << "vertex " << v.id;
+    worst_m = std::max(worst_m, (graph.pose(node_of[v.id]).translation() - it->second.translation()).norm());
+  }
+  EXPECT_LT(worst_m, 1e-3);
 }
 
 TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
@@ -147,8 +195,11 @@ TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
   EXPECT_NEAR(optimize_ms, streaming.value("total_ms", 0.0),
               1e-3 + 1e-4 * static_cast<double>(timing.size()));
 
+  expect_graph_file_gives_the_corrected_trajectory(one);
+
   EXPECT_EQ(edges_without_timing(one), edges_without_timing(two));
-  for (const char* file : {"trajectory_corrected.tum", "loops.csv", "frames.csv", "trajectory.tum"})
+  for (const char* file :
+       {"trajectory_corrected.tum", "pose_graph.g2o", "loops.csv", "frames.csv", "trajectory.tum"})
     EXPECT_EQ(read_file(one / file), read_file(two / file)) << file;
 }
 
@@ -182,6 +233,7 @@ TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
   EXPECT_EQ(edges_without_timing(out / "dird-seqslam"), edges_without_timing(ran));
   EXPECT_EQ(read_file(out / "dird-seqslam" / "trajectory_corrected.tum"),
             read_file(ran / "trajectory_corrected.tum"));
+  EXPECT_EQ(read_file(out / "dird-seqslam" / "pose_graph.g2o"), read_file(ran / "pose_graph.g2o"));
   // The plots draw the trajectories before and after correction beside the ground truth.
   std::string plot_output;
   ASSERT_EQ(testing::run_command("/usr/bin/python3 " + std::string(LOOPGATE_SOURCE_DIR) +
@@ -261,6 +313,7 @@ TEST(E2eLoopClosure, OffByDefault) {
   EXPECT_FALSE(summary.contains("loops_verified"));
   EXPECT_FALSE(fs::exists(out / "loop_edges.csv"));
   EXPECT_FALSE(fs::exists(out / "trajectory_corrected.tum"));
+  EXPECT_FALSE(fs::exists(out / "pose_graph.g2o"));
   EXPECT_NE(header(out / "frames.csv").back(), "geometry");
 }
 

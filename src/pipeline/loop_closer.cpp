@@ -11,6 +11,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "io/dataset.hpp"
+#include "io/g2o_file.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/pipeline.hpp"
@@ -361,6 +362,7 @@ double LoopCloser::solve(std::size_t last, bool final) {
   final_report_ = report;
   final_odometry_cov_scale_ = scale;
   nodes_ = frames;
+  final_edges_ = graph.edges();
   node_poses_.clear();
   for (std::size_t n = 0; n < graph.node_count(); ++n) node_poses_.push_back(graph.pose(n));
   // Mark the outlier loops (in submission order, like edge_of_loop).
@@ -391,6 +393,7 @@ void LoopCloser::finish() {
     spdlog::error("posegraph: the final solve failed: {}", e.what());
     nodes_.clear();
     node_poses_.clear();
+    final_edges_.clear();
   }
   std::size_t verified = 0, skipped = 0;
   for (const LoopResult& r : results_) {
@@ -442,6 +445,20 @@ void LoopCloser::write_corrected(const std::filesystem::path& out_dir,
   TumWriter file(out_dir / "trajectory_corrected.tum");
   for (const StampedPose& pose : corrected(tracked)) file.write(pose.t_ns, pose.T_w_b);
   file.close();
+}
+
+void LoopCloser::write_graph(const std::filesystem::path& out_dir) const {
+  if (!active_ || nodes_.empty()) return;
+  G2oGraph file;
+  for (const std::size_t frame : nodes_)
+    file.vertices.push_back({static_cast<std::int64_t>(frame), *poses_[frame - first_]});
+  file.fixed.push_back(static_cast<std::int64_t>(nodes_.front()));
+  for (const PoseGraphEdge& e : final_edges_) {
+    if (e.outlier) continue;
+    file.edges.push_back({static_cast<std::int64_t>(nodes_[e.a]), static_cast<std::int64_t>(nodes_[e.b]),
+                          e.T_a_b, e.sqrt_information.transpose() * e.sqrt_information});
+  }
+  write_g2o(out_dir / "pose_graph.g2o", file);
 }
 
 void LoopCloser::write_edges(const std::filesystem::path& out_dir) const {
@@ -570,6 +587,7 @@ nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& da
   for (const Detection& loop : track.loops) closer.submit(loop);
   closer.finish();
   closer.write_edges(run_dir);
+  closer.write_graph(run_dir);
   closer.write_corrected(run_dir, track.tracked_poses);
   nlohmann::json fields = closer.summary_fields(track.tracked_poses);
   fields["ms"] = ms_since(start);

@@ -74,6 +74,10 @@ class LoopCloser {
 
   // After finish(): the files and the summary fields.
   void write_edges(const std::filesystem::path& out_dir) const;  // loop_edges.csv
+  // pose_graph.g2o (io/g2o_file.hpp): the final solve's graph - its nodes at their odometry poses, its
+  // odometry edges and the loop edges it kept (those it switched off are in loop_edges.csv only). Nothing
+  // when there was no final solve.
+  void write_graph(const std::filesystem::path& out_dir) const;
   // loops.csv again with the verification columns (when every loop written was submitted here).
   void annotate_loops(LoopsWriter& loops) const;
   // tracked poses of the run -> corrected poses (same times).
@@ -148,6 +152,7 @@ class LoopCloser {
   double final_odometry_cov_scale_ = 1.0;  // the final solve's (posegraph.odometry_cov odometry)
   std::vector<std::size_t> nodes_;         // frames of the final graph's nodes
   std::vector<Eigen::Isometry3d> node_poses_;
+  std::vector<PoseGraphEdge> final_edges_;  // the final graph's edges (node indices into nodes_)
 };
 
 struct RunTrack;

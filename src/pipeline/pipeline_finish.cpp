@@ -60,6 +60,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   write_output("the method's files", [&] { method_->write_files(out_dir_); });
   if (closer_.active()) {
     write_output("loop_edges.csv", [&] { closer_.write_edges(out_dir_); });
+    write_output("pose_graph.g2o", [&] { closer_.write_graph(out_dir_); });
     write_output("loops.csv's verification", [&] { closer_.annotate_loops(loops_); });
     write_output("trajectory_corrected.tum",
                  [&] { closer_.write_corrected(out_dir_, outputs_.tracked_poses()); });

@@ -20,7 +20,8 @@ const std::vector<std::string>& run_output_file_names() {
                                                  "ground_truth.tum",    "truth_loops.csv",
                                                  "candidate_areas.csv", "candidate_cells.csv",
                                                  "descriptors.csv",     "descriptor.csv",
-                                                 "loop_edges.csv",      "trajectory_corrected.tum"};
+                                                 "loop_edges.csv",      "trajectory_corrected.tum",
+                                                 "pose_graph.g2o"};
   return names;
 }
 
