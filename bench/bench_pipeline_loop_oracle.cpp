@@ -11,11 +11,15 @@
 // are the poses of trajectory.tum and the edges take the fixed model (posegraph.odometry_cov model).
 //
 //   build/release/bench_pipeline_loop_oracle RUN_DIR DATASET [--every N] [--sigma-position-m S]
-//       [--sigma-rotation-rad R] [--model]
+//       [--sigma-rotation-rad R] [--model] [--robust]
+//
+// The perfect loop edges are plain least squares (no robust loss, none switched off: they are right); with
+// --robust they get the run's Cauchy loss and outlier switch-off, as a run's verified loops do.
 #include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <limits>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -42,6 +46,7 @@ struct Options {
   double sigma_position_m = 0.1;
   double sigma_rotation_rad = 0.005;
   bool model = false;
+  bool robust = false;  // the run's robust loss and outlier switch-off on the perfect loops too
 };
 
 // truth_loops.csv as the run writes it: header "i,j", then one pair per line.
@@ -68,6 +73,12 @@ int run(const Options& o) {
   const auto dataset = open_dataset(o.dataset);
   if (!dataset->has_ground_truth()) throw DataError(o.dataset, "the oracle needs ground truth");
   PoseGraphConfig config;
+  if (!o.robust) {
+    // The perfect loops are known to be right: no robust loss, none switched off (a graph whose odometry edges
+    // are overconfident would otherwise reject the truth and report a floor that is not one).
+    config.loss = "none";
+    config.outlier_chi2 = std::numeric_limits<double>::infinity();
+  }
   PoseGraph graph(config);
   std::map<std::size_t, std::size_t> node_of;  // frame -> node
   const fs::path graph_file = o.run_dir / "pose_graph.g2o";
@@ -166,6 +177,8 @@ int main(int argc, char** argv) {
         o.sigma_position_m = std::stod(value());
       } else if (args[k] == "--model") {
         o.model = true;
+      } else if (args[k] == "--robust") {
+        o.robust = true;
       } else if (args[k] == "--sigma-rotation-rad") {
         o.sigma_rotation_rad = std::stod(value());
       } else {
