@@ -88,9 +88,10 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   EXPECT_NO_THROW(config.validate());
   int keys = 0;
   GateConfig::fields(config, [&](const char*, auto&) { ++keys; });
-  EXPECT_EQ(keys, 13);
+  EXPECT_EQ(keys, 14);
   EXPECT_EQ(config.gap_frames, 30);
-  EXPECT_FALSE(config.feedback);  // gate.feedback is off by default (issue 13)
+  EXPECT_DOUBLE_EQ(config.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
+  EXPECT_FALSE(config.feedback);               // gate.feedback is off by default (issue 13)
   EXPECT_EQ(config.sigma_norm, "max_eigen");
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);
 }
@@ -107,6 +108,8 @@ TEST(GateConfig, ErrorsNameTheKey) {
     }
   };
   expect_error([](GateConfig& c) { c.gap_frames = 0; }, "gate.gap_frames");
+  expect_error([](GateConfig& c) { c.min_travel_m = -1; }, "gate.min_travel_m");
+  expect_error([](GateConfig& c) { c.min_travel_m = NAN; }, "gate.min_travel_m");
   expect_error([](GateConfig& c) { c.beta_m = -1; }, "gate.beta_m");
   expect_error([](GateConfig& c) { c.beta_m = NAN; }, "gate.beta_m");
   expect_error([](GateConfig& c) { c.sigma_norm = "det"; }, "max_eigen, trace");

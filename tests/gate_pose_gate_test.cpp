@@ -1,6 +1,6 @@
-// The KD-tree search of PoseGate equals a brute-force scan over all j <= i - gap, on random trajectories
-// with random (also degenerate, huge and zero) covariances, duplicate positions, both sigma norms and
-// several gaps; delayed insertion; bad input.
+// The KD-tree search of PoseGate equals a brute-force scan over all j <= i - gap travelled from by at least
+// min_travel_m, on random trajectories with random (also degenerate, huge and zero) covariances, duplicate
+// positions, both sigma norms, several gaps and travels; delayed insertion; standing still; bad input.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -84,6 +84,9 @@ std::vector<Sample> make_samples(std::uint64_t seed, int n, CovKind kind, bool s
 void expect_matches_brute_force(const GateConfig& config, const std::vector<Sample>& samples) {
   PoseGate gate(config);
   std::size_t gated = 0;
+  std::vector<double> travel_m(samples.size(), 0.0);  // path length from the first sample
+  for (std::size_t k = 1; k < samples.size(); ++k)
+    travel_m[k] = travel_m[k - 1] + (samples[k].p_m - samples[k - 1].p_m).norm();
   for (std::size_t k = 0; k < samples.size(); ++k) {
     const Sample& s = samples[k];
     const GateDecision got = gate.process(s.frame, s.p_m, s.P_m2);
@@ -92,6 +95,7 @@ void expect_matches_brute_force(const GateConfig& config, const std::vector<Samp
     double best_d = 0.0;
     for (std::size_t m = 0; m < k; ++m) {
       if (samples[m].frame > s.frame - config.gap_frames) break;
+      if (travel_m[m] > travel_m[k] - config.min_travel_m) break;
       const double d = combined_distance(s.p_m, s.P_m2, samples[m].p_m, samples[m].P_m2);
       if (!has || d < best_d) {
         has = true;
@@ -122,11 +126,13 @@ struct BruteForceCase {
   CovKind kind;
   bool skip_frames;
   int seed_neighbours;
+  double min_travel_m = 2.0;
 };
 
 void PrintTo(const BruteForceCase& c, std::ostream* os) {
   *os << c.sigma_norm << "/gap" << c.gap << (c.kind == CovKind::kWild ? "/wild" : "/realistic")
-      << (c.skip_frames ? "/skips" : "") << "/seeds" << c.seed_neighbours;
+      << (c.skip_frames ? "/skips" : "") << "/seeds" << c.seed_neighbours << "/travel"
+      << static_cast<int>(c.min_travel_m);
 }
 
 class PoseGateBruteForce : public ::testing::TestWithParam<BruteForceCase> {};
@@ -139,6 +145,7 @@ TEST_P(PoseGateBruteForce, KdTreeSearchEqualsBruteForce) {
   config.beta_m = 2.0;
   config.kdtree_seed_neighbours = c.seed_neighbours;
   config.kdtree_leaf_size = 4;
+  config.min_travel_m = c.min_travel_m;
   const auto samples =
       make_samples(1000 + static_cast<std::uint64_t>(c.gap) * 7 + (c.kind == CovKind::kWild ? 1 : 0), 2000,
                    c.kind, c.skip_frames);
@@ -152,18 +159,23 @@ INSTANTIATE_TEST_SUITE_P(Cases, PoseGateBruteForce,
                                            BruteForceCase{"trace", 7, CovKind::kWild, true, 3},
                                            BruteForceCase{"max_eigen", 200, CovKind::kWild, true, 8},
                                            BruteForceCase{"trace", 2, CovKind::kRealistic, true, 2},
-                                           BruteForceCase{"max_eigen", 30, CovKind::kWild, false, 32}),
+                                           BruteForceCase{"max_eigen", 30, CovKind::kWild, false, 32},
+                                           BruteForceCase{"trace", 1, CovKind::kRealistic, true, 4, 0.0},
+                                           BruteForceCase{"max_eigen", 1, CovKind::kWild, false, 4, 40.0},
+                                           BruteForceCase{"trace", 30, CovKind::kRealistic, false, 2, 150.0}),
                          [](const ::testing::TestParamInfo<BruteForceCase>& param_info) {
                            const BruteForceCase& c = param_info.param;
                            return c.sigma_norm + "_gap" + std::to_string(c.gap) +
                                   (c.kind == CovKind::kWild ? "_wild" : "_realistic") +
                                   (c.skip_frames ? "_skips" : "") + "_seeds" +
-                                  std::to_string(c.seed_neighbours);
+                                  std::to_string(c.seed_neighbours) + "_travel" +
+                                  std::to_string(static_cast<int>(c.min_travel_m));
                          });
 
 TEST(PoseGate, AllPositionsEqualTiesGoToSmallestFrame) {
   GateConfig config;
   config.gap_frames = 3;
+  config.min_travel_m = 0.0;  // the paper's gate: the frame gap only
   PoseGate gate(config);
   const Eigen::Vector3d p(1.0, 2.0, 3.0);
   for (std::int64_t i = 0; i < 50; ++i) {
@@ -200,6 +212,7 @@ TEST(PoseGate, DelayedInsertionRespectsGap) {
 TEST(PoseGate, GapsInFrameNumbering) {
   GateConfig config;
   config.gap_frames = 10;
+  config.min_travel_m = 0.0;
   PoseGate gate(config);
   gate.process(0, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
   gate.process(5, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Zero());
@@ -233,6 +246,7 @@ TEST(PoseGate, UsesPoseEstimatePositionAndCovariance) {
 TEST(PoseGate, RunningMaxEigenvalueOfTree) {
   GateConfig config;
   config.gap_frames = 2;
+  config.min_travel_m = 0.0;
   PoseGate gate(config);
   gate.process(0, Eigen::Vector3d::Zero(), Eigen::Vector3d(1, 4, 2).asDiagonal().toDenseMatrix());
   gate.process(1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity() * 9);
@@ -241,6 +255,45 @@ TEST(PoseGate, RunningMaxEigenvalueOfTree) {
   EXPECT_NEAR(gate.max_tree_eigenvalue_m2(), 4.0, 1e-12);
   gate.process(3, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
   EXPECT_NEAR(gate.max_tree_eigenvalue_m2(), 9.0, 1e-12);
+}
+
+// Standing still (or hovering), the camera sees the place it has not left: no past frame is a candidate until
+// the odometry has travelled min_travel_m from it, however many frames pass.
+TEST(PoseGate, StandingStillGivesNoCandidateUntilTheOdometryTravelled) {
+  GateConfig config;
+  config.gap_frames = 3;
+  config.min_travel_m = 2.0;
+  PoseGate gate(config);
+  std::int64_t frame = 0;
+  // 100 frames at the origin with 1 mm of jitter: 2 mm of path per frame at most, 0.2 m in all.
+  for (; frame < 100; ++frame) {
+    const double jitter = (frame % 2 == 0 ? 1e-3 : -1e-3);
+    const GateDecision d = gate.process(frame, Eigen::Vector3d(jitter, 0, 0), Eigen::Matrix3d::Zero());
+    EXPECT_FALSE(d.has_nearest) << "frame " << frame;
+  }
+  EXPECT_EQ(gate.frames_in_tree(), 0u);
+  // Drive away along x at 0.6 m per frame (path 0.199 m at frame 100, then 0.799, 1.399, ...): nothing
+  // enters before frame 104, 2.6 m of path from the stationary frames, which then enter all at once.
+  for (; frame < 104; ++frame) {
+    gate.process(frame, Eigen::Vector3d(0.6 * static_cast<double>(frame - 100), 0, 0),
+                 Eigen::Matrix3d::Zero());
+    EXPECT_EQ(gate.frames_in_tree(), 0u) << "frame " << frame;
+  }
+  gate.process(frame++, Eigen::Vector3d(2.4, 0, 0), Eigen::Matrix3d::Zero());
+  EXPECT_EQ(gate.frames_in_tree(), 101u);  // frames 0..100
+  for (; frame < 110; ++frame)
+    gate.process(frame, Eigen::Vector3d(0.6 * static_cast<double>(frame - 100), 0, 0),
+                 Eigen::Matrix3d::Zero());
+  EXPECT_EQ(gate.frames_in_tree(), 106u);  // then one per frame: 101..105 (frame 109 at 5.599 m of path)
+  // Back at the origin: the nearest past frame is one of the stationary ones (or frame 100, at x = 0).
+  const GateDecision back = gate.process(frame, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
+  EXPECT_TRUE(back.gated);
+  EXPECT_LE(back.nearest_frame, 100);
+  // With min_travel_m 0 the gate searches every frame older than the gap, stationary ones too.
+  config.min_travel_m = 0.0;
+  PoseGate paper(config);
+  for (std::int64_t f = 0; f < 10; ++f) paper.process(f, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
+  EXPECT_EQ(paper.frames_in_tree(), 10u - 3u);
 }
 
 TEST(PoseGate, BadInputIsDataError) {

@@ -11,6 +11,7 @@ namespace loopgate {
 void GateConfig::validate() const {
   // Upper bounds: far beyond any use, so that no value makes a run hang or exhaust memory (issue 15).
   require_in("gate.gap_frames", gap_frames, 1, 1'000'000, "frames");
+  require_in("gate.min_travel_m", min_travel_m, 0.0, 1e6, "m");
   require_in("gate.beta_m", beta_m, 0.0, 1e5, "m");
   if (sigma_norm != "max_eigen" && sigma_norm != "trace") {
     throw ConfigError("gate.sigma_norm: '" + sigma_norm + "' is not one of: max_eigen, trace");

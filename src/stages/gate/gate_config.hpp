@@ -9,6 +9,11 @@ namespace loopgate {
 struct GateConfig {
   // Only past frames j <= i - gap_frames are searched (paper: 30; should follow the frame rate).
   int gap_frames = 30;
+  // ... and only frames the odometry has travelled at least min_travel_m from since (the path length of the
+  // positions the gate was given, from j to i): standing still or hovering, a camera sees the place it has
+  // not left, and such a "revisit" is no loop. The same definition of a revisit as eval.min_travel_m's on the
+  // ground truth (2 m). 0: no travel needed (the paper's gate: the frame gap only).
+  double min_travel_m = 2.0;
   // beta: allowed drift between j and i, added to the threshold, in metres (per environment).
   double beta_m = 5.0;
   // sigma_i = sqrt(lambda_max(P_i)) ("max_eigen", the default) or sqrt(trace(P_i)) ("trace").
@@ -48,6 +53,7 @@ struct GateConfig {
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
     v("gap_frames", self.gap_frames);
+    v("min_travel_m", self.min_travel_m);
     v("beta_m", self.beta_m);
     v("sigma_norm", self.sigma_norm);
     v("confidence_scale", self.confidence_scale);
@@ -61,7 +67,8 @@ struct GateConfig {
     v("row_horizon_frames", self.row_horizon_frames);
     v("feedback", self.feedback);
   }
-  // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], beta_m in [0, 1e5],
+  // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], min_travel_m in [0, 1e6],
+  // beta_m in [0, 1e5],
   // sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000], covariance_tolerance_m2 in [0, 0.25],
   // kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000], area_* in [0, 1e4] (query rows) or
   // [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].

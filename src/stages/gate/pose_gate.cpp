@@ -74,6 +74,7 @@ struct PoseGate::Impl {
   std::vector<Eigen::Vector3d> positions_m;
   std::vector<Eigen::Matrix3d> covariances_m2;
   std::vector<double> max_eigen_m2;  // lambda_max(P_k), clamped at 0
+  std::vector<double> travel_m;      // path length of the positions from the first frame to frame k
 
   PositionCloud cloud;
   std::unique_ptr<Tree> tree;
@@ -99,12 +100,14 @@ struct PoseGate::Impl {
     throw DataError(source, "frame " + std::to_string(frame) + ": " + what);
   }
 
-  // Delayed insertion: stored frames k with frame_k <= frame - gap enter the tree.
-  void insert_up_to(std::int64_t frame) {
+  // Delayed insertion: stored frames k with frame_k <= frame - gap and travel_k <= travel_now - min_travel
+  // enter the tree (both hold for a prefix of the stored frames: frames and travel never decrease).
+  void insert_up_to(std::int64_t frame, double travel_now_m) {
     const std::int64_t last_allowed = frame - static_cast<std::int64_t>(config.gap_frames);
+    const double last_travel_m = travel_now_m - config.min_travel_m;
     const std::size_t first = cloud.count;
     std::size_t end = first;
-    while (end < frames.size() && frames[end] <= last_allowed) {
+    while (end < frames.size() && frames[end] <= last_allowed && travel_m[end] <= last_travel_m) {
       max_tree_eigen_m2 = std::max(max_tree_eigen_m2, max_eigen_m2[end]);
       ++end;
     }
@@ -165,9 +168,11 @@ struct PoseGate::Impl {
     if (frame < 0) fail(frame, "frame index must be >= 0");
     if (frames.size() >= std::numeric_limits<std::uint32_t>::max()) fail(frame, "more than 2^32 - 1 frames");
     const auto [P_m2, lmax_m2] = checked_covariance(frame, p_m, P_in_m2);
-    insert_up_to(frame);
+    const double travel_now_m = travel_m.empty() ? 0.0 : travel_m.back() + (p_m - positions_m.back()).norm();
+    insert_up_to(frame, travel_now_m);
     const GateDecision decision = decide(frame, p_m, P_m2, lmax_m2, scratch);
     frames.push_back(frame);
+    travel_m.push_back(travel_now_m);
     positions_m.push_back(p_m);
     covariances_m2.push_back(P_m2);
     max_eigen_m2.push_back(lmax_m2);
