@@ -19,10 +19,10 @@
 
 #include <algorithm>
 #include <cstdio>
-#include <limits>
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <string>
 #include <vector>
@@ -74,8 +74,8 @@ int run(const Options& o) {
   if (!dataset->has_ground_truth()) throw DataError(o.dataset, "the oracle needs ground truth");
   PoseGraphConfig config;
   if (!o.robust) {
-    // The perfect loops are known to be right: no robust loss, none switched off (a graph whose odometry edges
-    // are overconfident would otherwise reject the truth and report a floor that is not one).
+    // The perfect loops are known to be right: no robust loss, none switched off (a graph whose odometry
+    // edges are overconfident would otherwise reject the truth and report a floor that is not one).
     config.loss = "none";
     config.outlier_chi2 = std::numeric_limits<double>::infinity();
   }
@@ -188,7 +188,7 @@ int main(int argc, char** argv) {
     if (positional.size() != 2 || o.every < 1 || o.sigma_position_m <= 0 || o.sigma_rotation_rad <= 0) {
       std::fprintf(stderr,
                    "usage: %s RUN_DIR DATASET [--every N>=1] [--sigma-position-m S>0] [--sigma-rotation-rad "
-                   "R>0] [--model]\n",
+                   "R>0] [--model] [--robust]\n",
                    argv[0]);
       return 2;
     }

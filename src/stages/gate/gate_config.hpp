@@ -68,10 +68,9 @@ struct GateConfig {
     v("feedback", self.feedback);
   }
   // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], min_travel_m in [0, 1e6],
-  // beta_m in [0, 1e5],
-  // sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000], covariance_tolerance_m2 in [0, 0.25],
-  // kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000], area_* in [0, 1e4] (query rows) or
-  // [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].
+  // beta_m in [0, 1e5], sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000],
+  // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000],
+  // area_* in [0, 1e4] (query rows) or [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].
   void validate() const;
   // Throws ConfigError unless area_margin_query_frames >= sequence_length (the DP's L) and
   // row_horizon_frames >= max(area_margin_query_frames, area_max_hole_frames + 1).
