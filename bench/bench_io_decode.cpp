@@ -1,8 +1,8 @@
-// Does a faster PNG decoder pay (issue 16)? The decode of one frame as loopgate does it today (OpenCV
-// imdecode, IMREAD_UNCHANGED, then grey when the file is colour), OpenCV decoding straight to grey, and, when
-// the build found Debian's libspng (spng.pc), libspng decoding to 8-bit grey. Every variant decodes the same
-// files, read into memory once (no disk in the timing), round-robin; each checks that its pixels equal
-// OpenCV's.
+// Does a faster PNG decoder pay (issue 16)? The decode of one frame as loopgate did it before (OpenCV
+// imdecode, IMREAD_UNCHANGED, then grey when the file is colour), OpenCV decoding straight to grey,
+// loopgate's decode today (io/png_grey.hpp: libdeflate for 8-bit grey PNGs, else OpenCV), and, when the build
+// found Debian's libspng (spng.pc), libspng decoding to 8-bit grey. Every variant decodes the same files,
+// read into memory once (no disk in the timing), round-robin; each checks that its pixels equal OpenCV's.
 //
 // Images: the real EuRoC V1_01 excerpt of ../shared/data (752 x 480 grey PNG), or the folder in
 // LOOPGATE_BENCH_IMAGES (e.g. a rendered preset's mav0/cam0/data). Skips with a message when neither exists.
@@ -19,6 +19,8 @@
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
+
+#include "io/png_grey.hpp"
 
 #ifdef LOOPGATE_HAVE_SPNG
 #include <spng.h>
@@ -112,6 +114,18 @@ void BM_DecodeOpenCvGrey(benchmark::State& state) {
   run_decoder(state, decode_grey);
 }
 BENCHMARK(BM_DecodeOpenCvGrey)->Unit(benchmark::kMicrosecond);
+
+// loopgate's path since issue 16 (LoadedDataset::decode): the 8-bit grey fast path (libdeflate's inflate and
+// our unfiltering), today's path for every other file.
+cv::Mat decode_loopgate(const std::vector<unsigned char>& bytes) {
+  cv::Mat grey = loopgate::decode_png_grey8(bytes.data(), bytes.size());
+  return grey.empty() ? decode_unchanged(bytes) : grey;
+}
+
+void BM_DecodeLoopgate(benchmark::State& state) {
+  run_decoder(state, decode_loopgate);
+}
+BENCHMARK(BM_DecodeLoopgate)->Unit(benchmark::kMicrosecond);
 
 #ifdef LOOPGATE_HAVE_SPNG
 // libspng to 8-bit grey (SPNG_FMT_G8: grey files only; colour files are skipped with a message).

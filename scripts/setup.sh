@@ -4,7 +4,7 @@
 # libsensor-msgs-dev are for ROS1 bag input (CMake option LOOPGATE_WITH_ROSBAG, on when they are found).
 set -euo pipefail
 packages=(
-  cmake ninja-build g++ pkg-config
+  cmake ninja-build g++ pkg-config libdeflate-dev
   libeigen3-dev libopencv-dev libtbb-dev libspdlog-dev libcli11-dev libnanoflann-dev
   libyaml-cpp-dev nlohmann-json3-dev libgtest-dev libgmock-dev libbenchmark-dev
   libceres-dev

@@ -4,6 +4,7 @@
 
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
+#include <string>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -167,11 +168,18 @@ TEST(IoEuroc, DamagedImagesFailOnlyTheirFrame) {
   const fs::path dir = testing::make_temp_dir("io-euroc-damaged");
   make_euroc(dir);
   const auto d0 = open_euroc(dir);
-  // Frame 2: garbage bytes. Frame 4: removed. Frame 6: wrong size. Frame 8: empty file.
+  // Frame 2: garbage bytes. Frame 4: removed. Frame 6: wrong size. Frame 8: empty file. Frame 10: truncated.
   write_file(d0->image_path(2), "this is not a png");
   fs::remove(d0->image_path(4));
   cv::imwrite(d0->image_path(6).string(), frame_image(6, kWidth + 2, kHeight));
   write_file(d0->image_path(8), "");
+  // Frame 10: a grey PNG cut in half (the fast grey path declines it, OpenCV refuses it).
+  {
+    std::string bytes(fs::file_size(d0->image_path(10)), '\0');
+    std::ifstream(d0->image_path(10), std::ios::binary)
+        .read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    write_file(d0->image_path(10), bytes.substr(0, bytes.size() / 2));
+  }
   const auto d = open_euroc(dir);
   EXPECT_TRUE(d->has_images());
   const auto expect_frame_error = [&](std::size_t frame, const std::string& needle) {
@@ -184,6 +192,7 @@ TEST(IoEuroc, DamagedImagesFailOnlyTheirFrame) {
   expect_frame_error(4, "image file missing");
   expect_frame_error(6, "image is 42x24, expected 40x24 like cam0/sensor.yaml resolution");
   expect_frame_error(8, "cannot decode image");
+  expect_frame_error(10, "cannot decode image");
   for (const std::size_t ok : {0u, 1u, 3u, 5u, 7u, 9u, 11u}) EXPECT_EQ(d->load_image(ok).cols, kWidth);
 }
 

@@ -15,6 +15,7 @@
 #include "core/error.hpp"
 #include "core/geometry.hpp"
 #include "io/loaded_dataset.hpp"
+#include "io/png_grey.hpp"
 
 namespace loopgate {
 
@@ -247,6 +248,9 @@ cv::Mat LoadedDataset::decode(std::size_t frame) const {
   if (size > 0 && !in.read(reinterpret_cast<char*>(bytes.data()), size)) {
     throw DataError(entry.image, where + ": cannot read image file");
   }
+  // 8-bit grey PNGs (EuRoC, TUM-VI, rendered) the fast way; every other file, or anything unexpected in
+  // one, the general way (the same pixels; io/png_grey.hpp).
+  if (cv::Mat grey = decode_png_grey8(bytes.data(), bytes.size()); !grey.empty()) return grey;
   cv::Mat image;
   image_codecs_ready();
   try {

@@ -28,6 +28,7 @@
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
 #include "io/loaded_dataset.hpp"
+#include "io/png_grey.hpp"
 #include "io/time_order.hpp"
 
 #if LOOPGATE_WITH_ROSBAG
@@ -137,6 +138,7 @@ cv::Mat read_grey(const bag::BagReader& reader, const std::string& topic, std::s
   if (const std::string problem = image_problem(raw.info); !problem.empty())
     throw DataError(reader.file(), where + ": " + problem);
   if (raw.info.compressed) {
+    if (cv::Mat grey = decode_png_grey8(raw.data.data(), raw.data.size()); !grey.empty()) return grey;
     cv::Mat image;
     image_codecs_ready();
     try {
