@@ -17,6 +17,7 @@ TEST(EkfConfig, DefaultsAreValid) {
   EXPECT_EQ(config.max_features, 150);
   EXPECT_DOUBLE_EQ(config.chi2_quantile, 0.95);
   EXPECT_EQ(config.init_mode, "ground_truth");
+  EXPECT_EQ(config.klt_check_pyramid_levels, 0);
 }
 
 TEST(EkfConfig, VisitorSeesEveryKeyOnce) {
@@ -58,6 +59,14 @@ TEST(EkfConfig, BadValuesNameTheKey) {
   config = EkfConfig{};
   config.klt_window_px = 20;
   EXPECT_NE(message_of(config).find("ekf.klt_window_px"), std::string::npos);
+  for (const int levels : {-2, 3}) {  // below -1, or more than the forward flow's klt_pyramid_levels (2)
+    config = EkfConfig{};
+    config.klt_check_pyramid_levels = levels;
+    EXPECT_NE(message_of(config).find("ekf.klt_check_pyramid_levels"), std::string::npos) << levels;
+  }
+  config = EkfConfig{};
+  config.klt_check_pyramid_levels = -1;  // the forward flow's levels
+  EXPECT_EQ(message_of(config), "");
   config = EkfConfig{};
   config.accel_noise_density = -1.0;
   EXPECT_NE(message_of(config).find("ekf.accel_noise_density"), std::string::npos);

@@ -48,6 +48,8 @@ void EkfConfig::validate() const {
   require(klt_window_px >= 5 && klt_window_px <= 101 && klt_window_px % 2 == 1, "klt_window_px",
           "must be odd and in [5, 101] px");
   require(klt_pyramid_levels >= 0 && klt_pyramid_levels <= 8, "klt_pyramid_levels", "must be in [0, 8]");
+  require(klt_check_pyramid_levels >= -1 && klt_check_pyramid_levels <= klt_pyramid_levels,
+          "klt_check_pyramid_levels", "must be in [-1, klt_pyramid_levels] (-1: klt_pyramid_levels)");
   require(klt_max_iterations >= 1 && klt_max_iterations <= 1000, "klt_max_iterations",
           "must be in [1, 1000]");
   require(positive(klt_epsilon), "klt_epsilon", "must be > 0");

@@ -93,8 +93,10 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
                              config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     std::vector<cv::Point2f> back_pts = previous_pts;
     std::vector<unsigned char> status_bwd;
+    const int check_levels =
+        config_.klt_check_pyramid_levels < 0 ? config_.klt_pyramid_levels : config_.klt_check_pyramid_levels;
     cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, error, window,
-                             config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+                             check_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     stats_.klt_ms = ms_since(t0);
     const auto border = static_cast<float>(config_.border_px);
     const float max_x = static_cast<float>(grey.cols - 1) - border;
