@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <future>
 #include <limits>
 #include <memory>
 #include <opencv2/core.hpp>
@@ -230,6 +231,55 @@ TEST(OdometryEkf, BadInputIsReportedLostAndTheFilterRecovers) {
   int lost = 0;
   for (const FrameResult& r : results) lost += r.out.pose.status == OdometryStatus::kLost ? 1 : 0;
   EXPECT_EQ(lost, 3);
+}
+
+// The pipeline prepares each frame's image (the tracker's pyramid) in its decode node, in parallel with the
+// odometry node's process() of an earlier frame: the poses must be those of process() on the image alone,
+// bit for bit, and an image the tracker cannot take gets no preparation and the same lost report.
+TEST(OdometryEkf, ImagesPreparedAheadOnAnotherThreadGiveTheSamePoses) {
+  LOOPGATE_REQUIRE_SHARED_DATA(kMicro);
+  const auto dataset = open_micro();
+  constexpr std::size_t kSmallImageFrame = 60;
+  const auto damage = [&](std::size_t i, std::vector<ImuSample>&, cv::Mat& image, bool&) {
+    if (i == kSmallImageFrame) image = cv::Mat(10, 10, CV_8UC1, cv::Scalar(0));
+  };
+  const auto plain_source = ekf_source(*dataset);
+  const auto plain = run_source(*plain_source, *dataset, damage);
+
+  const auto source = ekf_source(*dataset);
+  std::vector<cv::Mat> images(dataset->frame_count());
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    images[i] = dataset->load_image(i);
+    bool has_image = true;
+    std::vector<ImuSample> unused;
+    damage(i, unused, images[i], has_image);
+  }
+  EXPECT_EQ(source->prepare(images[kSmallImageFrame]), nullptr);
+  std::future<std::shared_ptr<const PreparedImage>> next =
+      std::async(std::launch::async, [&] { return source->prepare(images[0]); });
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    const std::shared_ptr<const PreparedImage> prepared = next.get();
+    if (i + 1 < images.size())  // frame i + 1 is prepared while frame i is processed
+      next = std::async(std::launch::async, [&, i] { return source->prepare(images[i + 1]); });
+    const Timestamp t_ns = dataset->frame_t_ns(i);
+    const Timestamp t_prev_ns = i > 0 ? dataset->frame_t_ns(i - 1) : t_ns;
+    const auto span = dataset->imu_between(t_prev_ns - 5'000'000, t_ns + 5'000'001);
+    std::vector<ImuSample> imu(span.begin(), span.end());
+    OdometryInput input;
+    input.frame = i;
+    input.t_ns = t_ns;
+    input.imu = &imu;
+    input.image = &images[i];
+    input.prepared = prepared.get();
+    const OdometryOutput out = source->process(input);
+    const OdometryOutput& want = plain[i].out;
+    ASSERT_EQ(out.pose.status, want.pose.status) << "frame " << i;
+    EXPECT_EQ(out.reason, want.reason) << "frame " << i;
+    EXPECT_EQ(out.tracked_features, want.tracked_features) << "frame " << i;
+    EXPECT_TRUE(out.pose.T_w_b.matrix() == want.pose.T_w_b.matrix()) << "frame " << i;
+    EXPECT_TRUE(out.pose.cov == want.pose.cov) << "frame " << i;
+  }
+  EXPECT_EQ(plain[kSmallImageFrame].out.pose.status, OdometryStatus::kLost);
 }
 
 }  // namespace

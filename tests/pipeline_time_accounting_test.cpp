@@ -1,5 +1,6 @@
 // The time accounting's booking (pipeline/time_accounting.hpp): images read inside describe move from
-// describe to decode and similarities computed there to match, parallel helpers' CPU time joins their stage,
+// describe to decode and similarities computed there to match, the odometry's image preparation in decode
+// goes to rest (the odometry's part), parallel helpers' CPU time joins their stage,
 // the method's end-of-stream work is match and the rest of the end of the stream is rest; the parts add up to
 // the total, which holds every stage's time; and parallel loops report their helpers' CPU time.
 #include <gtest/gtest.h>
@@ -24,12 +25,14 @@ TEST(TimeAccounting, BooksEachKindOfWorkOnce) {
   m.parallel_ms[kMatch] = 5.0;
   m.decode_in_describe_ms = 12.0;
   m.match_in_describe_ms = 7.0;
+  m.odometry_in_decode_ms = 0.5;             // the odometry's image pyramid, built in the decode node
   const EndOfStreamTime end{6.0, 2.5, 3.0};  // the method's finish: 6 ms + 2.5 ms on helpers; 3 ms after it
   const TimeParts t = account_time(m, end);
-  EXPECT_DOUBLE_EQ(t.decode_ms, 10.0 + 12.0);
+  EXPECT_DOUBLE_EQ(t.decode_ms, 10.0 - 0.5 + 12.0);
   EXPECT_DOUBLE_EQ(t.describe_ms, 40.0 + 15.0 - 12.0 - 7.0);
   EXPECT_DOUBLE_EQ(t.match_ms, 20.0 + 5.0 + 7.0 + 6.0 + 2.5);
-  EXPECT_DOUBLE_EQ(t.rest_ms, 1.0 + 3.0 + 2.0 + 4.0 + 3.0);
+  EXPECT_DOUBLE_EQ(t.rest_ms, 1.0 + 3.0 + 0.5 + 2.0 + 4.0 + 3.0);
+  EXPECT_DOUBLE_EQ(t.odometry_in_decode_ms, 0.5);
   EXPECT_DOUBLE_EQ(t.total_ms, t.decode_ms + t.describe_ms + t.match_ms + t.rest_ms);
   EXPECT_DOUBLE_EQ(t.total_ms, 80.0 + 20.0 + 6.0 + 2.5 + 3.0);  // stages + helpers + end of stream
   EXPECT_DOUBLE_EQ(t.parallel_ms, 22.5);
@@ -52,14 +55,18 @@ TEST(TimeAccounting, StageTimesOfAFrame) {
   r.parallel_cpu_ns[kDescribe].store(500'000);
   r.reread_cpu_ns.store(250'000);
   r.match_in_describe_cpu_ns = 1'000'000;
+  r.cpu_ns[kDecode] = 3'000'000;
+  r.odometry_in_decode_cpu_ns = 1'000'000;
   const StageTimes t = stage_times(r);
+  EXPECT_DOUBLE_EQ(t.odometry_in_decode_ms, 1.0);
   EXPECT_DOUBLE_EQ(t.cpu_ms[kDescribe], 2.0);
   EXPECT_DOUBLE_EQ(t.parallel_ms[kDescribe], 0.5);
   EXPECT_DOUBLE_EQ(t.decode_in_describe_ms, 0.25);
   EXPECT_DOUBLE_EQ(t.match_in_describe_ms, 1.0);
   EXPECT_DOUBLE_EQ(account_time(t).describe_ms, 1.25);
   EXPECT_DOUBLE_EQ(account_time(t).match_ms, 1.0);
-  EXPECT_DOUBLE_EQ(account_time(t).decode_ms, 0.25);
+  EXPECT_DOUBLE_EQ(account_time(t).decode_ms, 3.0 - 1.0 + 0.25);
+  EXPECT_DOUBLE_EQ(account_time(t).rest_ms, 1.0);
 }
 
 // A loop started inside a ParallelTimeScope adds to its counter exactly the time of the tasks other threads

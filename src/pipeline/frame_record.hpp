@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <opencv2/core/mat.hpp>
 #include <string>
 #include <vector>
@@ -38,6 +39,10 @@ struct FrameRecord {
   bool needs_pixels = false;  // decode this frame now (decided by sync)
   bool decoded = false;
   cv::Mat image;
+  // The odometry source's per-image work (OdometrySource::prepare), done in the decode node and handed to
+  // the odometry node, which drops it; its thread CPU time, booked as odometry (time_accounting.hpp).
+  std::shared_ptr<const PreparedImage> prepared;
+  std::int64_t odometry_in_decode_cpu_ns = 0;
   OdometryOutput odometry;
   bool has_pose = false;
   std::vector<std::string> warnings;

@@ -4,6 +4,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
+#include "core/thread_cpu_time.hpp"
 #include "io/dataset.hpp"
 
 namespace loopgate {
@@ -77,6 +78,14 @@ void FrameSteps::decode(FrameRecord& r) {
     r.decoded = true;
   } catch (const DataError& e) {
     add_message(r.errors, std::string("image: ") + e.what());
+    return;
+  }
+  // The odometry's per-image work that needs no earlier frame (the ekf tracker's pyramid) runs here, where
+  // frames run in parallel, instead of on the odometry node's serial path.
+  if (odometry_->needs_images()) {
+    const std::int64_t start_ns = thread_cpu_ns();
+    r.prepared = odometry_->prepare(r.image);
+    r.odometry_in_decode_cpu_ns = thread_cpu_ns() - start_ns;
   }
 }
 
@@ -89,13 +98,16 @@ void FrameSteps::odometry(FrameRecord& r) {
   if (odometry_->needs_ground_truth()) input.T_w_b_true = dataset_.ground_truth_T_w_b(r.frame);
   input.imu = r.imu_synced ? &r.imu.samples : nullptr;
   input.image = r.decoded ? &r.image : nullptr;
+  input.prepared = r.prepared.get();
   try {
     r.odometry = odometry_->process(input);
     r.has_pose = true;
   } catch (const DataError& e) {
+    r.prepared.reset();
     add_message(r.errors, std::string("odometry: ") + e.what());
     return;
   }
+  r.prepared.reset();  // the pyramid is not needed after this frame's tracking
   if (r.odometry.pose.status != OdometryStatus::kTracking) {
     add_message(r.warnings, fmt::format("odometry {}{}{}", to_string(r.odometry.pose.status),
                                         r.odometry.reason.empty() ? "" : ": ", r.odometry.reason));

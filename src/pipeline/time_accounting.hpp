@@ -29,6 +29,8 @@ struct StageTimes {
   std::array<double, kStageCount> parallel_ms{};  // other threads in the body's parallel loops
   double decode_in_describe_ms = 0;               // images decoded inside describe (part of its CPU time)
   double match_in_describe_ms = 0;                // similarities computed inside describe (part of it too)
+  double odometry_in_decode_ms =
+      0;  // the odometry's per-image preparation inside decode (part of its CPU time)
   StageTimes& operator+=(const StageTimes& other);
 };
 StageTimes stage_times(const FrameRecord& r);
@@ -45,6 +47,7 @@ struct TimeParts {
   double decode_ms = 0, describe_ms = 0, match_ms = 0, rest_ms = 0, total_ms = 0;
   double decode_in_describe_ms = 0;  // of decode_ms
   double match_in_describe_ms = 0;   // of match_ms
+  double odometry_in_decode_ms = 0;  // of rest_ms: OdometrySource::prepare, run in the decode node
   double parallel_ms = 0;            // of total_ms: other threads in parallel loops
 };
 
@@ -52,8 +55,8 @@ struct TimeParts {
 TimeParts account_time(const StageTimes& frames, const EndOfStreamTime& end = {});
 
 // summary.json "time_accounting": {"unit", "decode_ms", "describe_ms", "match_ms", "rest_ms", "total_ms",
-// "decode_in_describe_ms", "match_in_describe_ms", "parallel_ms", "stages_cpu_ms": {stage: ms},
-// "end_of_stream_cpu_ms"}.
+// "decode_in_describe_ms", "match_in_describe_ms", "odometry_in_decode_ms", "parallel_ms", "stages_cpu_ms":
+// {stage: ms}, "end_of_stream_cpu_ms"}.
 nlohmann::json time_accounting_json(const StageTimes& frames, const EndOfStreamTime& end);
 
 }  // namespace loopgate

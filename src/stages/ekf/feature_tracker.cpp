@@ -43,8 +43,7 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
   return track(grey, nullptr);
 }
 
-const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
-                                                         const Eigen::Matrix3d* R_cur_prev) {
+TrackerImage FeatureTracker::prepare(const cv::Mat& grey) const {
   const CameraCalibration& calib = camera_.calibration();
   if (grey.empty() || grey.type() != CV_8UC1) {
     throw DataError("<image>", "ekf tracker: expected a non-empty 8-bit grey image");
@@ -54,18 +53,38 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
                                    std::to_string(grey.rows) + ", the camera calibration says " +
                                    std::to_string(calib.width_px) + "x" + std::to_string(calib.height_px));
   }
-  stats_ = {};
-  const cv::Size window(config_.klt_window_px, config_.klt_window_px);
-  auto t0 = Clock::now();
+  const auto t0 = Clock::now();
+  TrackerImage out;
   // Pixel noise (dark, high-gain images) breeds corners on noise and drags the KLT: smooth it first.
-  const cv::Mat* image = &grey;
   if (config_.image_blur_sigma_px > 0.0) {
-    cv::GaussianBlur(grey, smoothed_, cv::Size(0, 0), config_.image_blur_sigma_px);
-    image = &smoothed_;
+    cv::GaussianBlur(grey, out.image, cv::Size(0, 0), config_.image_blur_sigma_px);
+  } else {
+    out.image = grey;
   }
-  std::vector<cv::Mat> pyramid;
-  cv::buildOpticalFlowPyramid(*image, pyramid, window, config_.klt_pyramid_levels);
-  stats_.pyramid_ms = ms_since(t0);
+  const cv::Size window(config_.klt_window_px, config_.klt_window_px);
+  cv::buildOpticalFlowPyramid(out.image, out.pyramid, window, config_.klt_pyramid_levels);
+  out.prepare_ms = ms_since(t0);
+  return out;
+}
+
+const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
+                                                         const Eigen::Matrix3d* R_cur_prev) {
+  return track(prepare(grey), R_cur_prev);
+}
+
+const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& prepared,
+                                                         const Eigen::Matrix3d* R_cur_prev) {
+  const CameraCalibration& calib = camera_.calibration();
+  const cv::Mat& grey = prepared.image;
+  if (grey.empty() || grey.type() != CV_8UC1 || grey.cols != calib.width_px || grey.rows != calib.height_px ||
+      prepared.pyramid.empty()) {
+    throw DataError("<image>", "ekf tracker: the prepared image does not fit this tracker's calibration");
+  }
+  stats_ = {};
+  stats_.pyramid_ms = prepared.prepare_ms;
+  const cv::Size window(config_.klt_window_px, config_.klt_window_px);
+  const std::vector<cv::Mat>& pyramid = prepared.pyramid;
+  auto t0 = Clock::now();
 
   if (!previous_pyramid_.empty() && !features_.empty()) {
     std::vector<cv::Point2f> previous_pts;
@@ -153,9 +172,9 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey,
   }
   stats_.tracked = static_cast<int>(features_.size());
   t0 = Clock::now();
-  detect(*image);
+  detect(grey);
   stats_.detect_ms = ms_since(t0);
-  previous_pyramid_ = std::move(pyramid);
+  previous_pyramid_ = pyramid;  // shares the pixels
   return features_;
 }
 

@@ -38,6 +38,16 @@ struct TrackerStats {
   double detect_ms = 0;
 };
 
+// What the tracker needs of one image before it tracks into it, and which does not depend on earlier
+// images: the image after image_blur_sigma_px (detection runs on it) and its KLT pyramid with derivatives.
+// FeatureTracker::prepare computes it (const: on any thread, e.g. where the pipeline decodes frames in
+// parallel); track() then does the work that has to run in order.
+struct TrackerImage {
+  cv::Mat image;
+  std::vector<cv::Mat> pyramid;
+  double prepare_ms = 0;  // wall time of prepare(), reported as TrackerStats::pyramid_ms
+};
+
 class FeatureTracker {
  public:
   // Throws ConfigError for a bad camera calibration (see CameraModel).
@@ -49,6 +59,12 @@ class FeatureTracker {
   // As above; `R_cur_prev` rotates bearings of the previous camera frame into the current one (from the
   // gyro), used to predict where each feature moved. nullptr: no prediction (the previous position).
   const std::vector<TrackedFeature>& track(const cv::Mat& grey, const Eigen::Matrix3d* R_cur_prev);
+  // The same on an image prepare()d beforehand (by this tracker or another with the same config and
+  // calibration): the same features, bit for bit.
+  const std::vector<TrackedFeature>& track(const TrackerImage& image, const Eigen::Matrix3d* R_cur_prev);
+
+  // Validates `grey` (DataError as track()) and computes what track() needs of it. Thread-safe.
+  TrackerImage prepare(const cv::Mat& grey) const;
 
   const std::vector<TrackedFeature>& features() const { return features_; }
   const TrackerStats& last_stats() const { return stats_; }
@@ -67,9 +83,7 @@ class FeatureTracker {
   CameraModel camera_;
   double focal_px_;
   std::vector<cv::Mat> previous_pyramid_;
-  cv::Mat smoothed_;
-  std::vector<int> cell_cooldown_;  // images until an empty grid cell is searched again  // the image after
-                                    // image_blur_sigma_px (buffer reused from image to image)
+  std::vector<int> cell_cooldown_;  // images until an empty grid cell is searched again
   std::vector<TrackedFeature> features_;
   TrackerStats stats_;
   std::uint64_t next_id_ = 0;

@@ -211,10 +211,15 @@ EkfFrameOutput VioEkf::process(const EkfFrameInput& input) {
   using Clock = std::chrono::steady_clock;
   const auto t_start = Clock::now();
   std::vector<FeatureObservation> tracked;
-  if (input.image != nullptr) {
+  if (input.image != nullptr || input.prepared != nullptr) {
     const std::optional<Eigen::Matrix3d> R_cur_prev =
         config_.klt_predict_rotation ? camera_rotation_since_previous(input) : std::nullopt;
-    tracker_.track(*input.image, R_cur_prev.has_value() ? &*R_cur_prev : nullptr);
+    const Eigen::Matrix3d* R = R_cur_prev.has_value() ? &*R_cur_prev : nullptr;
+    if (input.prepared != nullptr) {
+      tracker_.track(*input.prepared, R);
+    } else {
+      tracker_.track(*input.image, R);
+    }
     previous_image_t_ns_ = input.t_ns;
     tracked = tracker_.observations();
   } else if (input.observations != nullptr) {

@@ -29,6 +29,8 @@ struct EkfFrameInput {
   // IMU samples since the previous image (the sync node interpolates the first and last to the image times).
   std::span<const ImuSample> imu;
   const cv::Mat* image = nullptr;  // 8-bit grey image, tracked by the KLT front end
+  // The same image prepared beforehand (prepare_image(), e.g. on another thread); used instead of `image`.
+  const TrackerImage* prepared = nullptr;
   // Instead of an image: observations in undistorted normalised coordinates (simulation, tests).
   const std::vector<FeatureObservation>* observations = nullptr;
   std::optional<GroundTruthState> ground_truth;  // used by init_mode ground_truth
@@ -69,6 +71,10 @@ class VioEkf {
 
   // Throws DataError for a bad image (see FeatureTracker::track); never for filter trouble (status lost).
   EkfFrameOutput process(const EkfFrameInput& input);
+  // The tracker's per-image work that does not depend on earlier images (FeatureTracker::prepare): const and
+  // thread-safe, so that it can run while process() runs on an earlier frame. Throws DataError for an image
+  // the tracker cannot take.
+  TrackerImage prepare_image(const cv::Mat& grey) const { return tracker_.prepare(grey); }
 
   const Msckf& filter() const { return filter_; }
   const FeatureTracker& tracker() const { return tracker_; }

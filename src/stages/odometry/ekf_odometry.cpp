@@ -41,6 +41,24 @@ OdometryOutput EkfOdometry::lost(const OdometryInput& input, const std::string& 
   return out;
 }
 
+namespace {
+
+struct EkfPreparedImage final : PreparedImage {
+  TrackerImage tracker;
+};
+
+}  // namespace
+
+std::shared_ptr<const PreparedImage> EkfOdometry::prepare(const cv::Mat& image) const {
+  try {
+    auto prepared = std::make_shared<EkfPreparedImage>();
+    prepared->tracker = ekf_.prepare_image(image);
+    return prepared;
+  } catch (const std::exception&) {
+    return nullptr;  // process() tracks the image itself and reports why the frame is lost
+  }
+}
+
 OdometryOutput EkfOdometry::process(const OdometryInput& input) {
   // IMU of this frame, after the samples of earlier frames that did not reach the filter.
   std::vector<ImuSample> imu = pending_imu_;
@@ -57,6 +75,8 @@ OdometryOutput EkfOdometry::process(const OdometryInput& input) {
   in.t_ns = input.t_ns;
   in.imu = std::span<const ImuSample>(imu);
   in.image = input.image;
+  if (const auto* prepared = dynamic_cast<const EkfPreparedImage*>(input.prepared))
+    in.prepared = &prepared->tracker;
   if (config_.init_mode == "ground_truth") in.ground_truth = ground_truth_state_at(ground_truth_, input.t_ns);
   EkfFrameOutput result;
   try {

@@ -7,6 +7,7 @@
 // with the next frame, so the propagation has no hole.
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -32,6 +33,8 @@ class EkfOdometry : public OdometrySource {
   bool needs_images() const override { return true; }
   bool needs_imu() const override { return true; }
   OdometryOutput process(const OdometryInput& input) override;
+  // The tracker's image pyramid (VioEkf::prepare_image); nullptr for an image it cannot take.
+  std::shared_ptr<const PreparedImage> prepare(const cv::Mat& image) const override;
 
   const VioEkf& filter() const { return ekf_; }
   // The last frame's full filter output (timings, update statistics), for tests and benchmarks.

@@ -84,6 +84,11 @@ struct OdometryConfig {
   void validate() const;
 };
 
+// A source's per-image work done ahead of process() (OdometrySource::prepare); each source defines its own.
+struct PreparedImage {
+  virtual ~PreparedImage() = default;
+};
+
 // What a source sees of one frame. Pointers may be null when the source does not need that input.
 struct OdometryInput {
   std::size_t frame = 0;
@@ -91,6 +96,7 @@ struct OdometryInput {
   std::optional<Eigen::Isometry3d> T_w_b_true;  // ground truth at the frame (drift source)
   const std::vector<ImuSample>* imu = nullptr;  // synced samples since the previous frame
   const cv::Mat* image = nullptr;               // decoded grey image (visual sources)
+  const PreparedImage* prepared = nullptr;      // prepare(*image), when the caller did it beforehand
 };
 
 struct OdometryOutput {
@@ -114,6 +120,12 @@ class OdometrySource {
   virtual bool needs_imu() const { return false; }
   // Called once per frame, in frame order (serially).
   virtual OdometryOutput process(const OdometryInput& input) = 0;
+  // The per-image work of a visual source that does not depend on earlier frames (the ekf tracker's image
+  // pyramid), for the caller to do where frames run in parallel and hand to process() in
+  // OdometryInput::prepared. Const and thread-safe: it may run while process() runs on an earlier frame.
+  // nullptr when the source has nothing to prepare or cannot take the image (process() then reports that).
+  // Never throws.
+  virtual std::shared_ptr<const PreparedImage> prepare(const cv::Mat& /*image*/) const { return nullptr; }
 };
 
 // odometry.source none: no poses (appearance-only runs).
