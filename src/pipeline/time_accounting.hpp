@@ -29,8 +29,7 @@ struct StageTimes {
   std::array<double, kStageCount> parallel_ms{};  // other threads in the body's parallel loops
   double decode_in_describe_ms = 0;               // images decoded inside describe (part of its CPU time)
   double match_in_describe_ms = 0;                // similarities computed inside describe (part of it too)
-  double odometry_in_decode_ms =
-      0;  // the odometry's per-image preparation inside decode (part of its CPU time)
+  double odometry_in_decode_ms = 0;               // the odometry's image preparation inside decode (too)
   StageTimes& operator+=(const StageTimes& other);
 };
 StageTimes stage_times(const FrameRecord& r);

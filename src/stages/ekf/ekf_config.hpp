@@ -40,8 +40,8 @@ struct EkfConfig {
   double fb_check_max_px = 1.0;      // forward-backward consistency threshold
   // Pyramid levels of the backward (check) flow; -1: klt_pyramid_levels (before 2026-11-27). The backward
   // flow starts at the feature's previous position, where it ends when the forward track is right, so its
-  // coarse levels have nothing to find: 0 cuts the KLT's time by about a quarter (docs/architecture.md
-  // § Time accounting).
+  // coarse levels have nothing to find: 0 cuts the KLT's time by about a quarter (README § Known
+  // limitations, issue 16).
   int klt_check_pyramid_levels = 0;
   double ransac_threshold_px = 1.0;  // on undistorted points expressed in pixels of the mean focal length
   double ransac_confidence = 0.99;
