@@ -129,6 +129,22 @@ TEST(IoPngGrey, EveryFilterTypeGivesOpenCvsPixels) {
   }
 }
 
+// Every ordered pair of filter types in consecutive rows (each row is unfiltered from the one above), then
+// an odd last row.
+TEST(IoPngGrey, EveryPairOfFilterTypesInConsecutiveRows) {
+  PngSpec spec;
+  for (int first = 0; first <= 4; ++first)
+    for (int second = 0; second <= 4; ++second) spec.filters.insert(spec.filters.end(), {first, second});
+  spec.filters.push_back(4);
+  for (const int cols : {1, 2, 61}) {
+    SCOPED_TRACE("width " + std::to_string(cols));
+    const cv::Mat image =
+        random_grey(static_cast<int>(spec.filters.size()), cols, static_cast<unsigned>(cols));
+    const Bytes png = encode(image, spec);
+    expect_same(fast(png), image);
+  }
+}
+
 TEST(IoPngGrey, MixedFiltersOddSizesAndSplitStreams) {
   for (const auto& [rows, cols] :
        std::vector<std::pair<int, int>>{{1, 1}, {1, 9}, {9, 1}, {480, 752}, {31, 17}}) {
