@@ -3,6 +3,9 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
+#include <memory>
+#include <utility>
+
 #include "core/error.hpp"
 #include "core/thread_cpu_time.hpp"
 #include "io/dataset.hpp"
@@ -98,16 +101,16 @@ void FrameSteps::odometry(FrameRecord& r) {
   if (odometry_->needs_ground_truth()) input.T_w_b_true = dataset_.ground_truth_T_w_b(r.frame);
   input.imu = r.imu_synced ? &r.imu.samples : nullptr;
   input.image = r.decoded ? &r.image : nullptr;
-  input.prepared = r.prepared.get();
+  // Taken out of the record: the pyramid is not needed after this frame's tracking.
+  const std::shared_ptr<const PreparedImage> prepared = std::move(r.prepared);
+  input.prepared = prepared.get();
   try {
     r.odometry = odometry_->process(input);
     r.has_pose = true;
   } catch (const DataError& e) {
-    r.prepared.reset();
     add_message(r.errors, std::string("odometry: ") + e.what());
     return;
   }
-  r.prepared.reset();  // the pyramid is not needed after this frame's tracking
   if (r.odometry.pose.status != OdometryStatus::kTracking) {
     add_message(r.warnings, fmt::format("odometry {}{}{}", to_string(r.odometry.pose.status),
                                         r.odometry.reason.empty() ? "" : ": ", r.odometry.reason));

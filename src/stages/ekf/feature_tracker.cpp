@@ -84,7 +84,6 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& pre
   stats_.pyramid_ms = prepared.prepare_ms;
   const cv::Size window(config_.klt_window_px, config_.klt_window_px);
   const std::vector<cv::Mat>& pyramid = prepared.pyramid;
-  auto t0 = Clock::now();
 
   if (!previous_pyramid_.empty() && !features_.empty()) {
     std::vector<cv::Point2f> previous_pts;
@@ -92,7 +91,7 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& pre
     for (const TrackedFeature& f : features_) previous_pts.push_back(f.uv_px);
     const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS,
                                     config_.klt_max_iterations, config_.klt_epsilon);
-    t0 = Clock::now();
+    auto t0 = Clock::now();
     // Initial positions: the previous ones moved by the camera rotation (far points move with it).
     std::vector<cv::Point2f> current_pts = previous_pts;
     if (R_cur_prev != nullptr) {
@@ -171,9 +170,9 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& pre
     features_.clear();
   }
   stats_.tracked = static_cast<int>(features_.size());
-  t0 = Clock::now();
+  const auto t_detect = Clock::now();
   detect(grey);
-  stats_.detect_ms = ms_since(t0);
+  stats_.detect_ms = ms_since(t_detect);
   previous_pyramid_ = pyramid;  // shares the pixels
   return features_;
 }
