@@ -1,13 +1,16 @@
 // The loop closer end to end (issue 13): on a short rendered street drive, loops forced by a small match
 // margin (pairs a few metres apart, which do share geometry) are verified and corrected identically with 1
 // and 2 threads, and the outputs carry their columns; thumbnail-size images skip verification with a reason;
-// without verify.enabled no loop-closure output appears; compare's loop correction after a run gives the
+// the aliasing preset's copied street verifies in the images and is rejected by the odometry check; without
+// verify.enabled no loop-closure output appears; compare's loop correction after a run gives the
 // files the run gives.
 #include <gtest/gtest.h>
 
+#include <Eigen/Core>
 #include <algorithm>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -304,6 +307,61 @@ TEST(E2eLoopClosure, TheFixedOdometryModelStillCorrects) {
   EXPECT_EQ(own_loops, read_file(model / "loops.csv"));  // the same loops, verified alike
   EXPECT_NE(own_corrected, read_file(model / "trajectory_corrected.tum"));
   EXPECT_EQ(read_file(model / "trajectory_corrected.tum"), read_file(model_one / "trajectory_corrected.tum"));
+}
+
+// The aliasing preset's second street is a copy of the first, built and textured the same: ORB, triangulation
+// and PnP verify loops between the copies. The odometry knows the streets are far apart, and the check
+// against it (verify.odometry_chi2) rejects those loops, and only those.
+TEST(E2eLoopClosure, TheAliasingPresetsCopiedStreetIsRejectedByTheOdometry) {
+  const fs::path sim = testing::make_temp_dir("e2e-closure-aliasing-sim");
+  int status = -1;
+  std::string output = run("simulate --preset aliasing --force --out " + sim.string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  // Ground-truth distance of the loop's frames, by frame number (frames.csv t_s -> ground_truth.tum).
+  const auto loops_by_truth = [](const fs::path& out, int* true_verified, int* false_verified,
+                                 int* rejected_by_odometry) {
+    std::map<std::string, Eigen::Vector3d> truth_at;
+    std::istringstream gt(read_file(out / "ground_truth.tum"));
+    for (std::string line; std::getline(gt, line);) {
+      std::istringstream fields(line);
+      std::string t;
+      Eigen::Vector3d p;
+      if (fields >> t >> p.x() >> p.y() >> p.z()) truth_at[t] = p;
+    }
+    std::vector<std::string> h;
+    std::map<std::string, Eigen::Vector3d> truth_of_frame;
+    for (const auto& row : read_csv(out / "frames.csv", &h)) truth_of_frame[row[0]] = truth_at.at(row[3]);
+    *true_verified = *false_verified = *rejected_by_odometry = 0;
+    for (const auto& row : read_csv(out / "loop_edges.csv")) {
+      const double d_m = (truth_of_frame.at(row[0]) - truth_of_frame.at(row[1])).norm();
+      if (row[3] == "y") ++(d_m <= 4.0 ? *true_verified : *false_verified);
+      if (row[7].find(" m from the odometry's frame i, ") != std::string::npos) {
+        ++*rejected_by_odometry;
+        EXPECT_GT(d_m, 4.0) << row[0] << " " << row[1] << " " << row[7];
+      }
+    }
+  };
+  const std::string base = "run --config " + std::string(LOOPGATE_SOURCE_DIR) +
+                           "/configs/aliasing.yaml --dataset " + sim.string() +
+                           " --mode full --set output.progress=off --set verify.enabled=true "
+                           "--set verify.orb_patch_px=15 --set verify.orb_fast_threshold=10 --set "
+                           "verify.min_inliers=15 --set verify.neighbour_offset_frames=2 --set "
+                           "verify.max_per_query=1 --out ";
+  int true_off = 0, false_off = 0, odometry_off = 0, true_on = 0, false_on = 0, odometry_on = 0;
+  const fs::path off = testing::make_temp_dir("e2e-closure-aliasing-off");
+  output = run(base + off.string() + " --set verify.odometry_chi2=0", &status);
+  ASSERT_EQ(status, 0) << output;
+  loops_by_truth(off, &true_off, &false_off, &odometry_off);
+  const fs::path on = testing::make_temp_dir("e2e-closure-aliasing-on");
+  output = run(base + on.string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  loops_by_truth(on, &true_on, &false_on, &odometry_on);
+  EXPECT_GT(false_off, 10);  // without the check the copies verify
+  EXPECT_EQ(odometry_off, 0);
+  EXPECT_EQ(false_on, 0);
+  EXPECT_GE(odometry_on, false_off);
+  EXPECT_GT(true_on, 10);
+  EXPECT_EQ(true_on, true_off);
 }
 
 TEST(E2eLoopClosure, OffByDefault) {

@@ -3,6 +3,7 @@
 // reason, never an exception.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
@@ -206,6 +207,54 @@ TEST(GeometricVerifier, ConfigErrorsNameTheKey) {
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("verify.min_inliers"), std::string::npos);
   }
+  VerifyConfig negative;
+  negative.odometry_chi2 = -1.0;
+  try {
+    negative.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("verify.odometry_chi2"), std::string::npos);
+  }
+}
+
+// A loop verified by the images, checked against the odometry: sigma^2 = sigma_i^2 - sigma_j^2 + the edge's
+// largest position variance; the distance between the loop's frame i and the odometry's over sigma.
+TEST(GeometricVerifier, ALoopFarFromWhereTheOdometryPutsFrameIIsRejected) {
+  VerifyResult loop;
+  loop.verified = true;
+  loop.T_j_i = Eigen::Translation3d(2.0, 0.0, 0.0) * Eigen::Isometry3d::Identity();
+  loop.cov = Eigen::Matrix<double, 6, 6>::Identity() * 0.01;
+  loop.cov(1, 1) = 0.09;  // the largest position variance counts: edge sigma 0.3 m
+  // Frame j faces +y (yaw 90 degrees): the loop puts frame i at (10, 22, 0).
+  Eigen::Isometry3d T_w_bj = Eigen::Isometry3d::Identity();
+  T_w_bj.linear() = Eigen::AngleAxisd(kPi / 2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  T_w_bj.translation() = Eigen::Vector3d(10.0, 20.0, 0.0);
+  const auto at = [](double x, double y) {
+    return Eigen::Isometry3d(Eigen::Translation3d(x, y, 0.0) * Eigen::Isometry3d::Identity());
+  };
+  // sigma^2 = 1.0^2 - 0.6^2 + 0.09 = 0.73; bound sqrt(16.27) = 4.03 sigma = 3.446 m.
+  const double sigma = std::sqrt(0.73);
+  const double bound = 16.27;
+  EXPECT_EQ(odometry_disagreement(at(10.0, 22.0), T_w_bj, loop, 1.0, 0.6, bound), "");
+  EXPECT_EQ(
+      odometry_disagreement(at(10.0 + 0.99 * std::sqrt(bound) * sigma, 22.0), T_w_bj, loop, 1.0, 0.6, bound),
+      "");
+  EXPECT_EQ(
+      odometry_disagreement(at(10.0 + 1.01 * std::sqrt(bound) * sigma, 22.0), T_w_bj, loop, 1.0, 0.6, bound)
+          .rfind("geometry: 3.48 m from the odometry's frame i, 4.1 sigma > 4.03", 0),
+      0u);
+  // j's heading counts: without it the loop would put frame i at (12, 20), 1 m from this odometry position.
+  EXPECT_NE(odometry_disagreement(at(13.0, 20.0), T_w_bj, loop, 1.0, 0.6, bound), "");
+  // The copy of the place 40 m away (the aliasing preset's second street).
+  EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 1.0, 0.6, bound),
+            "geometry: 40.00 m from the odometry's frame i, 46.8 sigma > 4.03");
+  // Uncertainty that shrank from j to i (a reset): the edge's sigma alone.
+  EXPECT_EQ(odometry_disagreement(at(11.0, 22.0), T_w_bj, loop, 0.5, 0.6, bound), "");  // 3.3 sigma
+  EXPECT_NE(odometry_disagreement(at(11.5, 22.0), T_w_bj, loop, 0.5, 0.6, bound), "");
+  // No check: bound 0, or an odometry without a sigma.
+  EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 1.0, 0.6, 0.0), "");
+  EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 0.0, 0.0, bound), "");
+  EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, std::nan(""), 0.6, bound), "");
 }
 
 }  // namespace

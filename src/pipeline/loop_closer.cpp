@@ -253,6 +253,16 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
         out.result.reason = "geometry: image missing";
       } else {
         out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour));
+        // The image geometry agrees; the odometry must too (a copy of the place elsewhere looks the same).
+        if (out.result.verified && pose_of(loop.query)) {
+          std::string why = odometry_disagreement(
+              *pose_of(loop.query), *pose_of(loop.reference), out.result, sigma_m_[loop.query - first_],
+              sigma_m_[loop.reference - first_], verify_config_.odometry_chi2);
+          if (!why.empty()) {
+            out.result.verified = false;
+            out.result.reason = std::move(why);
+          }
+        }
       }
     } catch (const std::exception& e) {
       out.result.reason = std::string("geometry: ") + e.what();

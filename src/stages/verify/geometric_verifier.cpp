@@ -3,6 +3,7 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -127,6 +128,27 @@ void VerifyConfig::validate() const {
     throw ConfigError("verify.sigma_position_m: must be a finite number > 0");
   if (!(std::isfinite(sigma_rotation_rad) && sigma_rotation_rad > 0.0))
     throw ConfigError("verify.sigma_rotation_rad: must be a finite number > 0");
+  if (!(std::isfinite(odometry_chi2) && odometry_chi2 >= 0.0))
+    throw ConfigError(
+        "verify.odometry_chi2: must be a finite number >= 0 (0: no check against the odometry)");
+}
+
+std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::Isometry3d& T_w_bj,
+                                  const VerifyResult& loop, double sigma_i_m, double sigma_j_m,
+                                  double chi2_bound) {
+  if (chi2_bound <= 0.0) return {};
+  if (!(std::isfinite(sigma_i_m) && sigma_i_m > 0.0 && std::isfinite(sigma_j_m) && sigma_j_m > 0.0))
+    return {};
+  const double edge_var_m2 = loop.cov.topLeftCorner<3, 3>().diagonal().maxCoeff();
+  const double var_m2 =
+      std::max(0.0, sigma_i_m * sigma_i_m - sigma_j_m * sigma_j_m) + std::max(0.0, edge_var_m2);
+  if (!(var_m2 > 0.0)) return {};
+  const Eigen::Vector3d p_w_i_loop = (T_w_bj * loop.T_j_i).translation();
+  const double distance_m = (p_w_i_loop - T_w_bi.translation()).norm();
+  const double chi2 = distance_m * distance_m / var_m2;
+  if (chi2 <= chi2_bound) return {};
+  return fmt::format("geometry: {:.2f} m from the odometry's frame i, {:.1f} sigma > {:.2f}", distance_m,
+                     std::sqrt(chi2), std::sqrt(chi2_bound));
 }
 
 GeometricVerifier::GeometricVerifier(const VerifyConfig& config,

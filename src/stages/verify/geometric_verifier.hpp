@@ -37,6 +37,10 @@ struct VerifyConfig {
   double max_translation_m = 30.0;  // |t_j_i| above this is rejected (a revisit is near)
   double sigma_position_m = 0.3;    // T_j_i covariance at min_inliers (see above)
   double sigma_rotation_rad = 0.02;
+  // A verified loop must agree with the odometry: where it puts frame i (T_w_bj T_j_i) may differ from the
+  // odometry's position of i by at most sqrt(odometry_chi2) sigmas (odometry_disagreement() below). The
+  // default is the chi-square quantile of 3 dof at 0.999 (16.27). 0: no such check.
+  double odometry_chi2 = 16.27;
   // Which loops are verified (the loop closer; 0 = no limit / no skipping). A revisit gives one loop per
   // query frame; one verified edge every few frames is all the pose graph needs.
   // A loop (i, j) is verified only when the odometry's position sigma grew from j to i by at least
@@ -65,6 +69,7 @@ struct VerifyConfig {
     v("max_translation_m", self.max_translation_m);
     v("sigma_position_m", self.sigma_position_m);
     v("sigma_rotation_rad", self.sigma_rotation_rad);
+    v("odometry_chi2", self.odometry_chi2);
     v("min_sigma_gain", self.min_sigma_gain);
     v("max_per_query", self.max_per_query);
     v("skip_after_verified_frames", self.skip_after_verified_frames);
@@ -84,6 +89,20 @@ struct VerifyResult {
   Eigen::Isometry3d T_j_i = Eigen::Isometry3d::Identity();                    // body i in body j
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Identity();  // (position, rotation)
 };
+
+// A verified loop against the odometry: where the loop puts frame i (T_w_bj T_j_i) and where the odometry
+// puts it (T_w_bi) are compared in units of sigma^2 = sigma_i^2 - sigma_j^2 + sigma_edge^2: the growth of the
+// odometry's position sigma from j to i (the sigma of the largest eigenvalue, frames.csv's sigma_m, as
+// verify.min_sigma_gain uses it) and the loop edge's position sigma (the largest of loop.cov's). The
+// squared distance over sigma^2 must not exceed `chi2_bound`. Image geometry cannot reject a place that
+// looks and is built the same as another one (aliasing); the odometry knows the two are far apart. This is
+// the odometry check of Kimera-RPGO's PCM and RTAB-Map's RGBD/OptimizeMaxError, before the edge reaches the
+// graph. Returns the rejection reason ("geometry: 41.30 m from the odometry's frame i, 23.1 sigma > 4.03"),
+// empty when the loop agrees, and empty when either sigma is not a finite number > 0 (an odometry without
+// covariance cannot judge).
+std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::Isometry3d& T_w_bj,
+                                  const VerifyResult& loop, double sigma_i_m, double sigma_j_m,
+                                  double chi2_bound);
 
 // What the verifier needs of one frame: its grey image and its odometry pose.
 struct VerifyFrame {
