@@ -248,9 +248,11 @@ TEST(GeometricVerifier, ALoopFarFromWhereTheOdometryPutsFrameIIsRejected) {
   // The copy of the place 40 m away (the aliasing preset's second street).
   EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 1.0, 0.6, bound),
             "geometry: 40.00 m from the odometry's frame i, 46.8 sigma > 4.03");
-  // Uncertainty that shrank from j to i (a reset): the edge's sigma alone.
-  EXPECT_EQ(odometry_disagreement(at(11.0, 22.0), T_w_bj, loop, 0.5, 0.6, bound), "");  // 3.3 sigma
-  EXPECT_NE(odometry_disagreement(at(11.5, 22.0), T_w_bj, loop, 0.5, 0.6, bound), "");
+  // No growth from j to i: the edge's sigma alone (0.3 m, bound 1.21 m).
+  EXPECT_EQ(odometry_disagreement(at(11.0, 22.0), T_w_bj, loop, 0.6, 0.6, bound), "");  // 3.3 sigma
+  EXPECT_NE(odometry_disagreement(at(11.5, 22.0), T_w_bj, loop, 0.6, 0.6, bound), "");  // 5 sigma
+  // Uncertainty that shrank from j to i: the odometry learnt where it is in between, no bound.
+  EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 0.5, 0.6, bound), "");
   // No check: bound 0, or an odometry without a sigma.
   EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 1.0, 0.6, 0.0), "");
   EXPECT_EQ(odometry_disagreement(at(50.0, 22.0), T_w_bj, loop, 0.0, 0.0, bound), "");

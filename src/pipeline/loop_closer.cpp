@@ -188,6 +188,13 @@ std::shared_ptr<const OrbFeatures> LoopCloser::features_of(std::size_t frame) {
   return features;
 }
 
+bool LoopCloser::odometry_unbroken(std::size_t from, std::size_t to) const {
+  if (from < first_ || to >= last_ || from > to) return false;
+  for (std::size_t f = from; f <= to; ++f)
+    if (!poses_[f - first_]) return false;
+  return true;
+}
+
 std::string LoopCloser::skip_reason(const Detection& loop) const {
   const auto near = [](std::size_t a, std::size_t b, int window) {
     return (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
@@ -253,8 +260,9 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
         out.result.reason = "geometry: image missing";
       } else {
         out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour));
-        // The image geometry agrees; the odometry must too (a copy of the place elsewhere looks the same).
-        if (out.result.verified && pose_of(loop.query)) {
+        // The image geometry agrees; the odometry must too (a copy of the place elsewhere looks the same),
+        // when its chain from j to i is whole (no frame lost or re-initialised in between).
+        if (out.result.verified && odometry_unbroken(loop.reference, loop.query)) {
           std::string why = odometry_disagreement(
               *pose_of(loop.query), *pose_of(loop.reference), out.result, sigma_m_[loop.query - first_],
               sigma_m_[loop.reference - first_], verify_config_.odometry_chi2);

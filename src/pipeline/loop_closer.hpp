@@ -110,6 +110,8 @@ class LoopCloser {
   // solve's time.
   double solve(std::size_t last, bool final);
   std::optional<Eigen::Isometry3d> pose_of(std::size_t frame) const;
+  // Every frame of [from, to] has an odometry pose (none lost, initialising or without an image between).
+  bool odometry_unbroken(std::size_t from, std::size_t to) const;
 
   const Dataset& dataset_;
   std::size_t first_ = 0, last_ = 0;

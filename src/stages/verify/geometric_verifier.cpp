@@ -139,9 +139,9 @@ std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::
   if (chi2_bound <= 0.0) return {};
   if (!(std::isfinite(sigma_i_m) && sigma_i_m > 0.0 && std::isfinite(sigma_j_m) && sigma_j_m > 0.0))
     return {};
+  if (sigma_i_m < sigma_j_m) return {};  // the odometry learnt where it is in between: no bound from j to i
   const double edge_var_m2 = loop.cov.topLeftCorner<3, 3>().diagonal().maxCoeff();
-  const double var_m2 =
-      std::max(0.0, sigma_i_m * sigma_i_m - sigma_j_m * sigma_j_m) + std::max(0.0, edge_var_m2);
+  const double var_m2 = sigma_i_m * sigma_i_m - sigma_j_m * sigma_j_m + std::max(0.0, edge_var_m2);
   if (!(var_m2 > 0.0)) return {};
   const Eigen::Vector3d p_w_i_loop = (T_w_bj * loop.T_j_i).translation();
   const double distance_m = (p_w_i_loop - T_w_bi.translation()).norm();

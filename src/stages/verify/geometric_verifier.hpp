@@ -98,8 +98,9 @@ struct VerifyResult {
 // looks and is built the same as another one (aliasing); the odometry knows the two are far apart. This is
 // the odometry check of Kimera-RPGO's PCM and RTAB-Map's RGBD/OptimizeMaxError, before the edge reaches the
 // graph. Returns the rejection reason ("geometry: 41.30 m from the odometry's frame i, 23.1 sigma > 4.03"),
-// empty when the loop agrees, and empty when either sigma is not a finite number > 0 (an odometry without
-// covariance cannot judge).
+// empty when the loop agrees, and empty when the odometry cannot judge: a sigma that is not a finite number
+// > 0 (no covariance), or sigma_i < sigma_j (it learnt where it is in between). The caller also leaves out
+// loops whose odometry chain from j to i is broken (a lost frame, a re-initialisation).
 std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::Isometry3d& T_w_bj,
                                   const VerifyResult& loop, double sigma_i_m, double sigma_j_m,
                                   double chi2_bound);
