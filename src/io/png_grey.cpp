@@ -2,11 +2,13 @@
 
 #include <libdeflate.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <utility>
 #include <vector>
 
 namespace loopgate {
@@ -50,47 +52,104 @@ Scratch& scratch() {
   return s;
 }
 
-unsigned char paeth(unsigned char a, unsigned char b, unsigned char c) {
-  const int p = int{a} + int{b} - int{c};
-  const int pa = std::abs(p - int{a});
-  const int pb = std::abs(p - int{b});
-  const int pc = std::abs(p - int{c});
-  if (pa <= pb && pa <= pc) return a;
-  return pb <= pc ? b : c;
+// The Paeth predictor of a (left), b (up), c (up-left), without branches: the rows' bytes make the three
+// outcomes about equally likely, so a branch would be mispredicted often. p - a = b - c does not depend on a,
+// which keeps the serial chain through a (the pixel just decoded) short.
+inline unsigned paeth(unsigned a, unsigned b, unsigned c) {
+  const int b_c = static_cast<int>(b) - static_cast<int>(c);
+  const int a_c = static_cast<int>(a) - static_cast<int>(c);
+  const int pa = std::abs(b_c);        // |p - a|
+  const int pb = std::abs(a_c);        // |p - b|
+  const int pc = std::abs(a_c + b_c);  // |p - c|
+  // Selections by mask (all ones or zero), which compilers keep free of branches.
+  const unsigned take_c = 0U - static_cast<unsigned>(pb > pc);
+  const unsigned b_or_c = b ^ ((b ^ c) & take_c);
+  const unsigned take_b_or_c = 0U - static_cast<unsigned>(pa > std::min(pb, pc));
+  return a ^ ((a ^ b_or_c) & take_b_or_c);
 }
 
-// Rows of `filtered` (filter byte + width bytes each) into `image`; false on an unknown filter type.
+// One pixel of a row with filter type Type (PNG spec § 9.2): the filtered byte and its left, up and up-left
+// neighbours, already unfiltered (0 outside the image).
+template <int Type>
+inline unsigned unfilter_pixel(unsigned in, unsigned left, unsigned up, unsigned up_left) {
+  if constexpr (Type == 0) return in;
+  if constexpr (Type == 1) return (in + left) & 0xffU;
+  if constexpr (Type == 2) return (in + up) & 0xffU;
+  if constexpr (Type == 3) return (in + ((left + up) >> 1U)) & 0xffU;
+  if constexpr (Type == 4) return (in + paeth(left, up, up_left)) & 0xffU;
+}
+
+// Two consecutive rows at once (`in0`/`out0` below `prior`, `in1`/`out1` below out0), the second one pixel
+// behind the first. Each Sub, Average and Paeth row is a serial chain through the pixel to its left; the two
+// chains are independent, so the processor runs them side by side instead of waiting on one. The pixel to the
+// left is kept in a local, not read back from the output (which may alias the input for the compiler).
+template <int Type0, int Type1>
+void unfilter_rows(const unsigned char* in0, const unsigned char* in1, const unsigned char* prior,
+                   unsigned char* out0, unsigned char* out1, std::size_t width) {
+  unsigned left0 = unfilter_pixel<Type0>(in0[0], 0, prior[0], 0);
+  out0[0] = static_cast<unsigned char>(left0);
+  unsigned left1 = 0, up_left1 = 0;
+  for (std::size_t x = 1; x < width; ++x) {
+    const unsigned up1 = left0;  // out0[x - 1]
+    left0 = unfilter_pixel<Type0>(in0[x], left0, prior[x], prior[x - 1]);
+    out0[x] = static_cast<unsigned char>(left0);
+    left1 = unfilter_pixel<Type1>(in1[x - 1], left1, up1, up_left1);
+    out1[x - 1] = static_cast<unsigned char>(left1);
+    up_left1 = up1;
+  }
+  out1[width - 1] = static_cast<unsigned char>(unfilter_pixel<Type1>(in1[width - 1], left1, left0, up_left1));
+}
+
+template <int Type>
+void unfilter_row(const unsigned char* in, const unsigned char* prior, unsigned char* out,
+                  std::size_t width) {
+  unsigned left = unfilter_pixel<Type>(in[0], 0, prior[0], 0);
+  out[0] = static_cast<unsigned char>(left);
+  for (std::size_t x = 1; x < width; ++x) {
+    left = unfilter_pixel<Type>(in[x], left, prior[x], prior[x - 1]);
+    out[x] = static_cast<unsigned char>(left);
+  }
+}
+
+using RowPair = void (*)(const unsigned char*, const unsigned char*, const unsigned char*, unsigned char*,
+                         unsigned char*, std::size_t);
+using Row = void (*)(const unsigned char*, const unsigned char*, unsigned char*, std::size_t);
+
+template <int Type0, int... Type1>
+constexpr std::array<RowPair, 5> pair_row(std::integer_sequence<int, Type1...> /*types*/) {
+  return {&unfilter_rows<Type0, Type1>...};
+}
+
+template <int... Type>
+constexpr std::array<std::array<RowPair, 5>, 5> pair_table(std::integer_sequence<int, Type...> types) {
+  return {pair_row<Type>(types)...};
+}
+
+constexpr auto kRowPairs = pair_table(std::make_integer_sequence<int, 5>{});
+constexpr std::array<Row, 5> kRows = {&unfilter_row<0>, &unfilter_row<1>, &unfilter_row<2>, &unfilter_row<3>,
+                                      &unfilter_row<4>};
+
+// Rows of `filtered` (filter byte + width bytes each) into `image`, two at a time; false on an unknown filter
+// type.
 bool unfilter(const unsigned char* filtered, cv::Mat& image) {
   const auto width = static_cast<std::size_t>(image.cols);
   const std::vector<unsigned char> zeros(width, 0);  // the row above the first row
   const unsigned char* prior = zeros.data();
-  for (int y = 0; y < image.rows; ++y) {
-    const unsigned char* in = filtered + static_cast<std::size_t>(y) * (width + 1);
-    const unsigned char type = in[0];
-    ++in;
-    unsigned char* out = image.ptr<unsigned char>(y);
-    switch (type) {
-      case 0: std::memcpy(out, in, width); break;
-      case 1:  // Sub
-        out[0] = in[0];
-        for (std::size_t x = 1; x < width; ++x) out[x] = static_cast<unsigned char>(in[x] + out[x - 1]);
-        break;
-      case 2:  // Up
-        for (std::size_t x = 0; x < width; ++x) out[x] = static_cast<unsigned char>(in[x] + prior[x]);
-        break;
-      case 3:  // Average
-        out[0] = static_cast<unsigned char>(in[0] + (prior[0] >> 1));
-        for (std::size_t x = 1; x < width; ++x)
-          out[x] = static_cast<unsigned char>(in[x] + ((unsigned{out[x - 1]} + unsigned{prior[x]}) >> 1));
-        break;
-      case 4:                                                   // Paeth
-        out[0] = static_cast<unsigned char>(in[0] + prior[0]);  // paeth(0, b, 0) = b
-        for (std::size_t x = 1; x < width; ++x)
-          out[x] = static_cast<unsigned char>(in[x] + paeth(out[x - 1], prior[x], prior[x - 1]));
-        break;
-      default: return false;
-    }
-    prior = out;
+  const auto row_in = [&](int y) { return filtered + static_cast<std::size_t>(y) * (width + 1); };
+  int y = 0;
+  for (; y + 1 < image.rows; y += 2) {
+    const unsigned char* in0 = row_in(y);
+    const unsigned char* in1 = row_in(y + 1);
+    if (in0[0] > 4 || in1[0] > 4) return false;
+    unsigned char* out0 = image.ptr<unsigned char>(y);
+    unsigned char* out1 = image.ptr<unsigned char>(y + 1);
+    kRowPairs[in0[0]][in1[0]](in0 + 1, in1 + 1, prior, out0, out1, width);
+    prior = out1;
+  }
+  if (y < image.rows) {
+    const unsigned char* in = row_in(y);
+    if (in[0] > 4) return false;
+    kRows[in[0]](in + 1, prior, image.ptr<unsigned char>(y), width);
   }
   return true;
 }
