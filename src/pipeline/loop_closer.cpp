@@ -13,6 +13,7 @@
 #include "io/dataset.hpp"
 #include "io/g2o_file.hpp"
 #include "io/writers.hpp"
+#include "parallel/parallel_handoff.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/pipeline_config.hpp"
@@ -50,7 +51,8 @@ LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std
       active_(detects && config.verify.enabled),
       verify_config_(config.verify),
       graph_config_(config.posegraph),
-      verifier_(config.verify, dataset.camera()) {
+      verifier_(config.verify, dataset.camera()),
+      drain_threads_(config.run.threads) {
   if (!active_) return;
   poses_.resize(last_ - first_);
   sigma_m_.assign(last_ - first_, 0.0);
@@ -179,13 +181,43 @@ std::optional<std::string> LoopCloser::geometry_cell(std::size_t frame) const {
 std::shared_ptr<const OrbFeatures> LoopCloser::features_of(std::size_t frame) {
   if (const auto it = feature_cache_.find(frame); it != feature_cache_.end()) return it->second;
   auto features = std::make_shared<const OrbFeatures>(verifier_.detect(dataset_.load_image(frame)));
-  feature_cache_.emplace(frame, features);
+  remember_features(frame, features);
+  return features;
+}
+
+void LoopCloser::remember_features(std::size_t frame, std::shared_ptr<const OrbFeatures> features) {
+  feature_cache_.emplace(frame, std::move(features));
   feature_cache_order_.push_back(frame);
   while (feature_cache_order_.size() > static_cast<std::size_t>(verify_config_.feature_cache_frames)) {
     feature_cache_.erase(feature_cache_order_.front());
     feature_cache_order_.pop_front();
   }
-  return features;
+}
+
+void LoopCloser::prefetch_features(const std::vector<std::size_t>& frames) {
+  if (drain_threads_ < 2) return;
+  std::vector<std::size_t> missing;
+  for (const std::size_t f : frames)
+    if (!feature_cache_.contains(f) && std::find(missing.begin(), missing.end(), f) == missing.end())
+      missing.push_back(f);
+  if (missing.size() < 2) return;
+  // A frame whose image cannot be read is left out: features_of() reads it again and reports why.
+  std::vector<std::shared_ptr<const OrbFeatures>> found(missing.size());
+  if (!drain_arena_) drain_arena_ = std::make_unique<tbb::task_arena>(drain_threads_);
+  drain_arena_->execute([&] {
+    parallel_for_with_handoff(missing.size(), [&](std::size_t k) {
+      try {
+        found[k] = std::make_shared<const OrbFeatures>(verifier_.detect(dataset_.load_image(missing[k])));
+      } catch (const std::exception&) {
+        found[k] = nullptr;
+      }
+    });
+  });
+  for (std::size_t k = 0; k < missing.size(); ++k) {
+    if (!found[k]) continue;
+    remember_features(missing[k], std::move(found[k]));
+    ++drain_prefetched_;
+  }
 }
 
 bool LoopCloser::odometry_unbroken(std::size_t from, std::size_t to) const {
@@ -226,7 +258,7 @@ std::string LoopCloser::skip_reason(const Detection& loop) const {
   return {};
 }
 
-LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
+LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draining) {
   LoopResult out;
   out.loop = loop;
   if (unusable_.empty()) {
@@ -253,6 +285,11 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
   } else {
     out.neighbour = *neighbour;
     try {
+      // At the end of the stream the pipeline's threads are free: detect the three frames' features at once.
+      if (draining) {
+        ++drain_verified_;
+        prefetch_features({loop.query, loop.reference, *neighbour});
+      }
       const std::shared_ptr<const OrbFeatures> i = features_of(loop.query);
       const std::shared_ptr<const OrbFeatures> j = features_of(loop.reference);
       const std::shared_ptr<const OrbFeatures> n = features_of(*neighbour);
@@ -283,13 +320,15 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop) {
 void LoopCloser::work() {
   for (;;) {
     Detection loop;
+    bool draining = false;
     {
       std::unique_lock lock(mutex_);
       wake_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
       if (queue_.empty()) return;  // stopping, nothing left
       loop = queue_.front();
+      draining = stopping_;
     }
-    LoopResult result = verify_one(loop);
+    LoopResult result = verify_one(loop, draining);
     if (result_listener_) result_listener_(loop, result.result);
     bool solve_now = false;
     {
@@ -559,6 +598,8 @@ nlohmann::json LoopCloser::summary() const {
           {"odometry_cov_scale", final_odometry_cov_scale_},
           {"verify", stats_json(verify_ms)},
           {"optimize_streaming", stats_json(solve_ms_)},
+          {"end_of_stream",
+           {{"loops_verified", drain_verified_}, {"features_detected_in_parallel", drain_prefetched_}}},
           {"optimize_final",
            {{"ms", final_solve_ms_},
             {"iterations", final_report_.iterations},

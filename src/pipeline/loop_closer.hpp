@@ -8,6 +8,8 @@
 // the verification columns of loops.csv and frames.csv, summary fields.
 #pragma once
 
+#include <tbb/task_arena.h>
+
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -101,11 +103,17 @@ class LoopCloser {
   };
   static std::vector<std::string> verification_cells(const LoopResult& r);
   void work();
-  LoopResult verify_one(const Detection& loop);
+  // `draining`: the stream has ended (finish()), the pipeline's threads are free.
+  LoopResult verify_one(const Detection& loop, bool draining);
   // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
   std::string skip_reason(const Detection& loop) const;
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
   std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);
+  // At the end of the stream, with run.threads > 1: detects the features of those `frames` that are not
+  // cached on run.threads threads at once and caches them in this order (what features_of() would do one
+  // after the other, so every result is the same). Worker only.
+  void prefetch_features(const std::vector<std::size_t>& frames);
+  void remember_features(std::size_t frame, std::shared_ptr<const OrbFeatures> features);
   // Builds the graph from the poses of frames <= last and the verified loops so far; solves. Returns the
   // solve's time.
   double solve(std::size_t last, bool final);
@@ -144,7 +152,11 @@ class LoopCloser {
 
   // Worker-only (and finish(), after the join).
   std::unordered_map<std::size_t, std::shared_ptr<const OrbFeatures>> feature_cache_;
-  std::deque<std::size_t> feature_cache_order_;  // oldest first
+  std::deque<std::size_t> feature_cache_order_;   // oldest first
+  int drain_threads_ = 1;                         // run.threads: prefetch_features' threads
+  std::unique_ptr<tbb::task_arena> drain_arena_;  // created by the first prefetch
+  std::size_t drain_verified_ = 0;                // loops verified (not skipped) after the stream ended
+  std::size_t drain_prefetched_ = 0;              // features detected by prefetch_features
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
   // timing.csv's cells by query frame: its loops' verification and the streaming solves they started (mutex_)
