@@ -120,6 +120,33 @@ TEST(PoseGraph, AWrongLoopDoesNotBendTheMap) {
   EXPECT_LE(rmse(wrong, d.truth), 1.1 * rmse(clean, d.truth));
 }
 
+TEST(PoseGraph, BothSparseCholeskyLibrariesGiveTheSameOptimum) {
+  // posegraph.sparse_library: Eigen's SimplicialLDLT (the default) and CHOLMOD solve the same normal
+  // equations; the optima agree to far below what the outputs print (6 decimals), with a wrong loop switched
+  // off by both.
+  const std::size_t per_lap = 100;
+  const Drive d = circle_drive(per_lap, 0.002);
+  PoseGraphConfig eigen_config;
+  PoseGraphConfig cholmod_config;
+  cholmod_config.sparse_library = "suite_sparse";
+  ASSERT_EQ(eigen_config.sparse_library, "eigen");
+  PoseGraph eigen = graph_of(d, eigen_config, per_lap, 10);
+  PoseGraph cholmod = graph_of(d, cholmod_config, per_lap, 10);
+  for (PoseGraph* graph : {&eigen, &cholmod})
+    graph->add_edge(20, 150, EdgeKind::kLoop, pose(1, 0, 0, 0), cov(0.1, 0.01));
+  const SolveReport a = eigen.optimize(true, 0);
+  const SolveReport b = cholmod.optimize(true, 0);
+  EXPECT_EQ(a.outliers, 1u);
+  EXPECT_EQ(b.outliers, 1u);
+  EXPECT_NEAR(a.final_cost, b.final_cost, 1e-9 * std::max(1.0, b.final_cost));
+  for (std::size_t k = 0; k < eigen.node_count(); ++k) {
+    EXPECT_LT((eigen.pose(k).translation() - cholmod.pose(k).translation()).norm(), 1e-8) << k;
+    EXPECT_LT(Eigen::AngleAxisd(eigen.pose(k).rotation().transpose() * cholmod.pose(k).rotation()).angle(),
+              1e-9)
+        << k;
+  }
+}
+
 TEST(PoseGraph, SameResultFromTheInitialPosesWhateverSolvedBefore) {
   const std::size_t per_lap = 60;
   const Drive d = circle_drive(per_lap, 0.003);
@@ -204,6 +231,17 @@ TEST(PoseGraph, BadEdgesAndConfigAreRejected) {
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("posegraph.odometry_cov: 'filter' is not one of: model, odometry"),
               std::string::npos)
+        << e.what();
+  }
+  config = PoseGraphConfig{};
+  config.sparse_library = "cxsparse";
+  try {
+    config.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("posegraph.sparse_library: 'cxsparse' is not one of: eigen, suite_sparse"),
+        std::string::npos)
         << e.what();
   }
   config = PoseGraphConfig{};

@@ -77,6 +77,13 @@ void PoseGraphConfig::validate() const {
   if (!positive(loss_scale)) throw ConfigError("posegraph.loss_scale: must be a finite number > 0");
   if (!positive(outlier_chi2)) throw ConfigError("posegraph.outlier_chi2: must be a finite number > 0");
   if (max_iterations < 1) throw ConfigError("posegraph.max_iterations: must be >= 1");
+  if (sparse_library != "eigen" && sparse_library != "suite_sparse")
+    throw ConfigError("posegraph.sparse_library: '" + sparse_library +
+                      "' is not one of: eigen, suite_sparse");
+  if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(sparse_library == "eigen" ? ceres::EIGEN_SPARSE
+                                                                                  : ceres::SUITE_SPARSE))
+    throw ConfigError("posegraph.sparse_library: this build of Ceres has no " + sparse_library +
+                      " sparse Cholesky; use the other one");
   if (!non_negative(max_solve_s)) throw ConfigError("posegraph.max_solve_s: must be a finite number >= 0");
 }
 
@@ -208,6 +215,8 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   }
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  options.sparse_linear_algebra_library_type =
+      config_.sparse_library == "eigen" ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE;
   options.max_num_iterations = config_.max_iterations;
   if (max_seconds > 0) options.max_solver_time_in_seconds = max_seconds;
   options.num_threads = 1;  // deterministic

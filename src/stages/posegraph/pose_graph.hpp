@@ -40,6 +40,9 @@ struct PoseGraphConfig {
   int max_iterations = 50;       // per solve
   double max_solve_s = 2.0;      // per solve while the stream runs (the final solve has no time bound)
   bool optimize_on_loop = true;  // solve whenever verified loops arrived (off the frame's critical path)
+  // The sparse Cholesky of Ceres' SPARSE_NORMAL_CHOLESKY: "eigen" (Eigen's SimplicialLDLT; a pose graph is
+  // a chain with a few loops, whose factor has little fill-in) or "suite_sparse" (CHOLMOD, supernodal).
+  std::string sparse_library = "eigen";
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -57,6 +60,7 @@ struct PoseGraphConfig {
     v("max_iterations", self.max_iterations);
     v("max_solve_s", self.max_solve_s);
     v("optimize_on_loop", self.optimize_on_loop);
+    v("sparse_library", self.sparse_library);
   }
   void validate() const;  // throws ConfigError naming posegraph.KEY and its bound
 
