@@ -2,12 +2,15 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <random>
 #include <vector>
 
 #include "core/error.hpp"
 #include "stages/posegraph/pose_graph.hpp"
+#include "stages/posegraph/relative_pose_cost.hpp"
 
 namespace loopgate {
 namespace {
@@ -118,6 +121,66 @@ TEST(PoseGraph, AWrongLoopDoesNotBendTheMap) {
   EXPECT_GE(report.outliers, 1u);
   EXPECT_TRUE(wrong.edges().back().outlier);
   EXPECT_LE(rmse(wrong, d.truth), 1.1 * rmse(clean, d.truth));
+}
+
+TEST(PoseGraph, AnalyticJacobiansEqualAutomaticDifferentiation) {
+  // The edge's closed-form Jacobians against Ceres' automatic differentiation of the same residual, on random
+  // poses, measurements and (upper-triangular) square-root informations; the quaternions slightly off unit
+  // length, as a solver's steps leave them before the manifold renormalises.
+  std::mt19937 rng(7);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  const auto random_quaternion = [&] {
+    Eigen::Quaterniond q(normal(rng), normal(rng), normal(rng), normal(rng));
+    q.normalize();
+    return q;
+  };
+  for (int trial = 0; trial < 200; ++trial) {
+    Eigen::Isometry3d T_a_b = Eigen::Isometry3d::Identity();
+    T_a_b.linear() = random_quaternion().toRotationMatrix();
+    T_a_b.translation() = Eigen::Vector3d(normal(rng), normal(rng), normal(rng)) * 5.0;
+    Eigen::Matrix<double, 6, 6> sqrt_information = Eigen::Matrix<double, 6, 6>::Zero();
+    for (int r = 0; r < 6; ++r) {
+      sqrt_information(r, r) = 1.0 + std::abs(normal(rng)) * 10.0;
+      for (int c = r + 1; c < 6; ++c) sqrt_information(r, c) = normal(rng);
+    }
+    const RelativePoseCost analytic(T_a_b, sqrt_information);
+    const ceres::AutoDiffCostFunction<RelativePoseResidual, 6, 3, 4, 3, 4> automatic(
+        new RelativePoseResidual(T_a_b, sqrt_information));
+    std::array<double, 3> p_a{}, p_b{};
+    std::array<double, 4> q_a{}, q_b{};
+    for (double& x : p_a) x = normal(rng) * 20.0;
+    for (double& x : p_b) x = normal(rng) * 20.0;
+    const double scale_a = 1.0 + 0.01 * normal(rng), scale_b = 1.0 + 0.01 * normal(rng);
+    Eigen::Map<Eigen::Vector4d>(q_a.data()) = random_quaternion().coeffs() * scale_a;
+    Eigen::Map<Eigen::Vector4d>(q_b.data()) = random_quaternion().coeffs() * scale_b;
+    const double* parameters[] = {p_a.data(), q_a.data(), p_b.data(), q_b.data()};
+    std::array<double, 6> r_analytic{}, r_automatic{};
+    std::array<std::array<double, 24>, 4> J_analytic{}, J_automatic{};
+    double* jac_analytic[] = {J_analytic[0].data(), J_analytic[1].data(), J_analytic[2].data(),
+                              J_analytic[3].data()};
+    double* jac_automatic[] = {J_automatic[0].data(), J_automatic[1].data(), J_automatic[2].data(),
+                               J_automatic[3].data()};
+    ASSERT_TRUE(analytic.Evaluate(parameters, r_analytic.data(), jac_analytic));
+    ASSERT_TRUE(automatic.Evaluate(parameters, r_automatic.data(), jac_automatic));
+    // The same expression in doubles and in Jets: equal to rounding.
+    for (int k = 0; k < 6; ++k)
+      EXPECT_NEAR(r_analytic[k], r_automatic[k], 1e-12 * std::max(1.0, std::abs(r_automatic[k])))
+          << "trial " << trial;
+    const int sizes[] = {3, 4, 3, 4};
+    for (int block = 0; block < 4; ++block) {
+      double largest = 0.0;
+      for (int k = 0; k < 6 * sizes[block]; ++k) largest = std::max(largest, std::abs(J_automatic[block][k]));
+      for (int k = 0; k < 6 * sizes[block]; ++k)
+        EXPECT_NEAR(J_analytic[block][k], J_automatic[block][k], 1e-12 * std::max(1.0, largest))
+            << "trial " << trial << " block " << block << " entry " << k;
+    }
+    // Residual only (no Jacobians asked for), and some blocks only (a constant block has none).
+    std::array<double, 6> r_only{};
+    ASSERT_TRUE(analytic.Evaluate(parameters, r_only.data(), nullptr));
+    EXPECT_EQ(r_only, r_analytic);
+    double* some[] = {nullptr, J_analytic[1].data(), nullptr, nullptr};
+    ASSERT_TRUE(analytic.Evaluate(parameters, r_only.data(), some));
+  }
 }
 
 TEST(PoseGraph, BothSparseCholeskyLibrariesGiveTheSameOptimum) {

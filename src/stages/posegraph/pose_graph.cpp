@@ -8,38 +8,13 @@
 #include <stdexcept>
 
 #include "core/error.hpp"
+#include "stages/posegraph/relative_pose_cost.hpp"
 
 namespace loopgate {
 
 namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
-
-// r = sqrt_information * [R_a^T (p_b - p_a) - t_ab ; 2 vec(q_ab_measured^-1 q_a^-1 q_b)].
-class RelativePoseCost {
- public:
-  RelativePoseCost(const Eigen::Isometry3d& T_a_b, const Matrix6d& sqrt_information)
-      : t_a_b_(T_a_b.translation()), q_a_b_(T_a_b.rotation()), sqrt_information_(sqrt_information) {}
-
-  template <class T>
-  bool operator()(const T* p_a_ptr, const T* q_a_ptr, const T* p_b_ptr, const T* q_b_ptr, T* residual) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> p_a(p_a_ptr), p_b(p_b_ptr);
-    const Eigen::Map<const Eigen::Quaternion<T>> q_a(q_a_ptr), q_b(q_b_ptr);
-    const Eigen::Quaternion<T> q_a_inverse = q_a.conjugate();
-    const Eigen::Matrix<T, 3, 1> p_ab = q_a_inverse * (p_b - p_a);
-    const Eigen::Quaternion<T> q_error = q_a_b_.template cast<T>().conjugate() * (q_a_inverse * q_b);
-    Eigen::Map<Eigen::Matrix<T, 6, 1>> r(residual);
-    r.template head<3>() = p_ab - t_a_b_.template cast<T>();
-    r.template tail<3>() = T(2.0) * q_error.vec();
-    r.applyOnTheLeft(sqrt_information_.template cast<T>());
-    return true;
-  }
-
- private:
-  Eigen::Vector3d t_a_b_;
-  Eigen::Quaterniond q_a_b_;
-  Matrix6d sqrt_information_;
-};
 
 Eigen::Isometry3d to_isometry(const std::array<double, 7>& s) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
@@ -200,8 +175,7 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   for (const PoseGraphEdge& e : edges_) {
     if (e.outlier) continue;
     if (e.kind == EdgeKind::kLoop) ++report.loop_edges;
-    auto* cost = new ceres::AutoDiffCostFunction<RelativePoseCost, 6, 3, 4, 3, 4>(
-        new RelativePoseCost(e.T_a_b, e.sqrt_information));
+    auto* cost = new RelativePoseCost(e.T_a_b, e.sqrt_information);
     problem.AddResidualBlock(cost, e.kind == EdgeKind::kLoop ? loss.get() : nullptr, state_[e.a].data(),
                              state_[e.a].data() + 3, state_[e.b].data(), state_[e.b].data() + 3);
   }
