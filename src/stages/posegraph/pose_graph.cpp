@@ -203,7 +203,7 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   report.seconds = summary.total_time_in_seconds;
   report.converged = summary.termination_type == ceres::CONVERGENCE;
   for (PoseGraphEdge& e : edges_) {
-    const RelativePoseCost cost(e.T_a_b, e.sqrt_information);
+    const RelativePoseResidual cost(e.T_a_b, e.sqrt_information);
     Eigen::Matrix<double, 6, 1> r;
     cost(state_[e.a].data(), state_[e.a].data() + 3, state_[e.b].data(), state_[e.b].data() + 3, r.data());
     e.chi2 = r.squaredNorm();

@@ -9,12 +9,8 @@
 
 namespace loopgate {
 
-// r = sqrt_information * [R_a^T (p_b - p_a) - t_ab ; 2 vec(q_ab_measured^-1 q_a^-1 q_b)], with its Jacobians
-// in closed form (automatic differentiation of the same expression took 40% of a final solve on KITTI 00).
-// The quaternions are Eigen's (x, y, z, w) parameter blocks; the Jacobians are with respect to those four
-// numbers as the expression uses them (Eigen rotates a vector by a quaternion assuming it is unit), as
-// automatic differentiation gives them (PoseGraph.AnalyticJacobiansEqualAutomaticDifferentiation).
-// The residual as a functor of any scalar type (what automatic differentiation needs).
+// The residual r = sqrt_information * [R_a^T (p_b - p_a) - t_ab ; 2 vec(q_ab_measured^-1 q_a^-1 q_b)] as a
+// functor of any scalar type (automatic differentiation needs one; the chi-square of an edge after a solve).
 class RelativePoseResidual {
  public:
   RelativePoseResidual(const Eigen::Isometry3d& T_a_b, const Eigen::Matrix<double, 6, 6>& sqrt_information)
@@ -43,16 +39,15 @@ class RelativePoseResidual {
   Eigen::Matrix<double, 6, 6> sqrt_information_;
 };
 
+// The same residual with its Jacobians in closed form (automatic differentiation of it took 40% of a final
+// solve on KITTI 00). The quaternions are Eigen's (x, y, z, w) parameter blocks; the Jacobians are with
+// respect to those four numbers as the expression uses them (Eigen rotates a vector by a quaternion assuming
+// it is unit), as automatic differentiation gives them
+// (PoseGraph.AnalyticJacobiansEqualAutomaticDifferentiation).
 class RelativePoseCost : public ceres::SizedCostFunction<6, 3, 4, 3, 4> {
  public:
   RelativePoseCost(const Eigen::Isometry3d& T_a_b, const Eigen::Matrix<double, 6, 6>& sqrt_information)
       : residual_(T_a_b, sqrt_information) {}
-
-  // The residual alone (the cost of an edge after a solve).
-  bool operator()(const double* p_a, const double* q_a, const double* p_b, const double* q_b,
-                  double* residual) const {
-    return residual_(p_a, q_a, p_b, q_b, residual);
-  }
 
   bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
     residual_(parameters[0], parameters[1], parameters[2], parameters[3], residuals);
