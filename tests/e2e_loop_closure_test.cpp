@@ -133,6 +133,8 @@ TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
   ASSERT_TRUE(summary.contains("trajectory_accuracy_corrected"));
   EXPECT_TRUE(summary["trajectory_accuracy_corrected"].contains("rmse_m"));
   EXPECT_GT(summary["loop_closure"]["verify"]["count"].get<int>(), 0);
+  // The demo's first 60 frames are lit alike: ORB verifies or rejects, the tracking fallback never runs.
+  EXPECT_EQ(summary["loop_closure"]["verified_by_tracking"].get<int>(), 0);
   // The odometry edges carry the odometry's own covariance (drift source here), scaled by what the loops
   // show.
   EXPECT_EQ(summary["loop_closure"]["odometry_cov"], "odometry");

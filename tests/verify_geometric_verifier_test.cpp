@@ -78,13 +78,13 @@ struct Scene {
   Eigen::Isometry3d T_j_i;
 };
 
-Scene scene(const Eigen::Isometry3d& T_b_c, std::uint64_t seed_i = 7) {
+Scene scene(const Eigen::Isometry3d& T_b_c, std::uint64_t seed_i = 7,
+            const Eigen::Isometry3d& T_w_ci = camera_pose(1.0, 0.3, -0.6, 5 * kPi / 180)) {
   Scene s;
   s.camera = calibration(T_b_c);
   const cv::Mat tex = texture(7);
   const Eigen::Isometry3d T_w_cj = camera_pose(0, 0, 0, 0);
   const Eigen::Isometry3d T_w_cn = camera_pose(0.5, 0, 0.3, 0.02);
-  const Eigen::Isometry3d T_w_ci = camera_pose(1.0, 0.3, -0.6, 5 * kPi / 180);
   const Eigen::Isometry3d T_c_b = T_b_c.inverse();
   s.j = {render(tex, s.camera, T_w_cj), T_w_cj * T_c_b};
   s.n = {render(tex, s.camera, T_w_cn), T_w_cn * T_c_b};
@@ -180,6 +180,89 @@ TEST(GeometricVerifier, RejectsAnUnrelatedView) {
   EXPECT_EQ(r.reason.rfind("geometry: ", 0), 0u) << r.reason;
 }
 
+// Frame i "at night": the day view dimmed to a few grey levels under a lamp's fall-off (a smooth gain from 3%
+// to 13% across the image), with photon-like noise of 3 grey levels, quantised to 8 bits.
+cv::Mat at_night(const cv::Mat& day, std::uint64_t seed) {
+  cv::Mat out(day.size(), CV_8UC1);
+  cv::RNG rng(seed);
+  const double cx = 0.7 * day.cols, cy = 0.3 * day.rows, r2 = 0.25 * day.cols * day.cols;
+  for (int v = 0; v < day.rows; ++v) {
+    for (int u = 0; u < day.cols; ++u) {
+      const double gain = 0.03 + 0.1 * std::exp(-((u - cx) * (u - cx) + (v - cy) * (v - cy)) / r2);
+      const double value = gain * day.at<std::uint8_t>(v, u) + rng.gaussian(3.0);
+      out.at<std::uint8_t>(v, u) = cv::saturate_cast<std::uint8_t>(value);
+    }
+  }
+  return out;
+}
+
+TEST(GeometricVerifier, NoiseSigmaEstimatesWhiteNoiseAndIgnoresSmoothShading) {
+  cv::Mat flat(480, 640, CV_8UC1, cv::Scalar(100));
+  cv::Mat noise(flat.size(), CV_32F);
+  cv::RNG(3).fill(noise, cv::RNG::NORMAL, 0.0, 5.0);
+  cv::Mat noisy;
+  cv::Mat(noise + 100.0).convertTo(noisy, CV_8U);
+  EXPECT_NEAR(noise_sigma(noisy), 5.0, 0.3);
+  cv::Mat ramp(480, 640, CV_8UC1);
+  for (int v = 0; v < ramp.rows; ++v)
+    for (int u = 0; u < ramp.cols; ++u) ramp.at<std::uint8_t>(v, u) = static_cast<std::uint8_t>((u + v) / 5);
+  EXPECT_LT(noise_sigma(ramp), 0.5);
+  EXPECT_EQ(noise_sigma(cv::Mat()), 0.0);
+}
+
+// Normalisation cancels a smooth illumination: the day view and the same view under a lamp's fall-off (no
+// noise) normalise to nearly the same image, an unrelated view does not.
+TEST(GeometricVerifier, IlluminationNormalisationCancelsASmoothGain) {
+  const Scene s = scene(Eigen::Isometry3d::Identity());
+  cv::Mat lit(s.j.image.size(), CV_8UC1);
+  for (int v = 0; v < lit.rows; ++v)
+    for (int u = 0; u < lit.cols; ++u)
+      lit.at<std::uint8_t>(v, u) =
+          cv::saturate_cast<std::uint8_t>((0.2 + 0.6 * u / lit.cols) * s.j.image.at<std::uint8_t>(v, u));
+  const cv::Rect inner(20, 20, lit.cols - 40, lit.rows - 40);
+  const auto mean_difference = [&](const cv::Mat& a, const cv::Mat& b) {
+    cv::Mat d;
+    cv::absdiff(normalise_illumination(a, 4.0, 0.0)(inner), normalise_illumination(b, 4.0, 0.0)(inner), d);
+    return cv::mean(d)[0];
+  };
+  const double same = mean_difference(s.j.image, lit);
+  const double other = mean_difference(s.j.image, scene(Eigen::Isometry3d::Identity(), 99).i.image);
+  EXPECT_LT(same, 4.0);
+  EXPECT_GT(other, 5.0 * same);
+}
+
+// Day against night: ORB's matches do not verify the loop, tracking j's points into i on normalised images
+// does, with the metric pose; with the fallback off the loop is rejected and the reason says both. Frame i
+// revisits j as a car does, half a metre aside and 2 degrees off.
+TEST(GeometricVerifier, TracksTheLoopIntoANightImageWhereOrbFails) {
+  Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(0.5, 0.1, -0.2, 2 * kPi / 180));
+  s.i.image = at_night(s.i.image, 5);
+  VerifyConfig orb_only;
+  orb_only.track_pyramid_levels = 0;
+  const VerifyResult without = GeometricVerifier(orb_only, s.camera).verify(s.i, s.j, s.n);
+  EXPECT_FALSE(without.verified) << "ORB alone verified the night view: the test's premise is lost";
+  const GeometricVerifier verifier(VerifyConfig{}, s.camera);
+  const VerifyResult r = verifier.verify(s.i, s.j, s.n);
+  ASSERT_TRUE(r.verified) << r.reason;
+  EXPECT_TRUE(r.tracked);
+  EXPECT_EQ(r.reason.rfind("verified by tracking (", 0), 0u) << r.reason;
+  EXPECT_LT((r.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15)
+      << r.T_j_i.translation().transpose() << " vs " << s.T_j_i.translation().transpose();
+  EXPECT_LT(Eigen::AngleAxisd(r.T_j_i.rotation().transpose() * s.T_j_i.rotation()).angle(), 0.02);
+  // The odometry's rotation of i starts the tracking where j's points rotate to: the same pose.
+  const Eigen::Matrix3d R_w_bi = (s.j.T_w_b * s.T_j_i).linear();
+  const VerifyResult predicted = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image),
+                                                 s.j.T_w_b, verifier.detect(s.n.image), s.n.T_w_b, &R_w_bi);
+  ASSERT_TRUE(predicted.verified) << predicted.reason;
+  EXPECT_LT((predicted.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15);
+  // An unrelated view at night is rejected by both, and the reason gives both counts.
+  Scene unrelated = scene(Eigen::Isometry3d::Identity(), 99);
+  unrelated.i.image = at_night(unrelated.i.image, 6);
+  const VerifyResult no = verifier.verify(unrelated.i, unrelated.j, unrelated.n);
+  EXPECT_FALSE(no.verified);
+  EXPECT_NE(no.reason.find("; tracked: "), std::string::npos) << no.reason;
+}
+
 TEST(GeometricVerifier, SkipsTinyImagesAndMissingCalibrationWithAReason) {
   CameraCalibration thumbs = calibration(Eigen::Isometry3d::Identity());
   thumbs.width_px = 64;
@@ -206,6 +289,14 @@ TEST(GeometricVerifier, ConfigErrorsNameTheKey) {
     FAIL();
   } catch (const ConfigError& e) {
     EXPECT_NE(std::string(e.what()).find("verify.min_inliers"), std::string::npos);
+  }
+  VerifyConfig even;
+  even.track_window_px = 20;
+  try {
+    even.validate();
+    FAIL();
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("verify.track_window_px"), std::string::npos);
   }
   VerifyConfig negative;
   negative.odometry_chi2 = -1.0;

@@ -296,18 +296,21 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draini
       if (i->image_size.empty() || j->image_size.empty() || n->image_size.empty()) {
         out.result.reason = "geometry: image missing";
       } else {
-        out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour));
+        const std::optional<Eigen::Isometry3d> T_w_bi = pose_of(loop.query);
+        const Eigen::Matrix3d R_w_bi =
+            T_w_bi ? Eigen::Matrix3d(T_w_bi->linear()) : Eigen::Matrix3d::Identity();
         // The image geometry agrees; the odometry must too (a copy of the place elsewhere looks the same),
         // when its chain from j to i is whole (no frame lost or re-initialised in between).
-        if (out.result.verified && odometry_unbroken(loop.reference, loop.query)) {
-          std::string why = odometry_disagreement(
-              *pose_of(loop.query), *pose_of(loop.reference), out.result, sigma_m_[loop.query - first_],
-              sigma_m_[loop.reference - first_], verify_config_.odometry_chi2);
-          if (!why.empty()) {
-            out.result.verified = false;
-            out.result.reason = std::move(why);
-          }
+        GeometricVerifier::Veto odometry_check;
+        if (odometry_unbroken(loop.reference, loop.query)) {
+          odometry_check = [&](const VerifyResult& r) {
+            return odometry_disagreement(*pose_of(loop.query), *pose_of(loop.reference), r,
+                                         sigma_m_[loop.query - first_], sigma_m_[loop.reference - first_],
+                                         verify_config_.odometry_chi2);
+          };
         }
+        out.result = verifier_.verify(*i, *j, *pose_of(loop.reference), *n, *pose_of(*neighbour),
+                                      T_w_bi ? &R_w_bi : nullptr, odometry_check);
       }
     } catch (const std::exception& e) {
       out.result.reason = std::string("geometry: ") + e.what();
@@ -578,10 +581,11 @@ void LoopCloser::annotate_loops(LoopsWriter& loops) const {
 }
 
 nlohmann::json LoopCloser::summary() const {
-  std::size_t verified = 0, outliers = 0, skipped = 0;
+  std::size_t verified = 0, tracked = 0, outliers = 0, skipped = 0;
   std::vector<double> verify_ms;
   for (const LoopResult& r : results_) {
     verified += r.result.verified ? 1 : 0;
+    tracked += r.result.verified && r.result.tracked ? 1 : 0;
     outliers += r.outlier ? 1 : 0;
     skipped += r.skipped ? 1 : 0;
     if (!r.skipped) verify_ms.push_back(r.verify_ms);
@@ -590,6 +594,7 @@ nlohmann::json LoopCloser::summary() const {
           {"unusable_reason", unusable_},
           {"loops", results_.size()},
           {"verified", verified},
+          {"verified_by_tracking", tracked},
           {"rejected_geometry", results_.size() - verified - skipped},
           {"skipped", skipped},
           {"graph_outliers", outliers},

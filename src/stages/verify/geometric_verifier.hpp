@@ -11,6 +11,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <functional>
 #include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
@@ -51,6 +52,17 @@ struct VerifyConfig {
   int skip_after_verified_frames = 0;  // skip (i, j) when (i', j') was verified with |i-i'|, |j-j'| <= N
   int skip_after_rejected_frames = 0;  // the same after a rejected (i', j')
   int feature_cache_frames = 64;       // ORB features kept per frame (detected once, reused)
+  // When ORB's matches do not verify a loop across a change of illumination (day against night: the
+  // descriptors of a lamp-lit, noisy image differ from the day's), j's triangulated points are tracked into
+  // i by a pyramidal KLT on locally normalised images and PnP runs on those (track_across_illumination
+  // below). A change of illumination: the two images' noise (noise_sigma()) differs by track_min_noise_ratio
+  // or more (noise grows as the square root of the gain: 2 = a gain ratio of 4). 0 levels: no fallback.
+  int track_pyramid_levels = 4;      // KLT pyramid levels: 4 follow ~100 px (a revisit's offset)
+  int track_window_px = 15;          // KLT window
+  double track_norm_sigma_px = 4.0;  // window (a Gaussian's sigma) of the local mean and deviation
+  double track_fb_max_px = 1.0;      // forward-backward agreement j -> i -> j
+  double track_min_noise_ratio =
+      2.0;  // the change of illumination that calls for it (1: after every rejection)
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -75,6 +87,11 @@ struct VerifyConfig {
     v("skip_after_verified_frames", self.skip_after_verified_frames);
     v("skip_after_rejected_frames", self.skip_after_rejected_frames);
     v("feature_cache_frames", self.feature_cache_frames);
+    v("track_pyramid_levels", self.track_pyramid_levels);
+    v("track_window_px", self.track_window_px);
+    v("track_norm_sigma_px", self.track_norm_sigma_px);
+    v("track_fb_max_px", self.track_fb_max_px);
+    v("track_min_noise_ratio", self.track_min_noise_ratio);
   }
   // Throws ConfigError naming verify.KEY and its bound.
   void validate() const;
@@ -82,9 +99,10 @@ struct VerifyConfig {
 
 struct VerifyResult {
   bool verified = false;
-  std::string reason;  // why not ("geometry: 12 inliers < 25"), or "verified"
-  int matches = 0;     // i-to-j matches with a triangulated point
-  int points = 0;      // points triangulated from j and j + k
+  std::string reason;    // why not ("geometry: 12 inliers < 25"), or "verified" / "verified by tracking"
+  bool tracked = false;  // verified by the tracking fallback (ORB's matches did not verify it)
+  int matches = 0;       // i-to-j matches with a triangulated point
+  int points = 0;        // points triangulated from j and j + k
   int inliers = 0;
   Eigen::Isometry3d T_j_i = Eigen::Isometry3d::Identity();                    // body i in body j
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Identity();  // (position, rotation)
@@ -117,7 +135,20 @@ struct OrbFeatures {
   cv::Mat descriptors;
   std::vector<Eigen::Vector2d> xy;  // undistorted normalised coordinates
   cv::Size image_size;
+  cv::Mat image;  // the grey image (shared, not copied): the tracking fallback's input
 };
+
+// The image the tracking fallback aligns: each pixel's deviation from its local mean over the local standard
+// deviation (a window of about a Gaussian of `sigma_px`), after smoothing the image down to `noise_target`
+// grey levels of noise (Immerkaer's estimate; 0: half a pixel); CV_8U, 128 + 32 x the normalised value.
+// Smooth illumination (a lamp's fall-off, an exposure) cancels in the ratio: what remains is the local
+// texture, as in SeqSLAM's patch normalisation. `noise`: the image's noise_sigma() when known (< 0: estimated
+// here).
+cv::Mat normalise_illumination(const cv::Mat& grey, double sigma_px, double noise_target,
+                               double noise = -1.0);
+
+// Immerkaer's (1996) estimate of the standard deviation of white noise in a grey image, in grey levels.
+double noise_sigma(const cv::Mat& grey);
 
 // Query row -> train row of the Hamming nearest neighbour passing Lowe's ratio test (best < ratio x second
 // best), -1 where none: the matches cv::BFMatcher(NORM_HAMMING).knnMatch(k = 2) gives with that test (a tie
@@ -133,9 +164,18 @@ class GeometricVerifier {
   // input: the result says why it is not verified.
   VerifyResult verify(const VerifyFrame& i, const VerifyFrame& j, const VerifyFrame& n) const;
 
+  // A check of a pose the images verified (the odometry's: odometry_disagreement()): a reason to reject it,
+  // or empty.
+  using Veto = std::function<std::string(const VerifyResult&)>;
+
   // The same from features detected beforehand (detect()): i's features, j's and n's with their poses.
+  // `R_w_bi`, the odometry's rotation of frame i when known, starts the tracking fallback where the rotation
+  // from j to i moves j's points (relative rotation drifts little; the translation is left to the images).
+  // `veto` judges each pose the images verify, ORB's then the fallback's: across a change of illumination
+  // ORB's matches can give a wrong pose with many inliers, which the odometry rejects and tracking corrects.
   VerifyResult verify(const OrbFeatures& i, const OrbFeatures& j, const Eigen::Isometry3d& T_w_bj,
-                      const OrbFeatures& n, const Eigen::Isometry3d& T_w_bn) const;
+                      const OrbFeatures& n, const Eigen::Isometry3d& T_w_bn,
+                      const Eigen::Matrix3d* R_w_bi = nullptr, const Veto& veto = {}) const;
 
   // ORB features of a grey image (none without a calibration or for an empty image).
   OrbFeatures detect(const cv::Mat& image) const;
@@ -146,6 +186,31 @@ class GeometricVerifier {
   const VerifyConfig& config() const { return config_; }
 
  private:
+  // The pose of i from points of a source frame (j or its neighbour) tracked into i: `uv_src` their pixels
+  // in the source image, `p_csrc` their positions in its camera, `c_other` the centre of the camera they were
+  // triangulated with (in the source camera). result.T_j_i is the source body's T_src_i; note says how many
+  // points tracked and inliers, and the position sigma their geometry gives (pnp_position_sigma_m).
+  struct TrackedPose {
+    VerifyResult result;
+    std::string note;
+  };
+  using Pyramid = std::vector<cv::Mat>;
+  TrackedPose track_into_i(const Pyramid& pyramid_src, const Pyramid& pyramid_i,
+                           std::vector<cv::Point2f> uv_src, const std::vector<Eigen::Vector3d>& p_csrc,
+                           const Eigen::Isometry3d& T_w_csrc, const Eigen::Vector3d& c_other,
+                           const Eigen::Matrix3d* R_w_bi, double threshold) const;
+  // The KLT pyramid of normalise_illumination(grey) smoothed from its `noise` to `noise_target`.
+  Pyramid normalised_pyramid(const cv::Mat& grey, double noise, double noise_target) const;
+  // PnP RANSAC on the correspondences, refined on its inliers: fills `result` (verified, or the reason).
+  void solve_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image,
+                  double threshold, const Eigen::Isometry3d& T_b_c, VerifyResult& result) const;
+  // `points` of image j tracked into image i on their normalised_pyramid()s, forward and back, starting where
+  // the rotation R_ci_cj (when given) moves them: where a point is found, points[k] becomes its position in i
+  // and found[k] is 1.
+  std::vector<unsigned char> track_across_illumination(const Pyramid& pyramid_j, const Pyramid& pyramid_i,
+                                                       const Eigen::Matrix3d* R_ci_cj,
+                                                       std::vector<cv::Point2f>& points) const;
+
   VerifyConfig config_;
   std::optional<CameraModel> camera_;
 };
