@@ -282,30 +282,20 @@ TEST(GeometricVerifier, SkipsTinyImagesAndMissingCalibrationWithAReason) {
 }
 
 TEST(GeometricVerifier, ConfigErrorsNameTheKey) {
-  VerifyConfig config;
-  config.min_inliers = 3;
-  try {
-    config.validate();
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("verify.min_inliers"), std::string::npos);
-  }
-  VerifyConfig even;
-  even.track_window_px = 20;
-  try {
-    even.validate();
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("verify.track_window_px"), std::string::npos);
-  }
-  VerifyConfig negative;
-  negative.odometry_chi2 = -1.0;
-  try {
-    negative.validate();
-    FAIL();
-  } catch (const ConfigError& e) {
-    EXPECT_NE(std::string(e.what()).find("verify.odometry_chi2"), std::string::npos);
-  }
+  const auto expect_error_naming = [](const std::string& key, auto&& set) {
+    VerifyConfig config;
+    set(config);
+    try {
+      config.validate();
+      ADD_FAILURE() << key << ": no error";
+    } catch (const ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("verify." + key), std::string::npos) << e.what();
+    }
+  };
+  expect_error_naming("min_inliers", [](VerifyConfig& c) { c.min_inliers = 3; });
+  expect_error_naming("track_window_px", [](VerifyConfig& c) { c.track_window_px = 20; });
+  expect_error_naming("track_min_noise_ratio", [](VerifyConfig& c) { c.track_min_noise_ratio = 0.5; });
+  expect_error_naming("odometry_chi2", [](VerifyConfig& c) { c.odometry_chi2 = -1.0; });
 }
 
 // A loop verified by the images, checked against the odometry: sigma^2 = sigma_i^2 - sigma_j^2 + the edge's
