@@ -585,7 +585,7 @@ nlohmann::json LoopCloser::summary() const {
   std::vector<double> verify_ms;
   for (const LoopResult& r : results_) {
     verified += r.result.verified ? 1 : 0;
-    tracked += r.result.verified && r.result.tracked ? 1 : 0;
+    tracked += r.result.tracked ? 1 : 0;  // set on verified loops only
     outliers += r.outlier ? 1 : 0;
     skipped += r.skipped ? 1 : 0;
     if (!r.skipped) verify_ms.push_back(r.verify_ms);

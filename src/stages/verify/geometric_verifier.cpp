@@ -4,7 +4,6 @@
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/LU>
-#include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
@@ -73,12 +72,13 @@ double pnp_position_sigma_m(const std::vector<Eigen::Vector3d>& p_cj, const Eige
     const Eigen::Matrix<double, 2, 6> J = J_proj * dP;
     H += J.transpose() * C.inverse() * J;
   }
-  const Eigen::Matrix<double, 6, 6> cov = H.completeOrthogonalDecomposition().pseudoInverse();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov.topLeftCorner<3, 3>());
-  const double largest = eig.eigenvalues().maxCoeff();
-  return std::isfinite(largest) && largest > 0.0 && H.fullPivLu().rank() == 6
-             ? std::sqrt(largest)
-             : std::numeric_limits<double>::infinity();
+  const Eigen::FullPivLU<Eigen::Matrix<double, 6, 6>> lu(H);
+  if (lu.rank() < 6) return std::numeric_limits<double>::infinity();  // some direction not observed at all
+  const Eigen::Matrix3d cov_position = lu.inverse().topLeftCorner<3, 3>();
+  const double largest =
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov_position).eigenvalues().maxCoeff();
+  return std::isfinite(largest) && largest > 0.0 ? std::sqrt(largest)
+                                                 : std::numeric_limits<double>::infinity();
 }
 
 // Binary descriptors as rows of 64-bit words (zero-padded), so that a distance is a few popcounts.

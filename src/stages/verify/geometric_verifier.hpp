@@ -57,12 +57,11 @@ struct VerifyConfig {
   // i by a pyramidal KLT on locally normalised images and PnP runs on those (track_across_illumination
   // below). A change of illumination: the two images' noise (noise_sigma()) differs by track_min_noise_ratio
   // or more (noise grows as the square root of the gain: 2 = a gain ratio of 4). 0 levels: no fallback.
-  int track_pyramid_levels = 4;      // KLT pyramid levels: 4 follow ~100 px (a revisit's offset)
-  int track_window_px = 15;          // KLT window
-  double track_norm_sigma_px = 4.0;  // window (a Gaussian's sigma) of the local mean and deviation
-  double track_fb_max_px = 1.0;      // forward-backward agreement j -> i -> j
-  double track_min_noise_ratio =
-      2.0;  // the change of illumination that calls for it (1: after every rejection)
+  int track_pyramid_levels = 4;        // KLT pyramid levels: 4 follow ~100 px (a revisit's offset)
+  int track_window_px = 15;            // KLT window
+  double track_norm_sigma_px = 4.0;    // window (a Gaussian's sigma) of the local mean and deviation
+  double track_fb_max_px = 1.0;        // forward-backward agreement j -> i -> j
+  double track_min_noise_ratio = 2.0;  // the illumination change that calls for it (1: every rejection)
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
