@@ -321,6 +321,34 @@ TEST(DirdExtractor, AreaResizeIsTheRoundedBlockMean) {
   EXPECT_EQ(extract_area(small), extract(upsampled, "l2"));
 }
 
+TEST(DirdExtractor, AreaResizeOfIrregularBlocksIsTheRoundedBlockMeanOfTheRule) {
+  // Frame sizes whose blocks are 3 or 4 pixels wide and 1 to 3 rows high (EuRoC 752 x 480, KITTI's 1241 x
+  // 376, an odd 333 x 101), noise-like pixels: the working image by the rule, block (u, v) = source rows
+  // [v H / 192, max(that + 1, (v + 1) H / 192)) and the same for columns, its mean rounded half up.
+  for (const auto& [rows, cols] : {std::pair{480, 752}, std::pair{376, 1241}, std::pair{101, 333}}) {
+    const cv::Mat image =
+        make_image(rows, cols, [](int x, int y) { return (x * 7919 + y * 104729 + x * y * 31) % 256; });
+    const auto block = [](int k, int n) {
+      const int lo = k * n / 192;
+      return std::pair{lo, std::min(n, std::max(lo + 1, (k + 1) * n / 192))};
+    };
+    const cv::Mat means = make_image(192, 192, [&](int u, int v) {
+      const auto [r0, r1] = block(v, rows);
+      const auto [c0, c1] = block(u, cols);
+      int sum = 0;
+      for (int y = r0; y < r1; ++y) {
+        for (int x = c0; x < c1; ++x) sum += image.at<std::uint8_t>(y, x);
+      }
+      const int count = (r1 - r0) * (c1 - c0);
+      return (sum + count / 2) / count;
+    });
+    for (const char* normalization : {"libdird", "l2"}) {
+      EXPECT_EQ(extract_area(image, normalization), extract(means, normalization))
+          << rows << " x " << cols << ", " << normalization;
+    }
+  }
+}
+
 TEST(DirdExtractor, AreaResizeAveragesSensorNoiseAway) {
   // A textured 1241 x 376 frame and the same with Gaussian noise of sigma 9 grey levels (the simulator's
   // harsh night): the area working image keeps the descriptor much closer to the clean one.
