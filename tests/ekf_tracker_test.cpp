@@ -6,7 +6,9 @@
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
 #include <set>
+#include <stdexcept>
 #include <utility>
+#include <vector>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -24,6 +26,52 @@ CameraCalibration pinhole(int width, int height) {
   c.cx = 0.5 * (width - 1);
   c.cy = 0.5 * (height - 1);
   return c;
+}
+
+// The reference: nth_element over every second row and column.
+float quarter_median_by_sorting(const cv::Mat& m) {
+  std::vector<float> values;
+  for (int y = 0; y < m.rows; y += 2) {
+    for (int x = 0; x < m.cols; x += 2) values.push_back(m.at<float>(y, x));
+  }
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
+
+TEST(EkfTracker, QuarterMedianIsTheValueNthElementGives) {
+  cv::RNG rng(7);
+  int cases = 0;
+  for (const auto& [rows, cols] : {std::pair{1, 1}, std::pair{1, 2}, std::pair{3, 5}, std::pair{120, 125},
+                                   std::pair{121, 126}, std::pair{94, 207}}) {
+    for (int kind = 0; kind < 5; ++kind) {
+      cv::Mat m(rows, cols, CV_32FC1);
+      for (int y = 0; y < rows; ++y) {
+        for (int x = 0; x < cols; ++x) {
+          float v = 0.0F;
+          switch (kind) {
+            case 0: v = rng.uniform(0.0F, 1e-3F); break;                       // corner responses
+            case 1: v = rng.uniform(-1e-6F, 1e-6F); break;                     // rounding around 0
+            case 2: v = static_cast<float>(rng.uniform(0, 4)) * 0.25F; break;  // many ties
+            case 3: v = rng.uniform(0, 2) == 0 ? 0.0F : -0.0F; break;          // signed zeros
+            default:
+              v = std::exp(rng.uniform(-60.0F, 60.0F)) * (rng.uniform(0, 2) ? 1.0F : -1.0F);  // wide range
+          }
+          m.at<float>(y, x) = v;
+        }
+      }
+      const float expected = quarter_median_by_sorting(m);
+      EXPECT_EQ(quarter_median(m), expected) << rows << " x " << cols << ", kind " << kind;
+      // A view into a larger image (the tracker passes a grid cell's responses).
+      cv::Mat big(rows + 3, cols + 4, CV_32FC1, cv::Scalar(1e9));
+      m.copyTo(big(cv::Rect(2, 1, cols, rows)));
+      EXPECT_EQ(quarter_median(big(cv::Rect(2, 1, cols, rows))), expected) << "view, kind " << kind;
+      ++cases;
+    }
+  }
+  EXPECT_EQ(cases, 30);
+  EXPECT_EQ(quarter_median(cv::Mat()), 0.0F);
+  EXPECT_THROW(quarter_median(cv::Mat(4, 4, CV_8UC1, cv::Scalar(0))), std::invalid_argument);
 }
 
 cv::Mat textured_image(int width, int height) {

@@ -1,11 +1,15 @@
 #include "stages/ekf/feature_tracker.hpp"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
+#include <stdexcept>
 #include <string>
 
 #include "core/error.hpp"
@@ -20,7 +24,43 @@ double ms_since(Clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
 }
 
+// Orders floats as their values do (negative ones reversed): the key of the histogram below.
+std::uint32_t order_key(float value) {
+  std::uint32_t bits = 0;
+  std::memcpy(&bits, &value, sizeof bits);
+  return (bits & 0x80000000U) != 0 ? ~bits : bits | 0x80000000U;
+}
+
 }  // namespace
+
+// A histogram of the top 12 bits of order_key() finds the bucket that holds the median and its rank there;
+// only that bucket's values, a few percent, are then partially sorted.
+float quarter_median(const cv::Mat& response) {
+  if (!response.empty() && response.type() != CV_32FC1)
+    throw std::invalid_argument("quarter_median: expected a CV_32F single-channel image");
+  constexpr int kShift = 20;
+  std::array<std::uint32_t, std::size_t{1} << (32 - kShift)> histogram{};
+  std::size_t n = 0;
+  for (int y = 0; y < response.rows; y += 2) {
+    const float* r = response.ptr<float>(y);
+    for (int x = 0; x < response.cols; x += 2, ++n) ++histogram[order_key(r[x]) >> kShift];
+  }
+  if (n == 0) return 0.0F;  // an empty cell: no noise level
+  std::size_t rank = n / 2;
+  std::uint32_t bucket = 0;
+  while (rank >= histogram[bucket]) rank -= histogram[bucket++];
+  std::vector<float> values;
+  values.reserve(histogram[bucket]);
+  for (int y = 0; y < response.rows; y += 2) {
+    const float* r = response.ptr<float>(y);
+    for (int x = 0; x < response.cols; x += 2) {
+      if (order_key(r[x]) >> kShift == bucket) values.push_back(r[x]);
+    }
+  }
+  const auto mid = values.begin() + static_cast<std::ptrdiff_t>(rank);
+  std::nth_element(values.begin(), mid, values.end());
+  return *mid;
+}
 
 FeatureTracker::FeatureTracker(const EkfConfig& config, const CameraCalibration& camera)
     : config_(config), camera_(camera), focal_px_(0.5 * (camera.fx + camera.fy)) {}
@@ -190,15 +230,8 @@ void FeatureTracker::detect_in(const cv::Mat& grey, const cv::Mat& mask, const c
   double threshold = config_.shi_tomasi_quality * max_response;
   if (config_.corner_noise_factor > 0.0) {
     // Median over every second row and column (a quarter of the pixels is plenty for a noise level).
-    std::vector<float> values;
-    values.reserve(static_cast<std::size_t>(response.total() / 4 + 1));
-    for (int y = 0; y < response.rows; y += 2) {
-      const float* r = response.ptr<float>(y);
-      for (int x = 0; x < response.cols; x += 2) values.push_back(r[x]);
-    }
-    const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
-    std::nth_element(values.begin(), mid, values.end());
-    threshold = std::max(threshold, config_.corner_noise_factor * static_cast<double>(*mid));
+    threshold =
+        std::max(threshold, config_.corner_noise_factor * static_cast<double>(quarter_median(response)));
   }
   cv::Mat dilated;
   cv::dilate(response, dilated, cv::Mat());
@@ -216,12 +249,20 @@ void FeatureTracker::detect_in(const cv::Mat& grey, const cv::Mat& mask, const c
       if (m[x] != 0 && r[x] > threshold && r[x] == d[x]) candidates.push_back(Candidate{r[x], x, y});
     }
   }
-  std::stable_sort(candidates.begin(), candidates.end(),
-                   [](const Candidate& a, const Candidate& b) { return a.response > b.response; });
+  // Strongest first, ties in scan order (row, then column): the order of a stable sort by response. Only
+  // the first few are taken (count, often a handful, of hundreds), so they come off a heap one by one
+  // instead of sorting them all.
+  const auto after = [](const Candidate& a, const Candidate& b) {
+    if (a.response != b.response) return a.response < b.response;
+    return a.y != b.y ? a.y > b.y : a.x > b.x;
+  };
+  std::make_heap(candidates.begin(), candidates.end(), after);
   const double min_d2 = config_.min_feature_distance_px * config_.min_feature_distance_px;
   const std::size_t first = corners->size();
-  for (const Candidate& c : candidates) {
-    if (static_cast<int>(corners->size() - first) >= count) break;
+  while (!candidates.empty() && static_cast<int>(corners->size() - first) < count) {
+    std::pop_heap(candidates.begin(), candidates.end(), after);
+    const Candidate c = candidates.back();
+    candidates.pop_back();
     const cv::Point2f p(static_cast<float>(c.x + roi.x), static_cast<float>(c.y + roi.y));
     bool far = true;
     for (std::size_t k = first; k < corners->size() && far; ++k) {

@@ -48,6 +48,11 @@ struct TrackerImage {
   double prepare_ms = 0;  // wall time of prepare(), reported as TrackerStats::pyramid_ms
 };
 
+// The median of a CV_32F image's values in every second row and column (the element std::nth_element puts
+// at index n / 2; 0 for an empty image): the noise level of the corner detection's responses, computed for
+// every grid cell it searches, 3-4x faster than nth_element over all of them.
+float quarter_median(const cv::Mat& response);
+
 class FeatureTracker {
  public:
   // Throws ConfigError for a bad camera calibration (see CameraModel).
