@@ -16,7 +16,9 @@ PoseGatedCells::PoseGatedCells(const MethodContext& context)
       tracker_(context.config.gate, context.config.match.sequence_length, context.config.match.margin),
       frames_(context.capacity),
       row_cells_(context.capacity, 0),
+      requested_by_(context.capacity),
       feedback_(context.feedback) {
+  for (std::atomic<std::int64_t>& by : requested_by_) by.store(-1, std::memory_order_relaxed);
   context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
   if (feedback_) poses_.resize(context.capacity);
 }
@@ -104,7 +106,16 @@ void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
   g.describe = std::move(update.new_descriptor_frames);
   // The method's own request goes through the tracker's set, so that no later cell asks for it again.
   if (describe_own_frame && tracker_.request_descriptor(seq)) g.describe.push_back(seq);
-  for (const std::int64_t k : g.describe) describe_requests_.emplace_back(k, seq);
+  for (const std::int64_t k : g.describe) {
+    describe_requests_.emplace_back(k, seq);
+    requested_by_[static_cast<std::size_t>(k)].store(static_cast<std::int64_t>(seq),
+                                                     std::memory_order_relaxed);
+  }
+}
+
+bool PoseGatedCells::requested_by(std::size_t seq, std::size_t last_seq) const {
+  const std::int64_t by = requested_by_[seq].load(std::memory_order_relaxed);
+  return by >= 0 && by <= static_cast<std::int64_t>(last_seq);
 }
 
 bool PoseGatedCells::request_descriptor(std::size_t by_seq, std::int64_t frame) {
@@ -116,6 +127,8 @@ bool PoseGatedCells::request_descriptor(std::size_t by_seq, std::int64_t frame) 
   std::vector<std::int64_t>& list = frames_[by_seq].describe;
   list.insert(std::upper_bound(list.begin(), list.end(), frame), frame);
   describe_requests_.emplace_back(frame, static_cast<std::int64_t>(by_seq));
+  requested_by_[static_cast<std::size_t>(frame)].store(static_cast<std::int64_t>(by_seq),
+                                                       std::memory_order_relaxed);
   return true;
 }
 

@@ -12,6 +12,7 @@
 
 #include <spdlog/fmt/fmt.h>
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
@@ -59,6 +60,11 @@ class PoseGatedCells {
   const std::vector<std::int64_t>& describe_list(std::size_t seq) const { return frames_[seq].describe; }
   // Whether frame seq's own descriptor is computed at its own time (by its own describe).
   bool described_at_own_time(std::size_t seq) const;
+  // Whether frame seq's descriptor was requested by a frame <= last_seq (whose describe has run once that
+  // frame has passed the match node). frames.csv's `descriptor` column asks it with last_seq = seq + the
+  // verdict's delay, so that the column does not depend on how far the describe node ran ahead when the row
+  // was written. Any thread.
+  bool requested_by(std::size_t seq, std::size_t last_seq) const;
   // The cells frame seq's update covered (moved out; counted per row). Call once per frame, in order.
   std::vector<CellSpan> take_cells(std::size_t seq);
   // No cell was ever added to row seq (the frame lies outside every candidate area).
@@ -107,6 +113,8 @@ class PoseGatedCells {
   CandidateAreaTracker tracker_;
   std::vector<GateFrame> frames_;
   std::vector<std::uint32_t> row_cells_;  // cells per row (match node)
+  // The seq whose describe computes frame k's descriptor (-1: not requested); written by the gate node.
+  std::vector<std::atomic<std::int64_t>> requested_by_;
   std::size_t frames_gate_ran_ = 0, frames_gated_ = 0, gate_errors_ = 0;
   std::vector<std::pair<std::int64_t, std::int64_t>> describe_requests_;  // (seq described, requesting seq)
   GateFeedback* feedback_ = nullptr;                                      // gate.feedback (nullptr: off)
