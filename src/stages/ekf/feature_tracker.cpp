@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -225,28 +226,45 @@ void FeatureTracker::detect_in(const cv::Mat& grey, const cv::Mat& mask, const c
   cv::Mat response;
   cv::cornerMinEigenVal(grey(roi), response, config_.shi_tomasi_block_size, 3);
   const cv::Mat roi_mask = mask(roi);
-  double max_response = 0.0;
-  cv::minMaxLoc(response, nullptr, &max_response, nullptr, nullptr, roi_mask);
+  // The largest response where the mask is set (0 where it is set nowhere, as cv::minMaxLoc gives).
+  float max_masked = -std::numeric_limits<float>::infinity();
+  bool any_masked = false;
+  for (int y = 0; y < response.rows; ++y) {
+    const float* r = response.ptr<float>(y);
+    const unsigned char* m = roi_mask.ptr<unsigned char>(y);
+    for (int x = 0; x < response.cols; ++x) {
+      if (m[x] != 0) {
+        any_masked = true;
+        max_masked = std::max(max_masked, r[x]);
+      }
+    }
+  }
+  const double max_response = any_masked ? static_cast<double>(max_masked) : 0.0;
   double threshold = config_.shi_tomasi_quality * max_response;
   if (config_.corner_noise_factor > 0.0) {
     // Median over every second row and column (a quarter of the pixels is plenty for a noise level).
     threshold =
         std::max(threshold, config_.corner_noise_factor * static_cast<double>(quarter_median(response)));
   }
-  cv::Mat dilated;
-  cv::dilate(response, dilated, cv::Mat());
   struct Candidate {
     float response;
     int x;
     int y;
   };
   std::vector<Candidate> candidates;
+  // Local maxima above the threshold: no response of the 3 x 3 neighbourhood is larger (what comparing with
+  // the response dilated by a 3 x 3 rectangle tells, looking only at the few pixels above the threshold).
   for (int y = 1; y + 1 < response.rows; ++y) {
+    const float* up = response.ptr<float>(y - 1);
     const float* r = response.ptr<float>(y);
-    const float* d = dilated.ptr<float>(y);
+    const float* down = response.ptr<float>(y + 1);
     const unsigned char* m = roi_mask.ptr<unsigned char>(y);
     for (int x = 1; x + 1 < response.cols; ++x) {
-      if (m[x] != 0 && r[x] > threshold && r[x] == d[x]) candidates.push_back(Candidate{r[x], x, y});
+      const float v = r[x];
+      if (m[x] == 0 || !(v > threshold)) continue;
+      if (up[x - 1] <= v && up[x] <= v && up[x + 1] <= v && r[x - 1] <= v && r[x + 1] <= v &&
+          down[x - 1] <= v && down[x] <= v && down[x + 1] <= v)
+        candidates.push_back(Candidate{v, x, y});
     }
   }
   // Strongest first, ties in scan order (row, then column): the order of a stable sort by response. Only
