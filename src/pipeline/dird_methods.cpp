@@ -75,7 +75,7 @@ class DirdMatching {
   LoopMatching& loops() { return loops_; }
   const LoopMatching& loops() const { return loops_; }
   // The detection row of `seq` once final; `outside_areas` (gated): its row had no cell; `requested` (gated):
-  // its descriptor was requested in time for the row (PoseGatedCells::requested_by).
+  // its descriptor was requested in time for the row (PoseGatedCells::requested_within).
   std::optional<FrameVerdict> detection(std::size_t seq, bool outside_areas, bool requested = true) {
     return loops_.detection(seq, requested && store_.state(seq) == DescriptorStore::State::kValid,
                             outside_areas);
@@ -226,8 +226,7 @@ class DirdGated final : public DetectionMethod {
   }
 
   std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, cells_.row_empty(seq),
-                           cells_.requested_by(seq, seq + static_cast<std::size_t>(*verdict_delay_frames())));
+    return dird_.detection(seq, cells_.row_empty(seq), cells_.requested_within(seq, *verdict_delay_frames()));
   }
 
   void write_files(const std::filesystem::path& out_dir) const override {

@@ -219,9 +219,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
     return context_.config.gate.row_horizon_frames + static_cast<int>(matching_.emission_delay());
   }
   std::optional<FrameVerdict> detection(std::size_t seq) override {
-    const bool described =
-        cells_.requested_by(seq, seq + static_cast<std::size_t>(*verdict_delay_frames())) &&
-        distances_.valid(seq);
+    const bool described = cells_.requested_within(seq, *verdict_delay_frames()) && distances_.valid(seq);
     return matching_.detection(seq, described, cells_.row_empty(seq));
   }
   void write_files(const std::filesystem::path& out_dir) const override {

@@ -113,9 +113,9 @@ void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
   }
 }
 
-bool PoseGatedCells::requested_by(std::size_t seq, std::size_t last_seq) const {
+bool PoseGatedCells::requested_within(std::size_t seq, int delay_frames) const {
   const std::int64_t by = requested_by_[seq].load(std::memory_order_relaxed);
-  return by >= 0 && by <= static_cast<std::int64_t>(last_seq);
+  return by >= 0 && by <= static_cast<std::int64_t>(seq) + delay_frames;
 }
 
 bool PoseGatedCells::request_descriptor(std::size_t by_seq, std::int64_t frame) {

@@ -60,11 +60,11 @@ class PoseGatedCells {
   const std::vector<std::int64_t>& describe_list(std::size_t seq) const { return frames_[seq].describe; }
   // Whether frame seq's own descriptor is computed at its own time (by its own describe).
   bool described_at_own_time(std::size_t seq) const;
-  // Whether frame seq's descriptor was requested by a frame <= last_seq (whose describe has run once that
-  // frame has passed the match node). frames.csv's `descriptor` column asks it with last_seq = seq + the
-  // verdict's delay, so that the column does not depend on how far the describe node ran ahead when the row
+  // Whether frame seq's descriptor was requested by a frame <= seq + delay_frames (whose describe has run
+  // once that frame has passed the match node). frames.csv's `descriptor` column asks it with the method's
+  // verdict delay, so that the column does not depend on how far the describe node ran ahead when the row
   // was written. Any thread.
-  bool requested_by(std::size_t seq, std::size_t last_seq) const;
+  bool requested_within(std::size_t seq, int delay_frames) const;
   // The cells frame seq's update covered (moved out; counted per row). Call once per frame, in order.
   std::vector<CellSpan> take_cells(std::size_t seq);
   // No cell was ever added to row seq (the frame lies outside every candidate area).

@@ -88,7 +88,7 @@ class StandardDird {
   bool valid(std::size_t seq) const { return distances_.valid(seq); }
   LoopMatching& loops() { return loops_; }
   const LoopMatching& loops() const { return loops_; }
-  // `requested` (gated): the descriptor was requested in time for the row (PoseGatedCells::requested_by).
+  // `requested` (gated): the descriptor was requested in time for the row (PoseGatedCells::requested_within).
   std::optional<FrameVerdict> detection(std::size_t seq, bool outside_areas, bool requested = true) {
     return loops_.detection(seq, requested && valid(seq), outside_areas);
   }
@@ -198,8 +198,7 @@ class StandardDirdGated final : public DetectionMethod {
     return context_.config.gate.row_horizon_frames + static_cast<int>(dird_.loops().emission_delay());
   }
   std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, cells_.row_empty(seq),
-                           cells_.requested_by(seq, seq + static_cast<std::size_t>(*verdict_delay_frames())));
+    return dird_.detection(seq, cells_.row_empty(seq), cells_.requested_within(seq, *verdict_delay_frames()));
   }
   void write_files(const std::filesystem::path& out_dir) const override {
     cells_.write_files(out_dir, match_end_seq_,
