@@ -12,6 +12,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
 #include <random>
 #include <string>
 #include <type_traits>
@@ -131,6 +132,80 @@ void BM_EkfTracking(benchmark::State& state) {
   state.counters["detect_ms"] = avg(detect_ms);
 }
 BENCHMARK(BM_EkfTracking)->Unit(benchmark::kMillisecond);
+
+// The corner detection's steps on one grid cell (6 x 4 cells, as ekf.grid_cols / grid_rows), over every cell
+// of every 10th of the first 400 images (LOOPGATE_EKF_DATASET or the real V1_01 excerpt): OpenCV's Shi-Tomasi
+// response of a cell (BM_DetectionCellResponse) and the noise median of a cell's responses, by nth_element
+// over every second row and column (arg 0, before 2026-11-28) or by quarter_median() (arg 1).
+std::vector<cv::Mat> detection_cells(benchmark::State& state, bool responses) {
+  const char* dataset_env = std::getenv("LOOPGATE_EKF_DATASET");
+  const std::filesystem::path dir = dataset_env != nullptr ? std::filesystem::path(dataset_env) : micro_dir();
+  std::vector<cv::Mat> cells;
+  if (!std::filesystem::exists(dir)) {
+    state.SkipWithError("shared data absent: euroc/V1_01_easy_micro");
+    return cells;
+  }
+  const auto dataset = open_dataset(dir);
+  const EkfConfig config;
+  for (std::size_t i = 0; i < std::min<std::size_t>(dataset->frame_count(), 400); i += 10) {
+    const cv::Mat image = dataset->load_image(i);
+    const int w = image.cols / config.grid_cols, h = image.rows / config.grid_rows;
+    for (int cy = 0; cy < config.grid_rows; ++cy) {
+      for (int cx = 0; cx < config.grid_cols; ++cx) {
+        const cv::Mat cell = image(cv::Rect(cx * w, cy * h, w, h));
+        if (!responses) {
+          cells.push_back(cell);
+          continue;
+        }
+        cv::Mat response;
+        cv::cornerMinEigenVal(cell, response, config.shi_tomasi_block_size, 3);
+        cells.push_back(response);
+      }
+    }
+  }
+  return cells;
+}
+
+void BM_DetectionCellResponse(benchmark::State& state) {
+  const std::vector<cv::Mat> cells = detection_cells(state, false);
+  if (cells.empty()) return;
+  const EkfConfig config;
+  std::size_t k = 0;
+  cv::Mat response;
+  for (auto _ : state) {
+    cv::cornerMinEigenVal(cells[k], response, config.shi_tomasi_block_size, 3);
+    benchmark::DoNotOptimize(response.data);
+    k = (k + 1) % cells.size();
+  }
+}
+BENCHMARK(BM_DetectionCellResponse)->Unit(benchmark::kMicrosecond);
+
+void BM_DetectionNoiseMedian(benchmark::State& state) {
+  const std::vector<cv::Mat> responses = detection_cells(state, true);
+  if (responses.empty()) return;
+  const bool histogram = state.range(0) == 1;
+  std::size_t k = 0;
+  for (auto _ : state) {
+    const cv::Mat& r = responses[k];
+    float median = 0.0F;
+    if (histogram) {
+      median = quarter_median(r);
+    } else {
+      std::vector<float> values;
+      values.reserve(r.total() / 4 + 1);
+      for (int y = 0; y < r.rows; y += 2) {
+        for (int x = 0; x < r.cols; x += 2) values.push_back(r.at<float>(y, x));
+      }
+      const auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+      std::nth_element(values.begin(), mid, values.end());
+      median = *mid;
+    }
+    benchmark::DoNotOptimize(median);
+    k = (k + 1) % responses.size();
+  }
+  state.SetLabel(histogram ? "quarter_median" : "nth_element");
+}
+BENCHMARK(BM_DetectionNoiseMedian)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 // The filter alone: propagation + clone + update + marginalisation per 20 Hz frame on a simulated scene.
 void BM_EkfFilter(benchmark::State& state) {
