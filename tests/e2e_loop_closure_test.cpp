@@ -256,6 +256,40 @@ TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
   EXPECT_TRUE(fs::is_regular_file(out / "plots" / "correction.png")) << plot_output;
 }
 
+// compare's correction verifies every loop after the end of its input, several at once on two threads
+// (LoopCloser::verify_ahead: those no loop before them can skip); a run on one thread verifies them one after
+// the other. Without the skip windows most loops are verified: the same files.
+TEST(E2eLoopClosure, LoopsVerifiedAtOnceAfterTheStreamGiveTheResultsOfOneAfterTheOther) {
+  const fs::path sim = simulate("e2e-closure-ahead-sim", "");
+  const std::string windows =
+      "--set verify.skip_after_verified_frames=0 --set verify.skip_after_rejected_frames=0";
+  const fs::path ran = run_forced(sim, 1, windows);
+  const fs::path out = testing::make_temp_dir("e2e-closure-ahead-out");
+  int status = -1;
+  const std::string output =
+      run("compare --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+              sim.string() + " --out " + out.string() +
+              " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
+              "dird_seqslam.min_score=0 "
+              "--set output.progress=off --set verify.enabled=true --set verify.min_sigma_gain=0 " +
+              windows,
+          &status);
+  ASSERT_EQ(status, 0) << output;
+  const auto compare = nlohmann::json::parse(read_file(out / "compare.json"));
+  ASSERT_TRUE(compare["dird-seqslam"].contains("loop_correction")) << compare.dump();
+  const auto& correction = compare["dird-seqslam"]["loop_correction"];
+  const auto& drained = correction["loop_closure"]["end_of_stream"];
+  EXPECT_GE(drained["loops_verified_in_parallel"].get<int>(), 4) << drained.dump();
+  const auto summary = nlohmann::json::parse(read_file(ran / "summary.json"));
+  EXPECT_EQ(summary["loop_closure"]["end_of_stream"]["loops_verified_in_parallel"].get<int>(), 0);
+  EXPECT_EQ(correction["loops_verified"], summary["loops_verified"]);
+  EXPECT_EQ(correction["loops_rejected_geometry"], summary["loops_rejected_geometry"]);
+  EXPECT_EQ(edges_without_timing(out / "dird-seqslam"), edges_without_timing(ran));
+  EXPECT_EQ(read_file(out / "dird-seqslam" / "trajectory_corrected.tum"),
+            read_file(ran / "trajectory_corrected.tum"));
+  EXPECT_EQ(read_file(out / "dird-seqslam" / "pose_graph.g2o"), read_file(ran / "pose_graph.g2o"));
+}
+
 TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {
   const fs::path sim = simulate("e2e-closure-thumbs",
                                 "--set camera.width_px=64 --set camera.height_px=32 "

@@ -103,8 +103,33 @@ class LoopCloser {
   };
   static std::vector<std::string> verification_cells(const LoopResult& r);
   void work();
-  // `draining`: the stream has ended (finish()), the pipeline's threads are free.
+  // `draining`: the stream has ended (finish()), the pipeline's threads are free. The result verify_ahead()
+  // computed for this loop, when it did.
   LoopResult verify_one(const Detection& loop, bool draining);
+  // What the verifier needs of a loop: its frames' features (read and detected here, worker only), or the
+  // reason it cannot be verified.
+  struct VerifyJob {
+    std::optional<std::size_t> neighbour;  // j's neighbour (verify.neighbour_offset_frames)
+    std::shared_ptr<const OrbFeatures> i, j, n;
+    std::string reason;  // not empty: nothing to run
+  };
+  std::optional<std::size_t> neighbour_of(const Detection& loop) const;
+  VerifyJob prepare(const Detection& loop, bool draining);
+  // The verification of a prepared loop (the verifier and the odometry check): reads only what the worker
+  // no longer changes, so several run at once.
+  VerifyResult run(const Detection& loop, const VerifyJob& job) const;
+  // At the end of the stream, with run.threads > 1: verifies at once, on run.threads threads, the loop at the
+  // front of the queue and the next ones that will be verified if the outcomes not known yet are those of the
+  // last loop verified or rejected, and keeps their results for verify_one(). Each result is taken in
+  // submission order after its own skip check, so the files are those of one loop after the other.
+  void verify_ahead();
+  // Whether `earlier`, verified or rejected, makes skip_reason(later) say skip (skip_after_*_frames,
+  // max_per_query).
+  bool would_skip(const Detection& earlier, bool verified, const Detection& later) const;
+  static constexpr std::size_t kVerifyAheadLoops = 256;  // how far down the queue verify_ahead() looks
+  // At most this many loops per thread at once: the threads take them one by one, so that one slow
+  // verification does not leave the other threads idle until it ends.
+  static constexpr std::size_t kVerifyAheadPerThread = 4;
   // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
   std::string skip_reason(const Detection& loop) const;
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
@@ -157,6 +182,8 @@ class LoopCloser {
   std::unique_ptr<tbb::task_arena> drain_arena_;  // created by the first prefetch
   std::size_t drain_verified_ = 0;                // loops verified (not skipped) after the stream ended
   std::size_t drain_prefetched_ = 0;              // features detected by prefetch_features
+  std::size_t drain_verified_ahead_ = 0;          // loops whose result verify_ahead() computed
+  std::unordered_map<std::size_t, LoopResult> verified_ahead_;  // by submission index, until verify_one()
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
   // timing.csv's cells by query frame: its loops' verification and the streaming solves they started (mutex_)
