@@ -16,8 +16,8 @@
 
 namespace loopgate::pipeline_internal {
 
-void PipelineRun::trace_end_of_stream(const char* name, std::int64_t start_ns) {
-  const std::int64_t end_ns = clock_.now_ns();
+void PipelineRun::trace_end_of_stream(const char* name, std::int64_t start_ns, std::int64_t end_ns) {
+  if (end_ns < 0) end_ns = clock_.now_ns();
   outputs_.trace().add(TraceEvent{name,
                                   "end_of_stream",
                                   1e-3 * static_cast<double>(start_ns),
@@ -42,7 +42,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
       1e-6 * static_cast<double>(work.method_cpu_ns), 1e-6 * static_cast<double>(work.finish_parallel_ns),
       1e-6 * static_cast<double>(thread_cpu_ns() - work.cpu_start_ns - work.method_cpu_ns)};
   if (config_.output.trace) {
-    trace_end_of_stream("end of stream: loops.csv", step_ns);
+    trace_end_of_stream("end of stream: loops.csv", step_ns, closer_start_ns);
     if (closer_.active())
       trace_end_of_stream("end of stream: loop closure (verification, pose graph)", closer_start_ns);
   }

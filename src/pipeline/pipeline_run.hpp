@@ -133,8 +133,9 @@ class PipelineRun {
   // result's counters and profile, the method's files, the evaluation, the checks, trace.json and
   // summary.json.
   void close_run(RunResult& result, const EndOfStreamWork& work);
-  // A span of the end-of-stream work on the producer's track of trace.json (output.trace).
-  void trace_end_of_stream(const char* name, std::int64_t start_ns);
+  // A span of the end-of-stream work on the producer's track of trace.json (output.trace), from start_ns to
+  // end_ns (-1: now).
+  void trace_end_of_stream(const char* name, std::int64_t start_ns, std::int64_t end_ns = -1);
   // Runs `write`, one output step after the drain: a failure (a full disk) is recorded, naming the file, and
   // the next outputs are still written.
   template <class Write>
