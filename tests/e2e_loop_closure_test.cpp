@@ -58,6 +58,24 @@ fs::path run_forced(const fs::path& sim, int threads, const std::string& extra =
   return out;
 }
 
+// compare of dird-seqslam on two threads with run_forced()'s settings: each method's run without
+// verification, then its loops verified and its trajectory corrected after the run. `output`: what it
+// printed.
+fs::path compare_forced(const fs::path& sim, const std::string& name, const std::string& extra,
+                        std::string* output) {
+  const fs::path out = testing::make_temp_dir(name);
+  int status = -1;
+  *output = run("compare --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+                    sim.string() + " --out " + out.string() +
+                    " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
+                    "dird_seqslam.min_score=0 --set output.progress=off --set verify.enabled=true --set "
+                    "verify.min_sigma_gain=0 " +
+                    extra,
+                &status);
+  EXPECT_EQ(status, 0) << *output;
+  return out;
+}
+
 std::vector<std::string> header(const fs::path& csv) {
   std::vector<std::string> h;
   read_csv(csv, &h);
@@ -221,16 +239,8 @@ TEST(E2eLoopClosure, SameOutputsWithOneAndTwoThreadsAndTheirColumns) {
 TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
   const fs::path sim = simulate("e2e-closure-compare-sim", "");
   const fs::path ran = run_forced(sim, 2);
-  const fs::path out = testing::make_temp_dir("e2e-closure-compare-out");
-  int status = -1;
-  const std::string output =
-      run("compare --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-              sim.string() + " --out " + out.string() +
-              " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
-              "dird_seqslam.min_score=0 "
-              "--set output.progress=off --set verify.enabled=true --set verify.min_sigma_gain=0",
-          &status);
-  ASSERT_EQ(status, 0) << output;
+  std::string output;
+  const fs::path out = compare_forced(sim, "e2e-closure-compare-out", "", &output);
   EXPECT_NE(output.find("ATE corrected (m)"), std::string::npos) << output;
   const auto compare = nlohmann::json::parse(read_file(out / "compare.json"));
   const auto& method = compare["dird-seqslam"];
@@ -264,17 +274,8 @@ TEST(E2eLoopClosure, LoopsVerifiedAtOnceAfterTheStreamGiveTheResultsOfOneAfterTh
   const std::string windows =
       "--set verify.skip_after_verified_frames=0 --set verify.skip_after_rejected_frames=0";
   const fs::path ran = run_forced(sim, 1, windows);
-  const fs::path out = testing::make_temp_dir("e2e-closure-ahead-out");
-  int status = -1;
-  const std::string output =
-      run("compare --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
-              sim.string() + " --out " + out.string() +
-              " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
-              "dird_seqslam.min_score=0 "
-              "--set output.progress=off --set verify.enabled=true --set verify.min_sigma_gain=0 " +
-              windows,
-          &status);
-  ASSERT_EQ(status, 0) << output;
+  std::string output;
+  const fs::path out = compare_forced(sim, "e2e-closure-ahead-out", windows, &output);
   const auto compare = nlohmann::json::parse(read_file(out / "compare.json"));
   ASSERT_TRUE(compare["dird-seqslam"].contains("loop_correction")) << compare.dump();
   const auto& correction = compare["dird-seqslam"]["loop_correction"];
