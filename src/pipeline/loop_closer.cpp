@@ -281,7 +281,7 @@ std::optional<std::size_t> LoopCloser::neighbour_of(const Detection& loop) const
   return neighbour;
 }
 
-LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool draining) {
+LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool prefetch) {
   VerifyJob job;
   if (!unusable_.empty()) {
     job.reason = unusable_;
@@ -295,10 +295,7 @@ LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool draining) 
   job.neighbour = *neighbour;
   try {
     // At the end of the stream the pipeline's threads are free: detect the three frames' features at once.
-    if (draining) {
-      ++drain_verified_;
-      prefetch_features({loop.query, loop.reference, *neighbour});
-    }
+    if (prefetch) prefetch_features({loop.query, loop.reference, *neighbour});
     job.i = features_of(loop.query);
     job.j = features_of(loop.reference);
     job.n = features_of(*neighbour);
@@ -352,6 +349,7 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draini
       return out;
     }
   }
+  if (draining && unusable_.empty()) ++drain_verified_;
   if (ahead != verified_ahead_.end()) {
     out = std::move(ahead->second);
     verified_ahead_.erase(ahead);
@@ -414,7 +412,7 @@ void LoopCloser::verify_ahead() {
   }
   prefetch_features(frames);
   std::vector<VerifyJob> jobs;
-  for (const std::size_t k : chosen) jobs.push_back(prepare(next[k], true));  // features cached: no reads
+  for (const std::size_t k : chosen) jobs.push_back(prepare(next[k], false));  // features cached above
   const double prepare_ms = ms_since(start) / static_cast<double>(chosen.size());
   std::vector<LoopResult> results(chosen.size());
   if (!drain_arena_) drain_arena_ = std::make_unique<tbb::task_arena>(drain_threads_);

@@ -114,7 +114,8 @@ class LoopCloser {
     std::string reason;  // not empty: nothing to run
   };
   std::optional<std::size_t> neighbour_of(const Detection& loop) const;
-  VerifyJob prepare(const Detection& loop, bool draining);
+  // `prefetch`: the three frames' missing features detected at once first (prefetch_features).
+  VerifyJob prepare(const Detection& loop, bool prefetch);
   // The verification of a prepared loop (the verifier and the odometry check): reads only what the worker
   // no longer changes, so several run at once.
   VerifyResult run(const Detection& loop, const VerifyJob& job) const;
@@ -180,9 +181,9 @@ class LoopCloser {
   std::deque<std::size_t> feature_cache_order_;   // oldest first
   int drain_threads_ = 1;                         // run.threads: prefetch_features' threads
   std::unique_ptr<tbb::task_arena> drain_arena_;  // created by the first prefetch
-  std::size_t drain_verified_ = 0;                // loops verified (not skipped) after the stream ended
-  std::size_t drain_prefetched_ = 0;              // features detected by prefetch_features
-  std::size_t drain_verified_ahead_ = 0;          // loops whose result verify_ahead() computed
+  std::size_t drain_verified_ = 0;        // loops verified or rejected (not skipped) after the stream ended
+  std::size_t drain_prefetched_ = 0;      // features detected by prefetch_features
+  std::size_t drain_verified_ahead_ = 0;  // loops whose result verify_ahead() computed
   std::unordered_map<std::size_t, LoopResult> verified_ahead_;  // by submission index, until verify_one()
   std::size_t verified_at_last_solve_ = 0;
   std::vector<double> solve_ms_;  // solves while streaming
