@@ -266,9 +266,10 @@ TEST(E2eLoopClosure, CompareCorrectsEachMethodLikeRun) {
   EXPECT_TRUE(fs::is_regular_file(out / "plots" / "correction.png")) << plot_output;
 }
 
-// compare's correction verifies every loop after the end of its input, several at once on two threads
-// (LoopCloser::verify_ahead: those no loop before them can skip); a run on one thread verifies them one after
-// the other. Without the skip windows most loops are verified: the same files.
+// compare's correction submits every loop at once, so it verifies nearly all of them after its input ends,
+// several at once on two threads (LoopCloser::verify_ahead, on a guess of the outcomes not known yet); a run
+// on one thread verifies them one after the other. Without the skip windows most loops are verified: the
+// same files.
 TEST(E2eLoopClosure, LoopsVerifiedAtOnceAfterTheStreamGiveTheResultsOfOneAfterTheOther) {
   const fs::path sim = simulate("e2e-closure-ahead-sim", "");
   const std::string windows =
