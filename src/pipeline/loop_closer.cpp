@@ -227,10 +227,16 @@ bool LoopCloser::odometry_unbroken(std::size_t from, std::size_t to) const {
   return true;
 }
 
-std::string LoopCloser::skip_reason(const Detection& loop) const {
-  const auto near = [](std::size_t a, std::size_t b, int window) {
+bool LoopCloser::in_skip_window(const Detection& earlier, bool verified, const Detection& later) const {
+  const int window =
+      verified ? verify_config_.skip_after_verified_frames : verify_config_.skip_after_rejected_frames;
+  const auto near = [window](std::size_t a, std::size_t b) {
     return (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
   };
+  return window > 0 && near(earlier.query, later.query) && near(earlier.reference, later.reference);
+}
+
+std::string LoopCloser::skip_reason(const Detection& loop) const {
   // A loop the odometry already knows: its position uncertainty grew less between j and i than a loop edge's
   // own (standing still, hovering, the frames just before a query). Such an edge corrects nothing.
   if (verify_config_.min_sigma_gain > 0 && pose_of(loop.query) && pose_of(loop.reference)) {
@@ -246,10 +252,7 @@ std::string LoopCloser::skip_reason(const Detection& loop) const {
     const LoopResult& r = *it;
     if (r.skipped) continue;
     if (r.loop.query == loop.query) ++tried_for_query;
-    const int window = r.result.verified ? verify_config_.skip_after_verified_frames
-                                         : verify_config_.skip_after_rejected_frames;
-    if (window > 0 && near(r.loop.query, loop.query, window) &&
-        near(r.loop.reference, loop.reference, window))
+    if (in_skip_window(r.loop, r.result.verified, loop))
       return fmt::format("skipped: near ({}, {}) {}", r.loop.query, r.loop.reference,
                          r.result.verified ? "verified" : "rejected");
   }
@@ -259,14 +262,8 @@ std::string LoopCloser::skip_reason(const Detection& loop) const {
 }
 
 bool LoopCloser::would_skip(const Detection& earlier, bool verified, const Detection& later) const {
-  const auto near = [](std::size_t a, std::size_t b, int window) {
-    return window > 0 && (a > b ? a - b : b - a) <= static_cast<std::size_t>(window);
-  };
-  const int window =
-      verified ? verify_config_.skip_after_verified_frames : verify_config_.skip_after_rejected_frames;
-  if (near(earlier.query, later.query, window) && near(earlier.reference, later.reference, window))
-    return true;
-  return verify_config_.max_per_query > 0 && earlier.query == later.query;
+  return in_skip_window(earlier, verified, later) ||
+         (verify_config_.max_per_query > 0 && earlier.query == later.query);
 }
 
 std::optional<std::size_t> LoopCloser::neighbour_of(const Detection& loop) const {

@@ -131,6 +131,9 @@ class LoopCloser {
   // At most this many loops per thread at once: the threads take them one by one, so that one slow
   // verification does not leave the other threads idle until it ends.
   static constexpr std::size_t kVerifyAheadPerThread = 4;
+  // Whether `later` lies within verify.skip_after_verified_frames (or _rejected_) of `earlier`, in both i and
+  // j, `earlier` having been verified (or rejected).
+  bool in_skip_window(const Detection& earlier, bool verified, const Detection& later) const;
   // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
   std::string skip_reason(const Detection& loop) const;
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
