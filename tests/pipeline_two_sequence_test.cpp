@@ -305,6 +305,65 @@ TEST(PipelineTwoSequence, SeqSlamFrameRangeAndThreadCountIndependent) {
   EXPECT_GE(aligned, 65u);  // 70 with a match (5 at either end have none)
 }
 
+// Every method writes the frames.csv columns they share in the same order, the method's own between them and
+// status / reason, and a query image that cannot be read gives an error row (its reason first, then the
+// verdict) counted in summary.json's query_frames_with_error, with the queries by outcome adding up.
+TEST(PipelineTwoSequence, EveryMethodWritesTheSharedColumnsAndAnUnreadableQueryAsAnError) {
+  const RevisitDataset reference(kPeriod, 1, 5);
+  RevisitDataset query(kPeriod, 1, 6);
+  query.corrupt_frames = {40};
+  struct Case {
+    Detector method;
+    std::vector<std::string> own_columns;
+    std::string error_note;
+  };
+  const std::vector<Case> cases = {
+      {Detector::kDird, {"match_score", "best_similarity", "candidates"}, ""},
+      {Detector::kDirdSeqSlam, {"match_score", "velocity", "line_end_frame"}, ""},
+      {Detector::kSeqSlam,
+       {"match_score", "best_score", "second_score"},
+       " (took part as an all-zero image)"}};
+  for (const Case& c : cases) {
+    SCOPED_TRACE(std::string(enum_name(c.method)));
+    PipelineConfig config = dird_config();
+    config.run.method = c.method;
+    config.eval.aligned_tolerance_frames = 1;
+    const auto out = testing::make_temp_dir("pipeline-two-seq-columns");
+    const TwoSequenceResult result = run_two_sequences(config, reference, query, out);
+    std::vector<std::string> header;
+    const auto rows = read_csv(out / "frames.csv", &header);
+    std::vector<std::string> expected = {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame"};
+    expected.insert(expected.end(), c.own_columns.begin(), c.own_columns.end());
+    expected.insert(expected.end(), {"status", "reason"});
+    EXPECT_EQ(header, expected);
+    ASSERT_EQ(rows.size(), kPeriod);
+    const auto& bad = rows[40];
+    EXPECT_EQ(bad[column_index(header, "status")], "error");
+    const std::string& reason = bad[column_index(header, "reason")];
+    EXPECT_EQ(reason.rfind("image: ", 0), 0u) << reason;
+    EXPECT_NE(reason.find(c.error_note + "; "), std::string::npos) << reason;
+    for (std::size_t q = 0; q < rows.size(); ++q) {
+      if (q != 40) {
+        EXPECT_EQ(rows[q][column_index(header, "status")], "ok") << q;
+      }
+    }
+    const nlohmann::json& summary = result.summary;
+    EXPECT_EQ(summary["query_frames_with_error"].get<std::size_t>(), 1u);
+    EXPECT_EQ(summary["method"], std::string(enum_name(c.method)));
+    const nlohmann::json& detection = summary["detection"];
+    EXPECT_EQ(detection["no_candidate"].get<std::size_t>() + detection["below_threshold"].get<std::size_t>() +
+                  detection["suppressed"].get<std::size_t>() + detection["loop"].get<std::size_t>(),
+              kPeriod);
+    std::size_t loop_rows = 0;
+    for (const auto& row : rows) loop_rows += row[column_index(header, "detection")] == "loop" ? 1 : 0;
+    EXPECT_EQ(detection["loop"].get<std::size_t>(), loop_rows);
+    EXPECT_EQ(read_csv(out / "loops.csv").size(), result.loops);
+    EXPECT_EQ(summary["aligned"]["loops_within_tolerance"].get<std::size_t>() +
+                  summary["aligned"]["loops_beyond_tolerance"].get<std::size_t>(),
+              result.loops);
+  }
+}
+
 // Hand-checked: 6 query and 6 reference frames from frame 2 on, tolerance 1, so every query is positive
 // (16 true pairs). Ranked (lower is better): q0->r0 0.1 true, q1->r3 0.2 false, q2->r2 0.3 true (and
 // q2->r5 0.35, not its best), q3->r5 0.4 false.

@@ -348,14 +348,156 @@ void add_aligned_json(const TwoSequenceSetup& setup, std::size_t loops, std::siz
                         {"best_match_within_tolerance", best_aligned}};
 }
 
+// loops.csv of the accepted loops (indices within the ranges; the file gives dataset frame numbers: i query,
+// j reference). Returns how many lie within the tolerance of the aligned frame.
+std::size_t write_loops(const TwoSequenceSetup& setup, const std::vector<Detection>& loops,
+                        const std::filesystem::path& out_dir) {
+  LoopsWriter loops_csv;
+  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
+  std::size_t aligned = 0;
+  for (const Detection& loop : loops) {
+    const std::size_t i = setup.ranges.query_first + loop.query;
+    const std::size_t j = setup.ranges.reference_first + loop.reference;
+    loops_csv.write(i, j, setup.query.frame_t_ns(i), setup.reference.frame_t_ns(j), loop.score);
+    if (setup.aligned(loop.query, loop.reference)) ++aligned;
+  }
+  loops_csv.close();
+  return aligned;
+}
+
+std::vector<Detection> as_detections(const std::vector<LoopClosure>& loops) {
+  std::vector<Detection> out;
+  out.reserve(loops.size());
+  for (const LoopClosure& loop : loops)
+    out.push_back(Detection{static_cast<std::size_t>(loop.i), static_cast<std::size_t>(loop.j), loop.score});
+  return out;
+}
+
+// frames.csv of a two-sequence run, a row per query frame: the columns of every method (frame, t_ns, t_s,
+// descriptor, detection, match_frame), the method's own (`method_columns`), then status and reason; and the
+// counts summary.json gives of them.
+class QueryFramesCsv {
+ public:
+  QueryFramesCsv(const TwoSequenceSetup& setup, const DescribedSequence& query_frames,
+                 const std::filesystem::path& out_dir, const std::vector<std::string>& method_columns,
+                 std::string error_note = {})
+      : setup_(setup), qry_(query_frames), error_note_(std::move(error_note)) {
+    std::vector<std::string> columns = {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame"};
+    columns.insert(columns.end(), method_columns.begin(), method_columns.end());
+    columns.insert(columns.end(), {"status", "reason"});
+    csv_.emplace(out_dir / "frames.csv", columns);
+  }
+
+  // Query q (within the range): its detection, whose match is the best reference (within the range; -1:
+  // none), and the method's cells. A frame whose image failed gives the error before the reason (with
+  // error_note after it).
+  void write(std::size_t q, const FrameDetection& detection, const std::vector<std::string>& method_cells) {
+    const std::size_t frame = setup_.ranges.query_first + q;
+    ++outcome_counts_[static_cast<std::size_t>(detection.outcome)];
+    const bool has_best = detection.match >= 0;
+    if (has_best && setup_.aligned(q, static_cast<std::size_t>(detection.match))) ++best_aligned_;
+    const bool error = !qry_.errors[q].empty();
+    frame_errors_ += error ? 1 : 0;
+    const Dataset& query = setup_.query;
+    std::vector<std::string> row = {
+        std::to_string(query.source_index(frame)),
+        std::to_string(query.frame_t_ns(frame)),
+        format_fixed(ns_to_s(query.frame_t_ns(frame)), 9),
+        qry_.valid[q] ? "y" : "n",
+        detection.label,
+        has_best ? std::to_string(setup_.reference.source_index(setup_.ranges.reference_first +
+                                                                static_cast<std::size_t>(detection.match)))
+                 : ""};
+    row.insert(row.end(), method_cells.begin(), method_cells.end());
+    row.push_back(error ? "error" : "ok");
+    row.push_back(error ? qry_.errors[q] + error_note_ + "; " + detection.reason : detection.reason);
+    csv_->write_row(row);
+  }
+  void close() { csv_->close(); }
+
+  std::size_t best_aligned() const { return best_aligned_; }
+  std::size_t frame_errors() const { return frame_errors_; }
+  // summary.json "detection": the queries by outcome.
+  nlohmann::json detection_json() const {
+    const auto count = [this](FrameOutcome o) { return outcome_counts_[static_cast<std::size_t>(o)]; };
+    return {{"no_candidate", count(FrameOutcome::kNoCandidate)},
+            {"below_threshold", count(FrameOutcome::kBelowThreshold)},
+            {"suppressed", count(FrameOutcome::kSuppressed)},
+            {"loop", count(FrameOutcome::kLoop)}};
+  }
+
+ private:
+  const TwoSequenceSetup& setup_;
+  const DescribedSequence& qry_;
+  std::string error_note_;
+  std::optional<CsvWriter> csv_;
+  std::array<std::size_t, 4> outcome_counts_{};
+  std::size_t best_aligned_ = 0, frame_errors_ = 0;
+};
+
+// What every method's run gives: the evaluation (and truth_loops.csv) and summary.json's common fields;
+// `summary` holds the method's own (stages_s, and more in "detection").
+struct MethodRun {
+  MethodRun(const char* method_name, std::string order, nlohmann::json effective_config,
+            const DescribedSequence& reference, const DescribedSequence& query)
+      : method(method_name),
+        score_order(std::move(order)),
+        config(std::move(effective_config)),
+        ref(&reference),
+        qry(&query) {}
+
+  const char* method;
+  std::string score_order;
+  nlohmann::json config;  // the effective configuration
+  const DescribedSequence* ref;
+  const DescribedSequence* qry;
+  std::size_t similarities = 0;
+  const std::vector<Detection>* loops = nullptr;
+  const std::vector<Detection>* ranked = nullptr;
+  std::size_t loops_aligned = 0;
+  nlohmann::json summary = nlohmann::json::object();
+};
+
+TwoSequenceResult finish_run(const TwoSequenceSetup& setup, MethodRun run, const QueryFramesCsv& frames,
+                             const std::filesystem::path& out_dir, Clock::time_point start,
+                             Clock::time_point outputs_start) {
+  TwoSequenceResult result;
+  result.reference_frames = setup.ranges.reference_count;
+  result.query_frames = setup.ranges.query_count;
+  result.loops = run.loops->size();
+  nlohmann::json evaluation = run_evaluation(setup, *run.loops, *run.ranked, run.score_order, out_dir);
+  setup.phase("outputs and evaluation", outputs_start);
+  result.wall_s = seconds_since(start);
+  nlohmann::json detection = frames.detection_json();
+  if (run.summary.contains("detection")) detection.update(run.summary["detection"]);
+  result.summary = std::move(run.summary);
+  result.summary.update({
+      {"mode", "two-sequence"},
+      {"method", run.method},
+      {"score_order", run.score_order},
+      {"config", std::move(run.config)},
+      {"images_decoded", run.ref->described + run.qry->described},
+      {"descriptors_computed", run.ref->described + run.qry->described},  // SeqSLAM: preprocessed images
+      {"similarities_computed", run.similarities},
+      {"loops", run.loops->size()},
+      {"query_frames", setup.ranges.query_count},
+      {"query_frames_with_error", frames.frame_errors()},
+      {"reference_errors", reference_errors_json(*run.ref)},
+      {"detection", std::move(detection)},
+      {"evaluation", std::move(evaluation)},
+      {"wall_s", result.wall_s},
+      {"peak_rss_mb", peak_rss_mb()},
+  });
+  result.summary.update(sequences_json(setup));
+  add_aligned_json(setup, run.loops->size(), run.loops_aligned, frames.best_aligned(), result.summary);
+  return result;
+}
+
 // DIRD (dird.md §5): describe both, S for every (reference, query) pair, the streaming matcher.
 TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                            Clock::time_point start) {
   const PipelineConfig& config = setup.config;
-  const Dataset& reference = setup.reference;
-  const Dataset& query = setup.query;
-  const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
-  const std::size_t query_first = setup.ranges.query_first;
+  const std::size_t ref_count = setup.ranges.reference_count;
   std::size_t query_count = setup.ranges.query_count;
   const DirdExtractor extractor(config.dird);
   const DirdSimilarity similarity(config.dird);
@@ -453,90 +595,38 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
   setup.phase("match (sequence matcher)", t0);
 
   const auto outputs_start = Clock::now();
-  LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
-  std::size_t loops_aligned = 0;
-  std::vector<Detection> detections;  // indices within the ranges, score = DP
-  for (const LoopClosure& loop : output.loops) {
-    const auto q = static_cast<std::size_t>(loop.i);
-    const auto r = static_cast<std::size_t>(loop.j);
-    loops_csv.write(query_first + q, ref_first + r, query.frame_t_ns(query_first + q),
-                    reference.frame_t_ns(ref_first + r), loop.score);
-    if (setup.aligned(q, r)) ++loops_aligned;
-    detections.push_back(Detection{q, r, loop.score});
-  }
-  loops_csv.close();
-
-  CsvWriter frames_csv(out_dir / "frames.csv",
-                       {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
-                        "best_similarity", "candidates", "status", "reason"});
-  std::array<std::size_t, 4> outcome_counts{};
-  std::size_t best_aligned = 0, frame_errors = 0;
+  const std::vector<Detection> detections = as_detections(output.loops);  // within the ranges, score = DP
+  MethodRun run("dird", "higher_is_better", config_to_json(config), ref, qry);
+  run.loops_aligned = write_loops(setup, detections, out_dir);
+  QueryFramesCsv frames(setup, qry, out_dir, {"match_score", "best_similarity", "candidates"});
   for (const FrameMatchStatus& status : output.frames) {
-    const auto q = static_cast<std::size_t>(status.i);
-    const std::size_t frame = query_first + q;
-    ++outcome_counts[static_cast<std::size_t>(status.outcome)];
     MatchOutcomeContext context;
     context.two_sequence = true;
-    context.described = qry.valid[q] != 0;
+    context.described = qry.valid[static_cast<std::size_t>(status.i)] != 0;
     context.tau1 = config.dird.tau1;
     context.dp_threshold = config.match.dp_threshold();
-    const FrameDetection detection = match_detection(status, context);
-    const std::string& reason = detection.reason;
     const bool has_best = status.best_j >= 0;
-    if (has_best && setup.aligned(q, static_cast<std::size_t>(status.best_j))) ++best_aligned;
-    const bool error = !qry.errors[q].empty();
-    frame_errors += error ? 1 : 0;
-    frames_csv.write_row(
-        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
-         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
-         has_best
-             ? std::to_string(reference.source_index(ref_first + static_cast<std::size_t>(status.best_j)))
-             : "",
-         has_best ? format_fixed(status.best_score, 6) : "", format_fixed(status.best_similarity, 6),
-         std::to_string(status.candidates), error ? "error" : "ok",
-         error ? qry.errors[q] + "; " + reason : reason});
+    frames.write(static_cast<std::size_t>(status.i), match_detection(status, context),
+                 {has_best ? format_fixed(status.best_score, 6) : "", format_fixed(status.best_similarity, 6),
+                  std::to_string(status.candidates)});
   }
-  frames_csv.close();
+  frames.close();
 
-  TwoSequenceResult result;
-  result.reference_frames = ref_count;
-  result.query_frames = query_count;
-  result.loops = output.loops.size();
-  const std::string score_order = "higher_is_better";
-  nlohmann::json evaluation = run_evaluation(setup, detections, detections, score_order, out_dir);
-  setup.phase("outputs and evaluation", outputs_start);
-  result.wall_s = seconds_since(start);
-  result.summary = {
-      {"mode", "two-sequence"},
-      {"method", "dird"},
-      {"score_order", score_order},
-      {"config", config_to_json(config)},
-      {"images_decoded", ref.described + qry.described},
-      {"descriptors_computed", ref.described + qry.described},
-      {"similarities_computed", similarities},
-      {"loops", output.loops.size()},
-      {"query_frames", query_count},
-      {"query_frames_with_error", frame_errors},
-      {"reference_errors", reference_errors_json(ref)},
-      {"detection",
-       {{"no_candidate", outcome_counts[static_cast<std::size_t>(FrameOutcome::kNoCandidate)]},
-        {"below_threshold", outcome_counts[static_cast<std::size_t>(FrameOutcome::kBelowThreshold)]},
-        {"suppressed", outcome_counts[static_cast<std::size_t>(FrameOutcome::kSuppressed)]},
-        {"loop", outcome_counts[static_cast<std::size_t>(FrameOutcome::kLoop)]},
-        {"nms_delay_frames", matcher.emission_delay()}}},
-      {"evaluation", std::move(evaluation)},
+  run.similarities = similarities;
+  run.loops = run.ranked = &detections;
+  run.summary = {
+      {"detection", {{"nms_delay_frames", matcher.emission_delay()}}},
       {"stages_s", {{"describe", describe_s}, {"similarity", similarity_s}, {"match", match_s}}},
-      {"wall_s", result.wall_s},
-      {"peak_rss_mb", peak_rss_mb()},
+      {"scale",
+       {{"mode", config.scale.mode},
+        {"mu", scale.mu},
+        {"sigma", scale.sigma},
+        {"cutoff_distance", scale.cutoff_distance},
+        {"estimated", scale.estimated},
+        {"distances", scale_distances}}},
   };
-  result.summary.update(sequences_json(setup));
-  if (standardized) result.summary["standardize"] = *standardized;
-  result.summary["scale"] = {{"mode", config.scale.mode},    {"mu", scale.mu},
-                             {"sigma", scale.sigma},         {"cutoff_distance", scale.cutoff_distance},
-                             {"estimated", scale.estimated}, {"distances", scale_distances}};
-  add_aligned_json(setup, output.loops.size(), loops_aligned, best_aligned, result.summary);
-  return result;
+  if (standardized) run.summary["standardize"] = *standardized;
+  return finish_run(setup, std::move(run), frames, out_dir, start, outputs_start);
 }
 
 // dird-seqslam (docs/illumination.md): describe both, code each with its own statistics, the distance of
@@ -546,9 +636,8 @@ TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& 
 TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                                    Clock::time_point start) {
   const PipelineConfig& config = setup.config;
-  const Dataset& reference = setup.reference;
   const Dataset& query = setup.query;
-  const std::size_t ref_first = setup.ranges.reference_first, ref_count = setup.ranges.reference_count;
+  const std::size_t ref_count = setup.ranges.reference_count;
   const std::size_t query_first = setup.ranges.query_first;
   std::size_t query_count = setup.ranges.query_count;
   const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
@@ -603,97 +692,42 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   setup.phase("search flush", t0);
 
   const auto outputs_start = Clock::now();
-  LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
-  std::size_t loops_aligned = 0;
-  std::vector<Detection> loops;  // indices within the ranges, score = mean z
-  for (const LoopClosure& loop : output.loops) {
-    const auto q = static_cast<std::size_t>(loop.i);
-    const auto r = static_cast<std::size_t>(loop.j);
-    loops_csv.write(query_first + q, ref_first + r, query.frame_t_ns(query_first + q),
-                    reference.frame_t_ns(ref_first + r), loop.score);
-    if (setup.aligned(q, r)) ++loops_aligned;
-    loops.push_back(Detection{q, r, loop.score});
-  }
-  loops_csv.close();
-
-  CsvWriter frames_csv(out_dir / "frames.csv",
-                       {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
-                        "velocity", "line_end_frame", "status", "reason"});
+  const std::vector<Detection> loops = as_detections(output.loops);  // within the ranges, score = mean z
+  MethodRun run("dird-seqslam", "higher_is_better", config_to_json(config), ref, qry);
+  run.loops_aligned = write_loops(setup, loops, out_dir);
+  QueryFramesCsv frames(setup, qry, out_dir, {"match_score", "velocity", "line_end_frame"});
   std::vector<Detection> ranked;
-  std::array<std::size_t, 4> outcome_counts{};
-  std::size_t best_aligned = 0, frame_errors = 0;
   for (const ContrastVerdict& verdict : output.frames) {
     const auto q = static_cast<std::size_t>(verdict.i);
-    const std::size_t frame = query_first + q;
-    ++outcome_counts[static_cast<std::size_t>(verdict.outcome)];
     ContrastOutcomeContext context;
     context.two_sequence = true;
     context.described = qry.valid[q] != 0;
     context.min_score = config.dird_seqslam.search.min_score;
-    const FrameDetection detection = contrast_detection(verdict, context);
     const bool has_best = verdict.best_j >= 0;
-    if (has_best) {
-      ranked.push_back(Detection{q, static_cast<std::size_t>(verdict.best_j), verdict.score});
-      if (setup.aligned(q, static_cast<std::size_t>(verdict.best_j))) ++best_aligned;
-    }
-    const bool error = !qry.errors[q].empty();
-    frame_errors += error ? 1 : 0;
-    frames_csv.write_row(
-        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
-         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
-         has_best
-             ? std::to_string(reference.source_index(ref_first + static_cast<std::size_t>(verdict.best_j)))
-             : "",
-         has_best ? format_fixed(verdict.score, 6) : "", has_best ? format_fixed(verdict.velocity, 4) : "",
+    if (has_best) ranked.push_back(Detection{q, static_cast<std::size_t>(verdict.best_j), verdict.score});
+    frames.write(
+        q, contrast_detection(verdict, context),
+        {has_best ? format_fixed(verdict.score, 6) : "", has_best ? format_fixed(verdict.velocity, 4) : "",
          has_best
              ? std::to_string(query.source_index(query_first + static_cast<std::size_t>(verdict.line_end)))
-             : "",
-         error ? "error" : "ok", error ? qry.errors[q] + "; " + detection.reason : detection.reason});
+             : ""});
   }
-  frames_csv.close();
+  frames.close();
 
-  TwoSequenceResult result;
-  result.reference_frames = ref_count;
-  result.query_frames = query_count;
-  result.loops = output.loops.size();
-  const std::string score_order = "higher_is_better";
-  nlohmann::json evaluation = run_evaluation(setup, loops, ranked, score_order, out_dir);
-  setup.phase("outputs and evaluation", outputs_start);
-  result.wall_s = seconds_since(start);
-  result.summary = {
-      {"mode", "two-sequence"},
-      {"method", "dird-seqslam"},
-      {"score_order", score_order},
-      {"config", config_to_json(config)},
-      {"images_decoded", ref.described + qry.described},
-      {"descriptors_computed", ref.described + qry.described},
-      {"similarities_computed", ref.described * qry.described},  // distances
-      {"loops", output.loops.size()},
-      {"query_frames", query_count},
-      {"query_frames_with_error", frame_errors},
-      {"reference_errors", reference_errors_json(ref)},
-      {"detection",
-       {{"no_candidate", outcome_counts[static_cast<std::size_t>(FrameOutcome::kNoCandidate)]},
-        {"below_threshold", outcome_counts[static_cast<std::size_t>(FrameOutcome::kBelowThreshold)]},
-        {"suppressed", 0},
-        {"loop", outcome_counts[static_cast<std::size_t>(FrameOutcome::kLoop)]},
-        {"delay_frames", search.emission_delay()}}},
+  run.similarities = ref.described * qry.described;  // distances
+  run.loops = &loops;
+  run.ranked = &ranked;
+  run.summary = {
+      {"detection", {{"delay_frames", search.emission_delay()}}},
       {"dird_seqslam",
        {{"normalization", dird.normalization},
         {"resize", dird.resize},
         {"velocities", config.dird_seqslam.search.velocities()},
         {"sequence_length", search.sequence_length()}}},
-      {"evaluation", std::move(evaluation)},
       {"stages_s", {{"describe", describe_s}, {"distances", distance_s}, {"search", search_s}}},
-      {"wall_s", result.wall_s},
-      {"peak_rss_mb", peak_rss_mb()},
   };
-  if (standardize.enabled())
-    result.summary["standardize"] = standardize_json(standardize, ref_codes, qry_codes);
-  result.summary.update(sequences_json(setup));
-  add_aligned_json(setup, output.loops.size(), loops_aligned, best_aligned, result.summary);
-  return result;
+  if (standardize.enabled()) run.summary["standardize"] = standardize_json(standardize, ref_codes, qry_codes);
+  return finish_run(setup, std::move(run), frames, out_dir, start, outputs_start);
 }
 
 // SeqSLAM (seqslam.md) between two runs: step 1 on both sequences in parallel, then the difference matrix
@@ -744,14 +778,9 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
   setup.phase("search (SeqSLAM)", t0);
 
   const auto outputs_start = Clock::now();
-  LoopsWriter loops_csv;
-  loops_csv.open(out_dir / "loops.csv", setup.query_label(), setup.reference_label());
-  CsvWriter frames_csv(out_dir / "frames.csv",
-                       {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame", "match_score",
-                        "best_score", "second_score", "status", "reason"});
+  QueryFramesCsv frames(setup, qry, out_dir, {"match_score", "best_score", "second_score"},
+                        " (took part as an all-zero image)");
   std::vector<Detection> loops, ranked;  // indices within the ranges, score = ratio
-  std::array<std::size_t, 4> outcome_counts{};
-  std::size_t loops_aligned = 0, best_aligned = 0, frame_errors = 0;
   SeqSlamOutcomeContext context;
   context.two_sequence = true;
   context.query_count = query_count;
@@ -759,67 +788,25 @@ TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::pat
   context.reference_first = ref_first;
   for (std::size_t q = 0; q < query_count; ++q) {
     const SeqSlamMatch& m = matches.at(q);
-    const std::size_t frame = query_first + q;
     const FrameDetection detection = seqslam_detection(m, seqslam, context);
     const bool has_match = detection.match >= 0;
     if (has_match) {
       if (std::isfinite(m.ratio)) ranked.push_back(Detection{q, m.reference, m.ratio});
-      if (setup.aligned(q, m.reference)) ++best_aligned;
-      if (detection.outcome == FrameOutcome::kLoop) {
-        const std::size_t rj = ref_first + m.reference;
-        loops_csv.write(frame, rj, query.frame_t_ns(frame), reference.frame_t_ns(rj), m.ratio);
-        loops.push_back(Detection{q, m.reference, m.ratio});
-        if (setup.aligned(q, m.reference)) ++loops_aligned;
-      }
+      if (detection.outcome == FrameOutcome::kLoop) loops.push_back(Detection{q, m.reference, m.ratio});
     }
-    ++outcome_counts[static_cast<std::size_t>(detection.outcome)];
-    const bool error = !qry.errors[q].empty();
-    frame_errors += error ? 1 : 0;
-    const std::string reason =
-        error ? qry.errors[q] + " (took part as an all-zero image); " + detection.reason : detection.reason;
-    frames_csv.write_row(
-        {std::to_string(query.source_index(frame)), std::to_string(query.frame_t_ns(frame)),
-         format_fixed(ns_to_s(query.frame_t_ns(frame)), 9), qry.valid[q] ? "y" : "n", detection.label,
-         has_match ? std::to_string(reference.source_index(ref_first + m.reference)) : "",
-         has_match ? format_fixed(m.ratio, 6) : "", has_match ? format_fixed(m.best_score, 6) : "",
-         has_match ? format_fixed(m.second_score, 6) : "", error ? "error" : "ok", reason});
+    frames.write(q, detection,
+                 {has_match ? format_fixed(m.ratio, 6) : "", has_match ? format_fixed(m.best_score, 6) : "",
+                  has_match ? format_fixed(m.second_score, 6) : ""});
   }
-  loops_csv.close();
-  frames_csv.close();
+  frames.close();
 
-  TwoSequenceResult result;
-  result.reference_frames = ref_count;
-  result.query_frames = query_count;
-  result.loops = loops.size();
-  const std::string score_order = "lower_is_better";
-  nlohmann::json evaluation = run_evaluation(setup, loops, ranked, score_order, out_dir);
-  setup.phase("outputs and evaluation", outputs_start);
-  result.wall_s = seconds_since(start);
-  result.summary = {
-      {"mode", "two-sequence"},
-      {"method", "seqslam"},
-      {"score_order", score_order},
-      {"config", config_to_json(effective)},
-      {"images_decoded", ref.described + qry.described},
-      {"descriptors_computed", ref.described + qry.described},  // preprocessed images
-      {"similarities_computed", ref_count * query_count},       // difference matrix entries
-      {"loops", loops.size()},
-      {"query_frames", query_count},
-      {"query_frames_with_error", frame_errors},
-      {"reference_errors", reference_errors_json(ref)},
-      {"detection",
-       {{"no_candidate", outcome_counts[static_cast<std::size_t>(FrameOutcome::kNoCandidate)]},
-        {"below_threshold", outcome_counts[static_cast<std::size_t>(FrameOutcome::kBelowThreshold)]},
-        {"suppressed", 0},
-        {"loop", outcome_counts[static_cast<std::size_t>(FrameOutcome::kLoop)]}}},
-      {"evaluation", std::move(evaluation)},
-      {"stages_s", {{"preprocess", preprocess_s}, {"search", search_s}}},
-      {"wall_s", result.wall_s},
-      {"peak_rss_mb", peak_rss_mb()},
-  };
-  result.summary.update(sequences_json(setup));
-  add_aligned_json(setup, loops.size(), loops_aligned, best_aligned, result.summary);
-  return result;
+  MethodRun run("seqslam", "lower_is_better", config_to_json(effective), ref, qry);
+  run.loops_aligned = write_loops(setup, loops, out_dir);
+  run.similarities = ref_count * query_count;  // difference matrix entries
+  run.loops = &loops;
+  run.ranked = &ranked;
+  run.summary = {{"stages_s", {{"preprocess", preprocess_s}, {"search", search_s}}}};
+  return finish_run(setup, std::move(run), frames, out_dir, start, outputs_start);
 }
 
 }  // namespace
