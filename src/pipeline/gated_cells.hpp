@@ -34,6 +34,7 @@
 #include "stages/gate/candidate_areas.hpp"
 #include "stages/gate/pose_gate.hpp"
 #include "stages/gate/reanchor.hpp"
+#include "stages/match/row_assembler.hpp"
 
 namespace loopgate {
 
@@ -165,5 +166,72 @@ void describe_frames(FrameRecord& r, const std::vector<std::int64_t>& seqs, cons
     if (!problem.empty()) add_message(r.warnings, std::move(problem));
   }
 }
+
+// What a gated DIRD method (the paper's matcher, on raw or standardised descriptors) does whatever its
+// descriptors: the pose gate's cells, rows kept open for gate.row_horizon_frames (RowAssembler) and then
+// the sequence matcher, and everything reported about them. `Dird` gives loops() (LoopMatching),
+// valid(seq) (a descriptor was computed), detection(seq, outside_areas, requested), summary() and
+// example_descriptor(); the method adds gate(), describe() and match(), which fills rows_ and calls
+// advance().
+template <class Dird>
+class GatedDirdMethod : public DetectionMethod {
+ public:
+  explicit GatedDirdMethod(const MethodContext& context)
+      : context_(context), dird_(context), cells_(context), rows_(context.config.gate.row_horizon_frames) {}
+  std::string name() const override { return "dird"; }
+  std::string mode() const override { return "gated"; }
+
+  void finish() override {
+    cells_.finish();
+    MatchOutput output;
+    rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.loops().matcher(), output);
+    dird_.loops().handle(output);
+    dird_.loops().flush();
+  }
+
+  void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
+  // Row s goes to the matcher at match(s + horizon) (RowAssembler), its verdict is final NMS-delay rows
+  // later.
+  std::optional<int> verdict_delay_frames() const override {
+    return context_.config.gate.row_horizon_frames + static_cast<int>(dird_.loops().emission_delay());
+  }
+  std::optional<FrameVerdict> detection(std::size_t seq) override {
+    return dird_.detection(seq, cells_.row_empty(seq), cells_.requested_within(seq, *verdict_delay_frames()));
+  }
+  void write_files(const std::filesystem::path& out_dir) const override {
+    cells_.write_files(out_dir, match_end_seq_,
+                       [this](std::int64_t k) { return dird_.valid(static_cast<std::size_t>(k)); });
+  }
+  nlohmann::json summary() const override {
+    nlohmann::json out = dird_.summary();
+    out.update(cells_.summary(match_end_seq_));
+    return out;
+  }
+  MethodEvaluation evaluation() const override {
+    MethodEvaluation e;
+    e.covers = [this](std::int64_t i, std::int64_t j) { return cells_.covers(i, j); };
+    return e;
+  }
+  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
+    return dird_.example_descriptor();
+  }
+
+ protected:
+  // After match() filled frame seq's cells into rows_: the rows older than the horizon go to the matcher.
+  void advance(std::size_t seq) {
+    match_end_seq_ = seq + 1;
+    MatchOutput output;
+    rows_.advance(static_cast<std::int64_t>(seq), dird_.loops().matcher(), output);
+    dird_.loops().handle(output);
+  }
+
+  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
+  Dird dird_;
+  PoseGatedCells cells_;
+  RowAssembler rows_;
+
+ private:
+  std::size_t match_end_seq_ = 0;
+};
 
 }  // namespace loopgate

@@ -157,12 +157,9 @@ class StandardDirdFull final : public DetectionMethod {
 // The pose gate's candidate cells (PoseGatedCells) with standardised DIRD: the frames the gate asks for and
 // the observed frames are described; the cells' similarities go into rows kept open for
 // gate.row_horizon_frames, then to the matcher.
-class StandardDirdGated final : public DetectionMethod {
+class StandardDirdGated final : public GatedDirdMethod<StandardDird> {
  public:
-  explicit StandardDirdGated(const MethodContext& context)
-      : context_(context), dird_(context), cells_(context), rows_(context.config.gate.row_horizon_frames) {}
-  std::string name() const override { return "dird"; }
-  std::string mode() const override { return "gated"; }
+  using GatedDirdMethod::GatedDirdMethod;
 
   void gate(FrameRecord& r) override { cells_.gate(r, dird_.observed_frame(r.seq)); }
 
@@ -177,53 +174,8 @@ class StandardDirdGated final : public DetectionMethod {
       dird_.similarity_range(static_cast<std::size_t>(span.i), static_cast<std::size_t>(span.j0),
                              static_cast<std::size_t>(span.j1) + 1, rows_.row(span.i));
     }
-    match_end_seq_ = r.seq + 1;
-    MatchOutput output;
-    rows_.advance(static_cast<std::int64_t>(r.seq), dird_.loops().matcher(), output);
-    dird_.loops().handle(output);
+    advance(r.seq);
   }
-
-  void finish() override {
-    cells_.finish();
-    MatchOutput output;
-    rows_.finish(static_cast<std::int64_t>(match_end_seq_), dird_.loops().matcher(), output);
-    dird_.loops().handle(output);
-    dird_.loops().flush();
-  }
-
-  void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }
-  // Row s goes to the matcher at match(s + horizon) (RowAssembler), its verdict is final NMS-delay rows
-  // later.
-  std::optional<int> verdict_delay_frames() const override {
-    return context_.config.gate.row_horizon_frames + static_cast<int>(dird_.loops().emission_delay());
-  }
-  std::optional<FrameVerdict> detection(std::size_t seq) override {
-    return dird_.detection(seq, cells_.row_empty(seq), cells_.requested_within(seq, *verdict_delay_frames()));
-  }
-  void write_files(const std::filesystem::path& out_dir) const override {
-    cells_.write_files(out_dir, match_end_seq_,
-                       [this](std::int64_t k) { return dird_.valid(static_cast<std::size_t>(k)); });
-  }
-  nlohmann::json summary() const override {
-    nlohmann::json out = dird_.summary();
-    out.update(cells_.summary(match_end_seq_));
-    return out;
-  }
-  MethodEvaluation evaluation() const override {
-    MethodEvaluation e;
-    e.covers = [this](std::int64_t i, std::int64_t j) { return cells_.covers(i, j); };
-    return e;
-  }
-  std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
-    return dird_.example_descriptor();
-  }
-
- private:
-  const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
-  StandardDird dird_;
-  PoseGatedCells cells_;
-  RowAssembler rows_;
-  std::size_t match_end_seq_ = 0;
 };
 
 }  // namespace
