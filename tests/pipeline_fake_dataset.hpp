@@ -13,6 +13,8 @@
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
+#include "pipeline/pipeline_config.hpp"
+#include "test_support.hpp"
 
 namespace loopgate::testing {
 
@@ -136,5 +138,56 @@ class RevisitDataset : public FakeDataset {
   std::size_t period_;
   int noise_seed_;
 };
+
+// Three laps of `period` frames whose frames [begin, end) are 500 m away: the same views in a far place.
+inline RevisitDataset detour_dataset(std::size_t period, std::size_t begin, std::size_t end) {
+  RevisitDataset dataset(period, 3);
+  dataset.detour_begin = begin;
+  dataset.detour_end = end;
+  return dataset;
+}
+
+// The keys every pipeline test over RevisitDataset's 120-frame laps shares: `method` in `mode` on `threads`,
+// drift odometry small enough that a detour's 500 m each way, counted as distance driven, does not shrink the
+// combined distance of its frames below the gate's threshold; margin 30 and sequences of 10 frames; the
+// gate's gap, beta and area margins for such a lap. Each test sets its method's own keys.
+inline PipelineConfig revisit_config(Detector method, RunMode mode, int threads = 2) {
+  PipelineConfig config;
+  config.run.method = method;
+  config.run.mode = mode;
+  config.run.threads = threads;
+  config.output.progress = "off";
+  config.odometry.source = "drift";  // ground truth + a random-walk drift, sigma growing with distance
+  config.odometry.drift_position_sigma_m_per_sqrt_m = 0.001;
+  config.odometry.drift_heading_sigma_rad_per_sqrt_m = 0.00005;
+  config.odometry.drift_scale_sigma_per_sqrt_m = 0.0001;
+  config.match.margin = 30;
+  config.match.sequence_length = 10;
+  config.gate.gap_frames = 30;
+  config.gate.beta_m = 5.0;
+  config.gate.area_margin_query_frames = 10;
+  config.gate.area_margin_reference_frames = 10;
+  config.gate.area_max_hole_frames = 5;
+  config.gate.row_horizon_frames = 20;
+  return config;
+}
+
+// Causal standardisation that warms up within RevisitDataset's first lap.
+inline void small_standardize(StandardizeConfig& standardize) {
+  standardize.warm_up = 20;
+  standardize.window = 40;
+  standardize.refresh_every = 3;
+  standardize.observe_every = 2;
+}
+
+// candidate_cells.csv (rows i, j0, j1) as the set of its (i, j) cells.
+inline std::set<std::pair<std::int64_t, std::int64_t>> read_cells(const std::filesystem::path& file) {
+  std::set<std::pair<std::int64_t, std::int64_t>> cells;
+  for (const auto& row : read_csv(file)) {
+    const std::int64_t i = std::stoll(row[0]);
+    for (std::int64_t j = std::stoll(row[1]); j <= std::stoll(row[2]); ++j) cells.insert({i, j});
+  }
+  return cells;
+}
 
 }  // namespace loopgate::testing

@@ -35,23 +35,7 @@ constexpr std::size_t kDetourBegin = 250, kDetourEnd = 300;  // third lap, 500 m
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 PipelineConfig gated_config(int threads = 2) {
-  PipelineConfig config;
-  config.run.mode = RunMode::kGated;
-  config.run.method = Detector::kSeqSlam;
-  config.run.threads = threads;
-  config.output.progress = "off";
-  config.odometry.source = "drift";  // as the gated DIRD test: small drift, the detour stays far away
-  config.odometry.drift_position_sigma_m_per_sqrt_m = 0.001;
-  config.odometry.drift_heading_sigma_rad_per_sqrt_m = 0.00005;
-  config.odometry.drift_scale_sigma_per_sqrt_m = 0.0001;
-  config.match.margin = 30;
-  config.match.sequence_length = 10;
-  config.gate.gap_frames = 30;
-  config.gate.beta_m = 5.0;
-  config.gate.area_margin_query_frames = 10;
-  config.gate.area_margin_reference_frames = 10;
-  config.gate.area_max_hole_frames = 5;
-  config.gate.row_horizon_frames = 20;
+  PipelineConfig config = testing::revisit_config(Detector::kSeqSlam, RunMode::kGated, threads);
   config.seqslam.exclusion = "past";
   config.seqslam.exclusion_margin_frames = 30;  // = match.margin
   config.eval.truth_radius_m = 2.0;
@@ -59,10 +43,7 @@ PipelineConfig gated_config(int threads = 2) {
 }
 
 RevisitDataset detour_dataset() {
-  RevisitDataset dataset(kPeriod, 3);
-  dataset.detour_begin = kDetourBegin;
-  dataset.detour_end = kDetourEnd;
-  return dataset;
+  return testing::detour_dataset(kPeriod, kDetourBegin, kDetourEnd);
 }
 
 using Cell = std::pair<std::size_t, std::size_t>;  // (query i, reference j)

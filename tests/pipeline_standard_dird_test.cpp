@@ -34,43 +34,16 @@ constexpr std::size_t kPeriod = 120;
 constexpr std::size_t kLaps = 3;
 
 PipelineConfig standard_config(RunMode mode, int threads = 2) {
-  PipelineConfig config;
-  config.run.mode = mode;
-  config.run.threads = threads;
-  config.output.progress = "off";
-  config.odometry.source = "drift";
-  config.odometry.drift_position_sigma_m_per_sqrt_m = 0.001;
-  config.odometry.drift_heading_sigma_rad_per_sqrt_m = 0.00005;
-  config.odometry.drift_scale_sigma_per_sqrt_m = 0.0001;
-  config.match.margin = 30;
-  config.match.sequence_length = 10;
-  config.match.tau3 = 0.05;
+  PipelineConfig config = testing::revisit_config(Detector::kDird, mode, threads);
   config.match.nms_half_window = 20;
-  config.gate.gap_frames = 30;
-  config.gate.beta_m = 5.0;
-  config.gate.area_margin_query_frames = 10;
-  config.gate.area_margin_reference_frames = 10;
-  config.gate.area_max_hole_frames = 5;
-  config.gate.row_horizon_frames = 20;
   config.dird.normalization = "l2";
   config.standardize.mode = "causal";
-  config.standardize.warm_up = 20;
-  config.standardize.window = 40;
-  config.standardize.refresh_every = 3;
-  config.standardize.observe_every = 2;
+  testing::small_standardize(config.standardize);
   return config;
 }
 
 using Cell = std::pair<std::int64_t, std::int64_t>;  // (i, j)
-
-std::set<Cell> read_cells(const fs::path& file) {
-  std::set<Cell> cells;
-  for (const auto& row : read_csv(file)) {
-    const std::int64_t i = std::stoll(row[0]);
-    for (std::int64_t j = std::stoll(row[1]); j <= std::stoll(row[2]); ++j) cells.insert({i, j});
-  }
-  return cells;
-}
+using testing::read_cells;
 
 std::vector<LoopClosure> read_loops(const fs::path& file) {
   std::vector<LoopClosure> loops;
