@@ -15,6 +15,7 @@
 #include <functional>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -69,6 +70,27 @@ std::vector<std::string> compare_output_names() {
 void remove_compare_outputs(const fs::path& out_dir) {
   std::error_code ec;
   for (const std::string& name : compare_output_names()) fs::remove_all(out_dir / name, ec);
+}
+
+// --threads and --frames as the keys they set (besides the command's own flags).
+void add_run_flags(const CompareOptions& options, std::vector<FlagValue>& flags) {
+  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
+  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+}
+
+// Before a compare writes anything (issue 15): no output over an input (compare.json, each method's run
+// files), one command at a time in the folder (`lock`, taken here for `command`), and no earlier compare's
+// outputs unless --force, whose folders then go (none is taken for this one's).
+void claim_output_folder(const CompareOptions& options, const PipelineConfig& base,
+                         const std::vector<std::string>& methods, std::optional<OutputLock>& lock,
+                         const char* command) {
+  const fs::path out_dir = options.out_dir;
+  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
+  for (const std::string& method : methods)
+    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
+  lock.emplace(out_dir, command);
+  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
+  remove_compare_outputs(out_dir);
 }
 
 std::string method_names() {
@@ -313,22 +335,15 @@ int compare_two_sequences(const CompareOptions& options) {
     }
   }
   std::vector<FlagValue> flags;
-  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
-  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  add_run_flags(options, flags);
   const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
-  // Before anything is written: no output over an input, one command at a time in the folder; SIGINT,
-  // SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is written
-  // (issue 15, as for the single-sequence compare).
-  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
-  for (const std::string& method : methods)
-    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
-  const OutputLock lock(out_dir, "loopgate compare --reference --query");
-  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
-  remove_compare_outputs(
-      out_dir);  // --force: the previous compare's folders go, none is taken for this one's
+  std::optional<OutputLock> lock;
+  claim_output_folder(options, base, methods, lock, "loopgate compare --reference --query");
+  // SIGINT, SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is
+  // written (issue 15, as for the single-sequence compare).
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
@@ -371,22 +386,14 @@ int compare_command(const CompareOptions& options) {
   std::vector<std::string> methods = split_methods(options.methods);
   std::vector<FlagValue> flags;
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
-  if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
-  if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  add_run_flags(options, flags);
   const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
   if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
-  // Before anything is written: no output over an input (compare.json, each method's run files), and one
-  // command at a time in the folder (issue 15).
-  refuse_outputs_over_inputs({{"the output", out_dir / "compare.json"}}, {{"--config", options.config_file}});
-  for (const std::string& method : methods)
-    refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
-  const OutputLock lock(out_dir, "loopgate compare");
-  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
-  remove_compare_outputs(
-      out_dir);               // --force: the previous compare's folders go, none is taken for this one's
+  std::optional<OutputLock> lock;
+  claim_output_folder(options, base, methods, lock, "loopgate compare");
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
   // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
