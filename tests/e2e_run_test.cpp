@@ -153,6 +153,20 @@ TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
   EXPECT_NE(output.find("compare: --out"), std::string::npos) << output;
   output = run(compare + " --force", &status);
   EXPECT_EQ(status, 0) << output;
+
+  // The two-sequence compare (the same check of its folder).
+  const fs::path two_out = testing::make_temp_dir("e2e-compare-two-refuse");
+  const std::string two = "compare --reference " + dataset.string() + " --query " + dataset.string() +
+                          " --out " + two_out.string() + " --no-plots --methods full";
+  ASSERT_EQ((run(two, &status), status), 0);
+  const std::string compare_json = read_file(two_out / "compare.json");
+  output = run(two, &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("already holds another run's outputs (compare.json, full"), std::string::npos)
+      << output;
+  EXPECT_EQ(read_file(two_out / "compare.json"), compare_json);
+  output = run(two + " --force", &status);
+  EXPECT_EQ(status, 0) << output;
 }
 
 TEST(E2eRun, ConfigErrorsNameTheKey) {
