@@ -35,10 +35,11 @@ extern "C" const char* __tsan_default_suppressions() {
 
 // The suppressions above that name a oneTBB function (fold_tree, tree_node, ...) match a frame anywhere in
 // either access's stack, so TSan must still hold the earlier access's stack when it reports. With its default
-// history (history_size=2, the last 128K memory accesses per thread) a busy TBB worker's stack was often gone
-// ("[failed to restore the stack]") and the report stood: the flaky one in PipelineGatedMode, the helper
-// that finished a tbb::parallel_for last decrementing the loop's root wait node on the spawner's stack
-// (fold_tree), which the spawner later reused (docs/reliability.md). The largest history (7: the last 4M
+// history (history_size=3, the last 256K memory accesses per thread; the runtime's help text says 2, its
+// "Current Value" 3) a busy TBB worker's stack was often gone ("[failed to restore the stack]") and the
+// report stood: the flaky one in PipelineGatedMode, the helper that finished a tbb::parallel_for last
+// decrementing the loop's root wait node on the spawner's stack (fold_tree), which the spawner later reused
+// (docs/reliability.md). The largest history (7: the last 4M
 // accesses per thread) keeps it. TSAN_OPTIONS given at run time still win.
 extern "C" const char* __tsan_default_options() {
   return "history_size=7";
