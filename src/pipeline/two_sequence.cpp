@@ -385,7 +385,7 @@ class QueryFramesCsv {
     std::vector<std::string> columns = {"frame", "t_ns", "t_s", "descriptor", "detection", "match_frame"};
     columns.insert(columns.end(), method_columns.begin(), method_columns.end());
     columns.insert(columns.end(), {"status", "reason"});
-    csv_.emplace(out_dir / "frames.csv", columns);
+    csv_.open(out_dir / "frames.csv", columns);
   }
 
   // Query q (within the range): its detection, whose match is the best reference (within the range; -1:
@@ -411,9 +411,9 @@ class QueryFramesCsv {
     row.insert(row.end(), method_cells.begin(), method_cells.end());
     row.push_back(error ? "error" : "ok");
     row.push_back(error ? qry_.errors[q] + error_note_ + "; " + detection.reason : detection.reason);
-    csv_->write_row(row);
+    csv_.write_row(row);
   }
-  void close() { csv_->close(); }
+  void close() { csv_.close(); }
 
   std::size_t best_aligned() const { return best_aligned_; }
   std::size_t frame_errors() const { return frame_errors_; }
@@ -430,7 +430,7 @@ class QueryFramesCsv {
   const TwoSequenceSetup& setup_;
   const DescribedSequence& qry_;
   std::string error_note_;
-  std::optional<CsvWriter> csv_;
+  CsvWriter csv_;
   std::array<std::size_t, 4> outcome_counts_{};
   std::size_t best_aligned_ = 0, frame_errors_ = 0;
 };
