@@ -147,15 +147,15 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& pre
       }
     }
     std::vector<unsigned char> status_fwd;
-    std::vector<float> error;
-    cv::calcOpticalFlowPyrLK(previous_pyramid_, pyramid, previous_pts, current_pts, status_fwd, error, window,
-                             config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    // No error output: OpenCV then skips its extra pass over every window at level 0 (unused here).
+    cv::calcOpticalFlowPyrLK(previous_pyramid_, pyramid, previous_pts, current_pts, status_fwd, cv::noArray(),
+                             window, config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     std::vector<cv::Point2f> back_pts = previous_pts;
     std::vector<unsigned char> status_bwd;
     const int check_levels =
         config_.klt_check_pyramid_levels < 0 ? config_.klt_pyramid_levels : config_.klt_check_pyramid_levels;
-    cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, error, window,
-                             check_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, cv::noArray(),
+                             window, check_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
     stats_.klt_ms = ms_since(t0);
     const auto border = static_cast<float>(config_.border_px);
     const float max_x = static_cast<float>(grey.cols - 1) - border;
