@@ -159,6 +159,25 @@ TEST(IoPngGrey, MixedFiltersOddSizesAndSplitStreams) {
   }
 }
 
+// Rows are unfiltered eight at a time (a diagonal wavefront in SIMD lanes) where SSE2 is there, the rest two
+// at a time: random filter types per row over heights around multiples of 8 and widths around multiples of
+// 8, so that every lane meets every filter type next to every other, at both image edges and in the band
+// left over at the bottom.
+TEST(IoPngGrey, RandomFilterTypesPerRowInEveryBandShape) {
+  std::mt19937 rng(7);
+  for (int rows = 7; rows <= 26; ++rows) {
+    for (const int cols : {1, 2, 7, 8, 9, 15, 16, 17, 33, 64}) {
+      SCOPED_TRACE(std::to_string(rows) + "x" + std::to_string(cols));
+      const cv::Mat image = random_grey(rows, cols, static_cast<unsigned>(rows * 101 + cols));
+      PngSpec spec;
+      for (int y = 0; y < rows; ++y) spec.filters.push_back(static_cast<int>(rng() % 5));
+      const Bytes png = encode(image, spec);
+      expect_same(fast(png), opencv(png));
+      EXPECT_EQ(cv::norm(fast(png), image, cv::NORM_INF), 0.0);
+    }
+  }
+}
+
 TEST(IoPngGrey, OpenCvsOwnFilesDecodeTheSame) {
   const cv::Mat image = random_grey(120, 200, 7);
   for (const int level : {0, 1, 9}) {
