@@ -49,7 +49,7 @@ struct Scratch {
   std::unique_ptr<libdeflate_decompressor, DecompressorDeleter> decompressor{libdeflate_alloc_decompressor()};
   std::vector<unsigned char> idat;      // the IDAT chunks joined, when there are several
   std::vector<unsigned char> filtered;  // the inflated rows, each led by its filter type byte
-  std::vector<unsigned char> band;      // 8 unfiltered rows with margins (unfilter_band8)
+  std::vector<unsigned char> band;      // 8 or 16 unfiltered rows with margins (unfilter_bands())
 };
 
 Scratch& scratch() {
@@ -181,98 +181,158 @@ inline __m128i select16(__m128i mask, __m128i if_set, __m128i if_clear) {
   return _mm_or_si128(_mm_and_si128(mask, if_set), _mm_andnot_si128(mask, if_clear));
 }
 
-// Rows y0 .. y0 + 7 of `filtered` (stride width + 1, filter byte first) below `prior` into `image`; the
-// filter types are known valid (0-4).
-void unfilter_band8(const unsigned char* filtered, const unsigned char* prior, int y0, cv::Mat& image,
-                    std::vector<unsigned char>& band) {
+// Eight rows (`first` .. first + 7 of `filtered`, stride width + 1, filter byte first; types known valid)
+// unfiltered into `out` (8 rows of stride out_stride, pixel x of row k at out + k * out_stride + x).
+class Band8 {
+ public:
+  Band8(const unsigned char* filtered, std::size_t width, std::size_t first, unsigned char* out,
+        std::size_t out_stride)
+      : out_(out), out_stride_(out_stride) {
+    std::array<std::int16_t, 8> sub{}, up{}, avg{}, paeth{};
+    for (std::size_t k = 0; k < 8; ++k) {
+      const unsigned char* row = filtered + (first + k) * (width + 1);
+      sub[k] = static_cast<std::int16_t>(row[0] == 1 ? -1 : 0);
+      up[k] = static_cast<std::int16_t>(row[0] == 2 ? -1 : 0);
+      avg[k] = static_cast<std::int16_t>(row[0] == 3 ? -1 : 0);
+      paeth[k] = static_cast<std::int16_t>(row[0] == 4 ? -1 : 0);
+      rows_[k] = row + 1;
+    }
+    const auto load = [](const std::array<std::int16_t, 8>& m) {
+      return _mm_loadu_si128(reinterpret_cast<const __m128i*>(m.data()));
+    };
+    m_sub_ = load(sub);
+    m_up_ = load(up);
+    m_avg_ = load(avg);
+    m_paeth_ = load(paeth);
+  }
+
+  // The filtered bytes of steps s0 .. s0 + 7: lane k of v_[j] is row k's byte at x = s0 + j - k (x < 0 reads
+  // the row above's tail, x >= width the next rows' head: those lanes are zeroed or never stored).
+  void load(std::size_t s0) {
+    for (std::size_t k = 0; k < 8; ++k)
+      v_[k] = _mm_unpacklo_epi8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(rows_[k] + s0 - k)),
+                                _mm_setzero_si128());
+    transpose8x16(v_);
+  }
+
+  // Step s0 + j: `up_lane0` holds, in lane 0, the pixel above row 0 at x = s0 + j (0 elsewhere).
+  template <bool kLeftEdge>
+  void step(int j, __m128i up_lane0) {
+    const __m128i a = prev_;
+    const __m128i b = _mm_or_si128(_mm_slli_si128(prev_, 2), up_lane0);
+    const __m128i c = up_prev_;
+    const __m128i a_c = _mm_sub_epi16(a, c);
+    const __m128i b_c = _mm_sub_epi16(b, c);
+    const __m128i pa = abs16(b_c);
+    const __m128i pb = abs16(a_c);
+    const __m128i pc = abs16(_mm_add_epi16(a_c, b_c));
+    const __m128i b_or_c = select16(_mm_cmpgt_epi16(pb, pc), c, b);
+    const __m128i paeth = select16(_mm_cmpgt_epi16(pa, _mm_min_epi16(pb, pc)), b_or_c, a);
+    const __m128i avg = _mm_srli_epi16(_mm_add_epi16(a, b), 1);
+    const __m128i predictor =
+        _mm_or_si128(_mm_or_si128(_mm_and_si128(m_sub_, a), _mm_and_si128(m_up_, b)),
+                     _mm_or_si128(_mm_and_si128(m_avg_, avg), _mm_and_si128(m_paeth_, paeth)));
+    __m128i value = _mm_and_si128(_mm_add_epi16(v_[j], predictor), _mm_set1_epi16(0xff));
+    if constexpr (kLeftEdge) {
+      // The first block: lane k > j is a pixel left of the image (x < 0), kept 0.
+      const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
+      value = _mm_andnot_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16(static_cast<short>(j))), value);
+    }
+    v_[j] = value;
+    prev_ = value;
+    up_prev_ = b;
+  }
+
+  // Row 7's pixel at x = s - 7 where s is the last step taken, in lane 0: the up neighbour of the band below
+  // at that x.
+  __m128i last_row_lane0() const { return _mm_srli_si128(prev_, 14); }
+
+  void store(std::size_t s0) {
+    transpose8x16(v_);  // v_[k]: row k's pixels at x = s0 - k .. s0 - k + 7
+    for (std::size_t k = 0; k < 8; ++k)
+      _mm_storel_epi64(reinterpret_cast<__m128i*>(out_ + k * out_stride_ + s0 - k),
+                       _mm_packus_epi16(v_[k], v_[k]));
+  }
+
+ private:
+  const unsigned char* rows_[8];
+  unsigned char* out_;
+  std::size_t out_stride_;
+  __m128i m_sub_, m_up_, m_avg_, m_paeth_;
+  __m128i v_[8];
+  __m128i prev_ = _mm_setzero_si128();     // every lane's value at the previous step (its left neighbour now)
+  __m128i up_prev_ = _mm_setzero_si128();  // the up neighbours of the previous step (the up-left ones now)
+};
+
+// `bands` (1 or 2) bands of eight rows from row y0 of `filtered` below `prior` into `image`, through
+// `scratch` (rows with margins: a block's stores reach 15 bytes left and 23 bytes right of a row). Two bands
+// run side by side, the lower one a block of eight steps behind, so that its row 0 finds the upper band's row
+// 7 at the same x in the register (last_row_lane0()): two independent chains of dependent steps, which the
+// processor overlaps. Reads up to 23 bytes past a band's last row in `filtered` and 15 past `prior`'s width.
+void unfilter_bands(const unsigned char* filtered, const unsigned char* prior, int y0, int bands,
+                    cv::Mat& image, std::vector<unsigned char>& scratch) {
   const auto width = static_cast<std::size_t>(image.cols);
-  const std::size_t stride = width + 1;
-  constexpr std::size_t kMargin = 16;
-  const std::size_t band_stride = width + 2 * kMargin;
-  band.resize(8 * band_stride);
-  const unsigned char* rows[8];
-  std::array<std::int16_t, 8> type_sub{}, type_up{}, type_avg{}, type_paeth{};
-  for (int k = 0; k < 8; ++k) {
-    const unsigned char* row = filtered + static_cast<std::size_t>(y0 + k) * stride;
-    const unsigned char type = row[0];
-    type_sub[static_cast<std::size_t>(k)] = static_cast<std::int16_t>(type == 1 ? -1 : 0);
-    type_up[static_cast<std::size_t>(k)] = static_cast<std::int16_t>(type == 2 ? -1 : 0);
-    type_avg[static_cast<std::size_t>(k)] = static_cast<std::int16_t>(type == 3 ? -1 : 0);
-    type_paeth[static_cast<std::size_t>(k)] = static_cast<std::int16_t>(type == 4 ? -1 : 0);
-    rows[k] = row + 1;
-  }
-  const auto load = [](const std::array<std::int16_t, 8>& m) {
-    return _mm_loadu_si128(reinterpret_cast<const __m128i*>(m.data()));
+  constexpr std::size_t kLeft = 16;
+  const std::size_t stride = width + kLeft + 32;
+  const std::size_t rows = 8 * static_cast<std::size_t>(bands);
+  scratch.resize(rows * stride);
+  const auto first = static_cast<std::size_t>(y0);
+  Band8 upper(filtered, width, first, scratch.data() + kLeft, stride);
+  const std::size_t blocks = (width + 7 + 7) / 8;  // steps 0 .. width + 6
+  const auto upper_block = [&]<bool kLeftEdge>(std::size_t s0) {
+    upper.load(s0);
+    for (int j = 0; j < 8; ++j)
+      upper.template step<kLeftEdge>(j, _mm_cvtsi32_si128(prior[s0 + static_cast<std::size_t>(j)]));
+    upper.store(s0);
   };
-  const __m128i m_sub = load(type_sub), m_up = load(type_up), m_avg = load(type_avg),
-                m_paeth = load(type_paeth);
-  const __m128i low_byte = _mm_set1_epi16(0xff);
-  const __m128i zero = _mm_setzero_si128();
-  // Lane k of the first block's step j is a pixel left of the image (x = j - k < 0) for k > j: kept 0.
-  const __m128i lane = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
-  __m128i prev = zero;     // every lane's value at the previous step (its left neighbour now)
-  __m128i up_prev = zero;  // the up neighbours of the previous step (the up-left ones now)
-  const std::size_t steps = width + 7;
-  for (std::size_t s0 = 0; s0 < steps; s0 += 8) {
-    __m128i v[8];
-    for (int k = 0; k < 8; ++k) {
-      // Row k's bytes at x = s0 - k .. s0 - k + 7 (x < 0 reads the row above's tail: those lanes are zeroed).
-      const unsigned char* p = rows[k] + s0 - static_cast<std::size_t>(k);
-      v[k] = _mm_unpacklo_epi8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(p)), zero);
-    }
-    transpose8x16(v);  // v[j]: lane k = row k's filtered byte at x = s0 + j - k
-    for (int j = 0; j < 8; ++j) {
-      const std::size_t s = s0 + static_cast<std::size_t>(j);
-      const __m128i a = prev;
-      const __m128i b = _mm_insert_epi16(_mm_slli_si128(prev, 2), prior[s], 0);
-      const __m128i c = up_prev;
-      const __m128i a_c = _mm_sub_epi16(a, c);
-      const __m128i b_c = _mm_sub_epi16(b, c);
-      const __m128i pa = abs16(b_c);
-      const __m128i pb = abs16(a_c);
-      const __m128i pc = abs16(_mm_add_epi16(a_c, b_c));
-      const __m128i b_or_c = select16(_mm_cmpgt_epi16(pb, pc), c, b);
-      const __m128i paeth = select16(_mm_cmpgt_epi16(pa, _mm_min_epi16(pb, pc)), b_or_c, a);
-      const __m128i avg = _mm_srli_epi16(_mm_add_epi16(a, b), 1);
-      const __m128i predictor =
-          _mm_or_si128(_mm_or_si128(_mm_and_si128(m_sub, a), _mm_and_si128(m_up, b)),
-                       _mm_or_si128(_mm_and_si128(m_avg, avg), _mm_and_si128(m_paeth, paeth)));
-      __m128i value = _mm_and_si128(_mm_add_epi16(v[j], predictor), low_byte);
-      if (s0 == 0)
-        value = _mm_andnot_si128(_mm_cmpgt_epi16(lane, _mm_set1_epi16(static_cast<short>(j))), value);
-      v[j] = value;
-      prev = value;
-      up_prev = b;
-    }
-    transpose8x16(v);  // v[k]: row k's pixels at x = s0 - k .. s0 - k + 7
-    for (int k = 0; k < 8; ++k) {
-      unsigned char* q = band.data() + static_cast<std::size_t>(k) * band_stride + kMargin + s0 -
-                         static_cast<std::size_t>(k);
-      _mm_storel_epi64(reinterpret_cast<__m128i*>(q), _mm_packus_epi16(v[k], v[k]));
-    }
+  if (bands == 1) {
+    upper_block.template operator()<true>(0);
+    for (std::size_t n = 1; n < blocks; ++n) upper_block.template operator()<false>(8 * n);
+  } else {
+    Band8 lower(filtered, width, first + 8, scratch.data() + 8 * stride + kLeft, stride);
+    // Block n of the upper band with block n - 1 of the lower one: at step j the lower band takes the upper
+    // band's row 7 from before the upper band's step j (x = lower's step).
+    const auto both = [&]<bool kUpperEdge, bool kLowerEdge>(std::size_t n) {
+      const std::size_t s0 = 8 * n;
+      upper.load(s0);
+      lower.load(s0 - 8);
+      for (int j = 0; j < 8; ++j) {
+        lower.template step<kLowerEdge>(j, upper.last_row_lane0());
+        upper.template step<kUpperEdge>(j, _mm_cvtsi32_si128(prior[s0 + static_cast<std::size_t>(j)]));
+      }
+      upper.store(s0);
+      lower.store(s0 - 8);
+    };
+    upper_block.template operator()<true>(0);
+    both.template operator()<false, true>(1);
+    // One block past the upper band's last: its steps are right of the image (computed, stored in the
+    // margin).
+    for (std::size_t n = 2; n <= blocks; ++n) both.template operator()<false, false>(n);
   }
-  for (int k = 0; k < 8; ++k)
-    std::memcpy(image.ptr<unsigned char>(y0 + k),
-                band.data() + static_cast<std::size_t>(k) * band_stride + kMargin, width);
+  for (std::size_t k = 0; k < rows; ++k)
+    std::memcpy(image.ptr<unsigned char>(y0 + static_cast<int>(k)), scratch.data() + k * stride + kLeft,
+                width);
 }
 #endif
 
-// Rows of `filtered` (filter byte + width bytes each, followed by at least 16 bytes of slack) into `image`:
-// eight at a time where SSE2 is there (every x86-64), the rest two at a time; false on an unknown filter
-// type.
+// Rows of `filtered` (filter byte + width bytes each, followed by at least 32 bytes of slack) into `image`:
+// sixteen or eight at a time where SSE2 is there (every x86-64), the rest two at a time; false on an unknown
+// filter type.
 bool unfilter(const unsigned char* filtered, cv::Mat& image, std::vector<unsigned char>& band) {
   const auto width = static_cast<std::size_t>(image.cols);
-  // The row above the first row (and the 16 bytes unfilter_band8 may read past a row).
-  const std::vector<unsigned char> zeros(width + 16, 0);
+  // The row above the first row (and the bytes unfilter_bands() may read past a row).
+  const std::vector<unsigned char> zeros(width + 32, 0);
   const unsigned char* prior = zeros.data();
   const auto row_in = [&](int y) { return filtered + static_cast<std::size_t>(y) * (width + 1); };
   int y = 0;
 #if defined(__SSE2__)
-  for (; y + 8 <= image.rows; y += 8) {
-    for (int k = 0; k < 8; ++k)
+  while (y + 8 <= image.rows) {
+    const int bands = y + 16 <= image.rows ? 2 : 1;
+    for (int k = 0; k < 8 * bands; ++k)
       if (row_in(y + k)[0] > 4) return false;
-    unfilter_band8(filtered, prior, y, image, band);
-    prior = image.ptr<unsigned char>(y + 7);
+    unfilter_bands(filtered, prior, y, bands, image, band);
+    y += 8 * bands;
+    prior = image.ptr<unsigned char>(y - 1);
   }
 #else
   (void)band;
@@ -349,7 +409,7 @@ cv::Mat decode_png_grey8(const unsigned char* bytes, std::size_t size) {
   if (idat_chunks == 0) return {};
   const unsigned char* stream = idat_chunks == 1 ? single_idat : s.idat.data();
   const std::size_t filtered_size = std::size_t{height} * (std::size_t{width} + 1);
-  s.filtered.resize(filtered_size + 16);  // unfilter_band8 reads up to 15 bytes past the last row
+  s.filtered.resize(filtered_size + 32);  // unfilter_bands() reads up to 23 bytes past the last row
   // Exactly filtered_size bytes, and the stream's Adler-32 must match (libdeflate checks it).
   if (libdeflate_zlib_decompress(s.decompressor.get(), stream, idat_size, s.filtered.data(), filtered_size,
                                  nullptr) != LIBDEFLATE_SUCCESS)
