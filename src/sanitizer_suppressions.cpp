@@ -39,8 +39,8 @@ extern "C" const char* __tsan_default_suppressions() {
 // "Current Value" 3) a busy TBB worker's stack was often gone ("[failed to restore the stack]") and the
 // report stood: the flaky one in PipelineGatedMode, the helper that finished a tbb::parallel_for last
 // decrementing the loop's root wait node on the spawner's stack (fold_tree), which the spawner later reused
-// (docs/reliability.md). The largest history (7: the last 4M
-// accesses per thread) keeps it. TSAN_OPTIONS given at run time still win.
+// (docs/reliability.md). The largest history (7: the last 4M accesses per thread) keeps it. TSAN_OPTIONS
+// given at run time still win.
 extern "C" const char* __tsan_default_options() {
   return "history_size=7";
 }

@@ -142,10 +142,8 @@ constexpr std::array<Row, 5> kRows = {&unfilter_row<0>, &unfilter_row<1>, &unfil
 // where unfilter_rows() advances two. Every filter type is computed in every lane and each lane keeps its
 // row's; integer arithmetic, so the pixels are exactly those of the scalar code. Steps come in blocks of
 // eight: the filtered bytes of the eight rows, loaded each shifted by its lane (the diagonal), are transposed
-// into eight step vectors, and the eight result vectors are transposed back into row order.
-//
-// Reads up to 15 bytes past the last row of the band in `filtered` (the caller's slack) and up to 15 bytes
-// past `prior`'s width; writes `band`, 8 rows of width + 32 bytes, then copies them into the image.
+// into eight step vectors, and the eight result vectors are transposed back into row order (Band8 below;
+// unfilter_bands() runs one or two bands and says how far they read and write).
 inline void transpose8x16(__m128i v[8]) {
   const __m128i t0 = _mm_unpacklo_epi16(v[0], v[1]);
   const __m128i t1 = _mm_unpackhi_epi16(v[0], v[1]);
@@ -268,7 +266,7 @@ class Band8 {
 // `scratch` (rows with margins: a block's stores reach 15 bytes left and 23 bytes right of a row). Two bands
 // run side by side, the lower one a block of eight steps behind, so that its row 0 finds the upper band's row
 // 7 at the same x in the register (last_row_lane0()): two independent chains of dependent steps, which the
-// processor overlaps. Reads up to 23 bytes past a band's last row in `filtered` and 15 past `prior`'s width.
+// processor overlaps. Reads up to 23 bytes past a band's last row in `filtered` and past `prior`'s width.
 void unfilter_bands(const unsigned char* filtered, const unsigned char* prior, int y0, int bands,
                     cv::Mat& image, std::vector<unsigned char>& scratch) {
   const auto width = static_cast<std::size_t>(image.cols);
