@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/klt.hpp"
 
 namespace loopgate {
 
@@ -540,8 +541,8 @@ GeometricVerifier::Pyramid GeometricVerifier::normalised_pyramid(const cv::Mat& 
                                                                  double noise_target) const {
   Pyramid pyramid;
   const cv::Size window(config_.track_window_px, config_.track_window_px);
-  cv::buildOpticalFlowPyramid(normalise_illumination(grey, config_.track_norm_sigma_px, noise_target, noise),
-                              pyramid, window, config_.track_pyramid_levels);
+  build_klt_pyramid(normalise_illumination(grey, config_.track_norm_sigma_px, noise_target, noise), window,
+                    config_.track_pyramid_levels, pyramid);
   return pyramid;
 }
 
