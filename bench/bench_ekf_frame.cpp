@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
+#include <opencv2/video/tracking.hpp>
 #include <random>
 #include <string>
 #include <type_traits>
@@ -20,6 +21,7 @@
 
 #include "../tests/ekf_sim_support.hpp"
 #include "core/geometry.hpp"
+#include "core/klt.hpp"
 #include "io/dataset.hpp"
 #include "stages/ekf/feature_tracker.hpp"
 #include "stages/ekf/msckf.hpp"
@@ -170,15 +172,107 @@ void BM_DetectionCellResponse(benchmark::State& state) {
   const std::vector<cv::Mat> cells = detection_cells(state, false);
   if (cells.empty()) return;
   const EkfConfig config;
+  const bool ours = state.range(0) == 1;
   std::size_t k = 0;
   cv::Mat response;
   for (auto _ : state) {
-    cv::cornerMinEigenVal(cells[k], response, config.shi_tomasi_block_size, 3);
+    // A cell is a view of its image: both read the image's pixels around it.
+    if (ours) {
+      shi_tomasi_response(cells[k], cv::Rect(0, 0, cells[k].cols, cells[k].rows),
+                          config.shi_tomasi_block_size, response);
+    } else {
+      cv::cornerMinEigenVal(cells[k], response, config.shi_tomasi_block_size, 3);
+    }
     benchmark::DoNotOptimize(response.data);
     k = (k + 1) % cells.size();
   }
+  state.SetLabel(ours ? "shi_tomasi_response" : "cv::cornerMinEigenVal");
 }
-BENCHMARK(BM_DetectionCellResponse)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_DetectionCellResponse)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// The KLT's pyramid (window 15, levels 0-2, derivatives) of every 10th of the first 400 images, and the KLT
+// of 150 Shi-Tomasi corners from each of them into the next image (ekf.klt_* defaults): OpenCV (arg 0) or
+// core/klt.hpp (arg 1, what the tracker runs since 2026-11-28).
+struct KltPairs {
+  std::vector<cv::Mat> images;                     // image, next image, ...
+  std::vector<std::vector<cv::Point2f>> corners;   // per pair
+  std::vector<std::vector<cv::Mat>> ours, opencv;  // pyramids per image
+};
+
+KltPairs klt_pairs(benchmark::State& state) {
+  KltPairs p;
+  const char* dataset_env = std::getenv("LOOPGATE_EKF_DATASET");
+  const std::filesystem::path dir = dataset_env != nullptr ? std::filesystem::path(dataset_env) : micro_dir();
+  if (!std::filesystem::exists(dir)) {
+    state.SkipWithError("shared data absent: euroc/V1_01_easy_micro");
+    return p;
+  }
+  const auto dataset = open_dataset(dir);
+  const EkfConfig config;
+  const cv::Size window(config.klt_window_px, config.klt_window_px);
+  for (std::size_t i = 0; i + 1 < std::min<std::size_t>(dataset->frame_count(), 400); i += 10) {
+    for (const std::size_t f : {i, i + 1}) {
+      p.images.push_back(dataset->load_image(f));
+      p.ours.emplace_back();
+      p.opencv.emplace_back();
+      build_klt_pyramid(p.images.back(), window, config.klt_pyramid_levels, p.ours.back());
+      cv::buildOpticalFlowPyramid(p.images.back(), p.opencv.back(), window, config.klt_pyramid_levels);
+    }
+    p.corners.emplace_back();
+    cv::goodFeaturesToTrack(p.images[p.images.size() - 2], p.corners.back(), config.max_features,
+                            config.shi_tomasi_quality, config.min_feature_distance_px);
+  }
+  return p;
+}
+
+void BM_KltPyramid(benchmark::State& state) {
+  const KltPairs p = klt_pairs(state);
+  if (p.images.empty()) return;
+  const EkfConfig config;
+  const cv::Size window(config.klt_window_px, config.klt_window_px);
+  const bool ours = state.range(0) == 1;
+  std::size_t k = 0;
+  for (auto _ : state) {
+    std::vector<cv::Mat> pyramid;
+    if (ours) {
+      build_klt_pyramid(p.images[k], window, config.klt_pyramid_levels, pyramid);
+    } else {
+      cv::buildOpticalFlowPyramid(p.images[k], pyramid, window, config.klt_pyramid_levels);
+    }
+    benchmark::DoNotOptimize(pyramid.data());
+    k = (k + 1) % p.images.size();
+  }
+  state.SetLabel(ours ? "build_klt_pyramid" : "cv::buildOpticalFlowPyramid");
+}
+BENCHMARK(BM_KltPyramid)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+void BM_KltTrack(benchmark::State& state) {
+  const KltPairs p = klt_pairs(state);
+  if (p.images.empty()) return;
+  const EkfConfig config;
+  const cv::Size window(config.klt_window_px, config.klt_window_px);
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, config.klt_max_iterations,
+                                  config.klt_epsilon);
+  const bool ours = state.range(0) == 1;
+  std::size_t k = 0;
+  std::vector<cv::Point2f> found;
+  std::vector<unsigned char> status;
+  for (auto _ : state) {
+    const std::vector<cv::Point2f>& corners = p.corners[k];
+    found = corners;
+    if (ours) {
+      track_klt(p.ours[2 * k], p.ours[2 * k + 1], corners, found, status, window, config.klt_pyramid_levels,
+                criteria, true);
+    } else {
+      cv::calcOpticalFlowPyrLK(p.opencv[2 * k], p.opencv[2 * k + 1], corners, found, status, cv::noArray(),
+                               window, config.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    }
+    benchmark::DoNotOptimize(found.data());
+    k = (k + 1) % p.corners.size();
+  }
+  state.SetLabel(ours ? "track_klt" : "cv::calcOpticalFlowPyrLK");
+}
+BENCHMARK(BM_KltTrack)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
 
 void BM_DetectionNoiseMedian(benchmark::State& state) {
   const std::vector<cv::Mat> responses = detection_cells(state, true);

@@ -84,6 +84,34 @@ cv::Mat textured_image(int width, int height) {
   return image;
 }
 
+TEST(EkfTracker, ShiTomasiResponseIsOpenCVsToItsLastBits) {
+  cv::RNG rng(17);
+  cv::Mat image(90, 130, CV_8UC1);
+  rng.fill(image, cv::RNG::UNIFORM, 0, 256);
+  cv::GaussianBlur(image, image, cv::Size(0, 0), 1.2);
+  // Rois inside, on every edge and corner, a single row and column; block sizes 3 to 7.
+  const std::vector<cv::Rect> rois{cv::Rect(20, 15, 60, 40), cv::Rect(0, 0, 33, 21), cv::Rect(97, 69, 33, 21),
+                                   cv::Rect(0, 50, 130, 40), cv::Rect(5, 5, 1, 30),  cv::Rect(5, 5, 30, 1),
+                                   cv::Rect(0, 0, 130, 90),  cv::Rect(64, 0, 2, 2)};
+  for (const int block : {3, 5, 7}) {
+    for (const cv::Rect& roi : rois) {
+      cv::Mat expected, actual;
+      cv::cornerMinEigenVal(image(roi), expected, block, 3);
+      shi_tomasi_response(image, roi, block, actual);
+      ASSERT_EQ(actual.size(), expected.size());
+      ASSERT_EQ(actual.type(), CV_32F);
+      double largest = 0.0;
+      cv::minMaxLoc(cv::abs(expected), nullptr, &largest);
+      // OpenCV's float pipeline against exact sums: equal to a few float roundings of the largest response.
+      EXPECT_LE(cv::norm(actual, expected, cv::NORM_INF), 1e-5 * std::max(largest, 1e-12))
+          << "roi " << roi << " block " << block;
+    }
+  }
+  cv::Mat out;
+  EXPECT_THROW(shi_tomasi_response(image, cv::Rect(120, 80, 20, 20), 3, out), std::invalid_argument);
+  EXPECT_THROW(shi_tomasi_response(image, cv::Rect(0, 0, 10, 10), 4, out), std::invalid_argument);
+}
+
 TEST(EkfTracker, FollowsAKnownImageShift) {
   const cv::Mat first = textured_image(320, 240);
   const double dx = 3.5;

@@ -1,10 +1,14 @@
 #include "core/klt.hpp"
 
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -156,29 +160,22 @@ int build_klt_pyramid(const cv::Mat& grey, cv::Size window, int max_level, std::
   pyramid.assign(static_cast<std::size_t>(max_level + 1) * 2, cv::Mat());
   cv::Size size = grey.size();
   cv::Mat previous;
+  // A buffer with the border and one more row (track_klt's slack), and the bordered part of it.
+  const auto bordered = [&](int type) {
+    const cv::Mat storage(size.height + 2 * bh + 1, size.width + 2 * bw, type);
+    return storage(cv::Rect(0, 0, size.width + 2 * bw, size.height + 2 * bh));
+  };
   for (int level = 0; level <= max_level; ++level) {
     const cv::Rect inner(bw, bh, size.width, size.height);
-    cv::Mat image;
+    cv::Mat buffer = bordered(CV_8UC1);
+    cv::Mat image = buffer(inner);
     if (level == 0) {
-      // A view with enough image around it is used as it is (OpenCV's tryReuseInputImage).
-      cv::Size whole;
-      cv::Point offset;
-      grey.locateROI(whole, offset);
-      if (grey.isSubmatrix() && offset.x >= bw && offset.y >= bh &&
-          offset.x + grey.cols + bw <= whole.width && offset.y + grey.rows + bh <= whole.height) {
-        image = grey;
-      } else {
-        cv::Mat buffer(size.height + 2 * bh, size.width + 2 * bw, CV_8UC1);
-        cv::copyMakeBorder(grey, buffer, bh, bh, bw, bw, cv::BORDER_REFLECT_101);
-        image = buffer(inner);
-      }
+      cv::copyMakeBorder(grey, buffer, bh, bh, bw, bw, cv::BORDER_REFLECT_101);
     } else {
-      cv::Mat buffer(size.height + 2 * bh, size.width + 2 * bw, CV_8UC1);
-      image = buffer(inner);
       cv::pyrDown(previous, image, size);
       cv::copyMakeBorder(image, buffer, bh, bh, bw, bw, cv::BORDER_REFLECT_101 | cv::BORDER_ISOLATED);
     }
-    cv::Mat deriv_buffer(size.height + 2 * bh, size.width + 2 * bw, CV_16SC2);
+    cv::Mat deriv_buffer = bordered(CV_16SC2);
     cv::Mat deriv = deriv_buffer(inner);
     scharr_derivatives(image, deriv);
     clear_border(deriv_buffer, inner);
@@ -192,6 +189,387 @@ int build_klt_pyramid(const cv::Mat& grey, cv::Size window, int max_level, std::
     previous = image;
   }
   return max_level;
+}
+
+namespace {
+
+constexpr int kWeightBits = 14;                // bilinear weights in 1 / 2^14
+constexpr int kImageShift = kWeightBits - 5;   // window values of the image: 32 x grey
+constexpr double kSumScale = 1.0 / (1 << 20);  // OpenCV's scale of the window sums (32 x 32 x 1024)
+constexpr float kMinEigenvalue = 1e-4F;        // cv::calcOpticalFlowPyrLK's default minEigThreshold
+
+struct Weights {
+  int w00 = 0, w01 = 0, w10 = 0, w11 = 0;
+};
+
+// The bilinear weights of a position's fractional part (a, b), rounded to 14 bits and summing to 2^14.
+Weights weights_of(float a, float b) {
+  Weights w;
+  w.w00 = cvRound((1.F - a) * (1.F - b) * (1 << kWeightBits));
+  w.w01 = cvRound(a * (1.F - b) * (1 << kWeightBits));
+  w.w10 = cvRound((1.F - a) * b * (1 << kWeightBits));
+  w.w11 = (1 << kWeightBits) - w.w00 - w.w01 - w.w10;
+  return w;
+}
+
+inline int descale(int value, int bits) {
+  return (value + (1 << (bits - 1))) >> bits;
+}
+
+// One pyramid level's views and steps.
+struct Level {
+  const std::uint8_t* image = nullptr;  // the previous image (I) or the next one (J), at (0, 0)
+  const std::int16_t* deriv = nullptr;  // I's derivative pairs at (0, 0)
+  std::ptrdiff_t image_step = 0;        // bytes
+  std::ptrdiff_t deriv_step = 0;        // int16 elements
+  int cols = 0, rows = 0;
+};
+
+// A window's template: I, Ix and Iy at the window's pixels (rows of `padded` values, the pixels past the
+// window's width zero in Ix and Iy, so that they add nothing), and the structure tensor's exact sums.
+struct Template {
+  int width = 0, height = 0, padded = 0;
+  std::vector<std::int16_t> value, ix, iy;
+  std::int64_t a11 = 0, a12 = 0, a22 = 0;
+};
+
+// The portable code: the template at the integer position (x0, y0) of I with the weights w, and the sums
+// b = (sum diff Ix, sum diff Iy) of the window of J at (x0, y0) with w, diff = J - I.
+void template_portable(const Level& I, int x0, int y0, const Weights& w, Template& t) {
+  t.a11 = t.a12 = t.a22 = 0;
+  for (int y = 0; y < t.height; ++y) {
+    const std::uint8_t* src = I.image + (y0 + y) * I.image_step + x0;
+    const std::int16_t* d = I.deriv + (y0 + y) * I.deriv_step + 2 * x0;
+    const auto row = static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+    for (int x = 0; x < t.padded; ++x) {
+      const auto k = row + static_cast<std::size_t>(x);
+      if (x >= t.width) {
+        t.value[k] = t.ix[k] = t.iy[k] = 0;
+        continue;
+      }
+      t.value[k] = static_cast<std::int16_t>(descale(src[x] * w.w00 + src[x + 1] * w.w01 +
+                                                         src[x + I.image_step] * w.w10 +
+                                                         src[x + I.image_step + 1] * w.w11,
+                                                     kImageShift));
+      const std::int16_t* p = d + 2 * x;
+      const std::int16_t* q = p + I.deriv_step;
+      const int ix = descale(p[0] * w.w00 + p[2] * w.w01 + q[0] * w.w10 + q[2] * w.w11, kWeightBits);
+      const int iy = descale(p[1] * w.w00 + p[3] * w.w01 + q[1] * w.w10 + q[3] * w.w11, kWeightBits);
+      t.ix[k] = static_cast<std::int16_t>(ix);
+      t.iy[k] = static_cast<std::int16_t>(iy);
+      t.a11 += static_cast<std::int64_t>(ix) * ix;
+      t.a12 += static_cast<std::int64_t>(ix) * iy;
+      t.a22 += static_cast<std::int64_t>(iy) * iy;
+    }
+  }
+}
+
+void mismatch_portable(const Level& J, int x0, int y0, const Weights& w, const Template& t, std::int64_t& b1,
+                       std::int64_t& b2) {
+  b1 = b2 = 0;
+  for (int y = 0; y < t.height; ++y) {
+    const std::uint8_t* src = J.image + (y0 + y) * J.image_step + x0;
+    const auto row = static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+    for (int x = 0; x < t.width; ++x) {
+      const auto k = row + static_cast<std::size_t>(x);
+      const int diff = descale(src[x] * w.w00 + src[x + 1] * w.w01 + src[x + J.image_step] * w.w10 +
+                                   src[x + J.image_step + 1] * w.w11,
+                               kImageShift) -
+                       t.value[k];
+      b1 += static_cast<std::int64_t>(diff) * t.ix[k];
+      b2 += static_cast<std::int64_t>(diff) * t.iy[k];
+    }
+  }
+}
+
+#ifdef LOOPGATE_KLT_PYRAMID_X86
+// The same, 16 pixels of a row at a time: every value is an exact integer, so the sums are those of the
+// portable code whatever the order.
+[[gnu::target("avx2")]] inline __m256i bilinear16(const std::uint8_t* top, std::ptrdiff_t step, __m256i w0,
+                                                  __m256i w1, __m256i round, int shift) {
+  const std::uint8_t* bottom = top + step;
+  const __m256i a0 = load8(top);
+  const __m256i a1 = load8(top + 1);
+  const __m256i c0 = load8(bottom);
+  const __m256i c1 = load8(bottom + 1);
+  // Pairs (x, x + 1) against (w00, w01) and (w10, w11): pixels 0-3 | 8-11 and 4-7 | 12-15, which the pack
+  // puts back in order.
+  __m256i low = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpacklo_epi16(a0, a1), w0),
+                                 _mm256_madd_epi16(_mm256_unpacklo_epi16(c0, c1), w1));
+  __m256i high = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpackhi_epi16(a0, a1), w0),
+                                  _mm256_madd_epi16(_mm256_unpackhi_epi16(c0, c1), w1));
+  low = _mm256_srai_epi32(_mm256_add_epi32(low, round), shift);
+  high = _mm256_srai_epi32(_mm256_add_epi32(high, round), shift);
+  return _mm256_packs_epi32(low, high);
+}
+
+// 8 derivative pairs (x, y) of a row, bilinear: the pairs of pixels p and p + 1 are 2 elements apart.
+[[gnu::target("avx2")]] inline __m256i bilinear_pairs8(const std::int16_t* top, std::ptrdiff_t step,
+                                                       __m256i w0, __m256i w1, __m256i round) {
+  const __m256i a0 = load16(top);
+  const __m256i a1 = load16(top + 2);
+  const __m256i c0 = load16(top + step);
+  const __m256i c1 = load16(top + step + 2);
+  __m256i low = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpacklo_epi16(a0, a1), w0),
+                                 _mm256_madd_epi16(_mm256_unpacklo_epi16(c0, c1), w1));
+  __m256i high = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpackhi_epi16(a0, a1), w0),
+                                  _mm256_madd_epi16(_mm256_unpackhi_epi16(c0, c1), w1));
+  low = _mm256_srai_epi32(_mm256_add_epi32(low, round), kWeightBits);
+  high = _mm256_srai_epi32(_mm256_add_epi32(high, round), kWeightBits);
+  return _mm256_packs_epi32(low, high);
+}
+
+[[gnu::target("avx2")]] inline __m256i pair_weights(int first, int second) {
+  return _mm256_set1_epi32(
+      static_cast<int>((static_cast<unsigned>(second) << 16) | (static_cast<unsigned>(first) & 0xFFFFU)));
+}
+
+// The 8 int32 lanes of v added into the 4 int64 lanes of sum.
+[[gnu::target("avx2")]] inline __m256i add_wide(__m256i sum, __m256i v) {
+  sum = _mm256_add_epi64(sum, _mm256_cvtepi32_epi64(_mm256_castsi256_si128(v)));
+  return _mm256_add_epi64(sum, _mm256_cvtepi32_epi64(_mm256_extracti128_si256(v, 1)));
+}
+
+[[gnu::target("avx2")]] inline std::int64_t total(__m256i v) {
+  alignas(32) std::int64_t lanes[4];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(lanes), v);
+  return lanes[0] + lanes[1] + lanes[2] + lanes[3];
+}
+
+[[gnu::target("avx2")]] void template_avx2(const Level& I, int x0, int y0, const Weights& w, Template& t) {
+  const __m256i w0 = pair_weights(w.w00, w.w01);
+  const __m256i w1 = pair_weights(w.w10, w.w11);
+  const __m256i round_image = _mm256_set1_epi32(1 << (kImageShift - 1));
+  const __m256i round_deriv = _mm256_set1_epi32(1 << (kWeightBits - 1));
+  const __m256i lane = _mm256_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  __m256i a11 = _mm256_setzero_si256(), a12 = a11, a22 = a11;
+  for (int y = 0; y < t.height; ++y) {
+    const std::uint8_t* src = I.image + (y0 + y) * I.image_step + x0;
+    const std::int16_t* d = I.deriv + (y0 + y) * I.deriv_step + 2 * x0;
+    std::int16_t* value = t.value.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+    std::int16_t* out_x = t.ix.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+    std::int16_t* out_y = t.iy.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+    for (int x = 0; x < t.padded; x += 16) {
+      store16(value + x, bilinear16(src + x, I.image_step, w0, w1, round_image, kImageShift));
+      const __m256i first = bilinear_pairs8(d + 2 * x, I.deriv_step, w0, w1, round_deriv);  // pixels 0-7
+      const __m256i second = bilinear_pairs8(d + 2 * x + 16, I.deriv_step, w0, w1, round_deriv);  // 8-15
+      // Split the pairs: x in the low halves of the 32-bit lanes, y in the high ones; the pack interleaves
+      // the two registers by 64 bits, the permute puts pixels 0-15 in order.
+      const __m256i gx = _mm256_packs_epi32(_mm256_srai_epi32(_mm256_slli_epi32(first, 16), 16),
+                                            _mm256_srai_epi32(_mm256_slli_epi32(second, 16), 16));
+      const __m256i gy = _mm256_packs_epi32(_mm256_srai_epi32(first, 16), _mm256_srai_epi32(second, 16));
+      const __m256i inside = _mm256_cmpgt_epi16(_mm256_set1_epi16(static_cast<short>(t.width - x)), lane);
+      const __m256i ix = _mm256_and_si256(_mm256_permute4x64_epi64(gx, 0xD8), inside);
+      const __m256i iy = _mm256_and_si256(_mm256_permute4x64_epi64(gy, 0xD8), inside);
+      store16(out_x + x, ix);
+      store16(out_y + x, iy);
+      a11 = add_wide(a11, _mm256_madd_epi16(ix, ix));
+      a12 = add_wide(a12, _mm256_madd_epi16(ix, iy));
+      a22 = add_wide(a22, _mm256_madd_epi16(iy, iy));
+    }
+  }
+  t.a11 = total(a11);
+  t.a12 = total(a12);
+  t.a22 = total(a22);
+}
+
+[[gnu::target("avx2")]] void mismatch_avx2(const Level& J, int x0, int y0, const Weights& w,
+                                           const Template& t, std::int64_t& b1, std::int64_t& b2) {
+  const __m256i w0 = pair_weights(w.w00, w.w01);
+  const __m256i w1 = pair_weights(w.w10, w.w11);
+  const __m256i round_image = _mm256_set1_epi32(1 << (kImageShift - 1));
+  __m256i sum1 = _mm256_setzero_si256(), sum2 = sum1;
+  // A lane of a madd holds two products of at most 8160 x 4080 (diff x derivative): 32 of them per 32-bit
+  // lane stay below 2^31, so the rows are summed in 32 bits in blocks of that many and then widened.
+  const int chunks = t.padded / 16;
+  const int block = std::max(1, 16 / chunks);
+  for (int y0_block = 0; y0_block < t.height; y0_block += block) {
+    __m256i part1 = _mm256_setzero_si256(), part2 = part1;
+    const int y_end = std::min(t.height, y0_block + block);
+    for (int y = y0_block; y < y_end; ++y) {
+      const std::uint8_t* src = J.image + (y0 + y) * J.image_step + x0;
+      const auto row = static_cast<std::size_t>(y) * static_cast<std::size_t>(t.padded);
+      const std::int16_t* value = t.value.data() + row;
+      const std::int16_t* gx = t.ix.data() + row;
+      const std::int16_t* gy = t.iy.data() + row;
+      for (int x = 0; x < t.padded; x += 16) {
+        const __m256i diff = _mm256_sub_epi16(
+            bilinear16(src + x, J.image_step, w0, w1, round_image, kImageShift), load16(value + x));
+        part1 = _mm256_add_epi32(part1, _mm256_madd_epi16(diff, load16(gx + x)));
+        part2 = _mm256_add_epi32(part2, _mm256_madd_epi16(diff, load16(gy + x)));
+      }
+    }
+    sum1 = add_wide(sum1, part1);
+    sum2 = add_wide(sum2, part2);
+  }
+  b1 = total(sum1);
+  b2 = total(sum2);
+}
+#endif
+
+using TemplateFunction = void (*)(const Level&, int, int, const Weights&, Template&);
+using MismatchFunction = void (*)(const Level&, int, int, const Weights&, const Template&, std::int64_t&,
+                                  std::int64_t&);
+
+Level level_of(const cv::Mat& image, const cv::Mat* deriv) {
+  Level l;
+  l.image = image.ptr<std::uint8_t>();
+  l.image_step = static_cast<std::ptrdiff_t>(image.step[0]);
+  l.cols = image.cols;
+  l.rows = image.rows;
+  if (deriv != nullptr) {
+    l.deriv = deriv->ptr<std::int16_t>();
+    l.deriv_step = static_cast<std::ptrdiff_t>(deriv->step[0] / sizeof(std::int16_t));
+  }
+  return l;
+}
+
+// The pyramid's levels checked: images CV_8UC1 and derivatives CV_16SC2 of the same size, each a view with
+// the window's border around it and build_klt_pyramid()'s extra row below. Returns its highest level.
+int checked_levels(const std::vector<cv::Mat>& pyramid, cv::Size window, const char* which) {
+  if (pyramid.empty() || pyramid.size() % 2 != 0)
+    throw std::invalid_argument(std::string("track_klt: the ") + which +
+                                " pyramid must hold (image, derivatives) pairs (build_klt_pyramid)");
+  for (std::size_t k = 0; k < pyramid.size(); ++k) {
+    const cv::Mat& m = pyramid[k];
+    const bool image = k % 2 == 0;
+    cv::Size whole;
+    cv::Point offset;
+    if (!m.empty()) m.locateROI(whole, offset);
+    if (m.empty() || m.type() != (image ? CV_8UC1 : CV_16SC2) ||
+        (!image && m.size() != pyramid[k - 1].size()) || offset.x < window.width ||
+        offset.y < window.height || offset.x + m.cols + window.width > whole.width ||
+        offset.y + m.rows + window.height + 1 > whole.height)
+      throw std::invalid_argument(std::string("track_klt: the ") + which + " pyramid's level " +
+                                  std::to_string(k / 2) +
+                                  " is not one of build_klt_pyramid() with this window");
+  }
+  return static_cast<int>(pyramid.size() / 2) - 1;
+}
+
+void track(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& next,
+           const std::vector<cv::Point2f>& points, std::vector<cv::Point2f>& found,
+           std::vector<unsigned char>& status, cv::Size window, int max_level,
+           const cv::TermCriteria& criteria, bool use_initial_flow, TemplateFunction make_template,
+           MismatchFunction mismatch) {
+  if (window.width <= 2 || window.height <= 2 || max_level < 0)
+    throw std::invalid_argument("track_klt: window must exceed 2 x 2 and max_level be >= 0");
+  const int levels = std::min(
+      {max_level, checked_levels(previous, window, "previous"), checked_levels(next, window, "next")});
+  if (use_initial_flow && found.size() != points.size())
+    throw std::invalid_argument("track_klt: use_initial_flow needs a start for every point");
+  if (!use_initial_flow) found = points;
+  status.assign(points.size(), 1);
+  if (points.empty()) return;
+  // cv::calcOpticalFlowPyrLK's reading of the criteria: 30 iterations and 0.01 px when not given, at most
+  // 100 and 10 px; the step is compared squared.
+  const int max_iterations =
+      (criteria.type & cv::TermCriteria::COUNT) != 0 ? std::clamp(criteria.maxCount, 0, 100) : 30;
+  const double epsilon =
+      (criteria.type & cv::TermCriteria::EPS) != 0 ? std::clamp(criteria.epsilon, 0.0, 10.0) : 0.01;
+  const double epsilon2 = epsilon * epsilon;
+  const cv::Point2f half((static_cast<float>(window.width) - 1.F) * 0.5F,
+                         (static_cast<float>(window.height) - 1.F) * 0.5F);
+  Template t;
+  t.width = window.width;
+  t.height = window.height;
+  t.padded = (window.width + 15) / 16 * 16;
+  const auto cells = static_cast<std::size_t>(t.padded) * static_cast<std::size_t>(t.height);
+  t.value.assign(cells, 0);
+  t.ix.assign(cells, 0);
+  t.iy.assign(cells, 0);
+  const double area2 = 2.0 * window.width * window.height;
+  for (int level = levels; level >= 0; --level) {
+    const auto l = static_cast<std::size_t>(level);
+    const Level I = level_of(previous[2 * l], &previous[2 * l + 1]);
+    const Level J = level_of(next[2 * l], nullptr);
+    if (J.cols != I.cols || J.rows != I.rows)
+      throw std::invalid_argument("track_klt: the two pyramids' level " + std::to_string(level) +
+                                  " differ in size");
+    const float scale = static_cast<float>(1.0 / (1 << level));
+    for (std::size_t k = 0; k < points.size(); ++k) {
+      cv::Point2f from = points[k] * scale;
+      cv::Point2f to;
+      if (level == levels) {
+        to = use_initial_flow ? found[k] * scale : from;
+      } else {
+        to = found[k] * 2.F;
+      }
+      found[k] = to;
+      from -= half;
+      const int fx = cvFloor(from.x);
+      const int fy = cvFloor(from.y);
+      if (fx < -window.width || fx >= I.cols || fy < -window.height || fy >= I.rows) {
+        if (level == 0) status[k] = 0;
+        continue;
+      }
+      make_template(I, fx, fy, weights_of(from.x - static_cast<float>(fx), from.y - static_cast<float>(fy)),
+                    t);
+      const double a11 = static_cast<double>(t.a11) * kSumScale;
+      const double a12 = static_cast<double>(t.a12) * kSumScale;
+      const double a22 = static_cast<double>(t.a22) * kSumScale;
+      const double det = a11 * a22 - a12 * a12;
+      const double min_eig = (a22 + a11 - std::sqrt((a11 - a22) * (a11 - a22) + 4.0 * a12 * a12)) / area2;
+      if (min_eig < kMinEigenvalue || det < static_cast<double>(FLT_EPSILON)) {
+        if (level == 0) status[k] = 0;
+        continue;
+      }
+      const double inverse = 1.0 / det;
+      to -= half;
+      cv::Point2f previous_step;
+      for (int j = 0; j < max_iterations; ++j) {
+        const int tx = cvFloor(to.x);
+        const int ty = cvFloor(to.y);
+        if (tx < -window.width || tx >= J.cols || ty < -window.height || ty >= J.rows) {
+          if (level == 0) status[k] = 0;
+          break;
+        }
+        std::int64_t b1 = 0;
+        std::int64_t b2 = 0;
+        mismatch(J, tx, ty, weights_of(to.x - static_cast<float>(tx), to.y - static_cast<float>(ty)), t, b1,
+                 b2);
+        const double s1 = static_cast<double>(b1) * kSumScale;
+        const double s2 = static_cast<double>(b2) * kSumScale;
+        const cv::Point2f step(static_cast<float>((a12 * s2 - a22 * s1) * inverse),
+                               static_cast<float>((a12 * s1 - a11 * s2) * inverse));
+        to += step;
+        found[k] = to + half;
+        if (static_cast<double>(step.x) * step.x + static_cast<double>(step.y) * step.y <= epsilon2) break;
+        if (j > 0 && std::abs(step.x + previous_step.x) < 0.01F &&
+            std::abs(step.y + previous_step.y) < 0.01F) {
+          found[k] -= step * 0.5F;  // oscillating between two positions: take the middle
+          break;
+        }
+        previous_step = step;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+void track_klt(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& next,
+               const std::vector<cv::Point2f>& points, std::vector<cv::Point2f>& found,
+               std::vector<unsigned char>& status, cv::Size window, int max_level,
+               const cv::TermCriteria& criteria, bool use_initial_flow) {
+#ifdef LOOPGATE_KLT_PYRAMID_X86
+  static const bool has_avx2 = __builtin_cpu_supports("avx2");
+  if (has_avx2) {
+    track(previous, next, points, found, status, window, max_level, criteria, use_initial_flow, template_avx2,
+          mismatch_avx2);
+    return;
+  }
+#endif
+  track(previous, next, points, found, status, window, max_level, criteria, use_initial_flow,
+        template_portable, mismatch_portable);
+}
+
+void track_klt_portable(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& next,
+                        const std::vector<cv::Point2f>& points, std::vector<cv::Point2f>& found,
+                        std::vector<unsigned char>& status, cv::Size window, int max_level,
+                        const cv::TermCriteria& criteria, bool use_initial_flow) {
+  track(previous, next, points, found, status, window, max_level, criteria, use_initial_flow,
+        template_portable, mismatch_portable);
 }
 
 }  // namespace loopgate

@@ -6,10 +6,12 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 #include <limits>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 #include <stdexcept>
 #include <string>
 
@@ -85,6 +87,135 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const cv::Mat& grey) {
   return track(grey, nullptr);
 }
 
+namespace {
+
+// out[x] = ((A + C) / 2 - sqrt(((A - C) / 2)^2 + B^2)) x scale in float, four at a time where SSE2 is (the
+// same operations in the same order as the scalar tail, so the same bits).
+void min_eigenvalues(const std::int32_t* A, const std::int32_t* B, const std::int32_t* C, int n, float scale,
+                     float* out) {
+  int x = 0;
+#ifdef __SSE2__
+  const __m128 half = _mm_set1_ps(0.5F);
+  const __m128 s = _mm_set1_ps(scale);
+  for (; x + 4 <= n; x += 4) {
+    const __m128 a = _mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(A + x)));
+    const __m128 b = _mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(B + x)));
+    const __m128 c = _mm_cvtepi32_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(C + x)));
+    const __m128 half_diff = _mm_mul_ps(_mm_sub_ps(a, c), half);
+    const __m128 root = _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(half_diff, half_diff), _mm_mul_ps(b, b)));
+    _mm_storeu_ps(out + x, _mm_mul_ps(_mm_sub_ps(_mm_mul_ps(_mm_add_ps(a, c), half), root), s));
+  }
+#endif
+  for (; x < n; ++x) {
+    const auto a = static_cast<float>(A[x]);
+    const auto b = static_cast<float>(B[x]);
+    const auto c = static_cast<float>(C[x]);
+    const float half_diff = (a - c) * 0.5F;
+    const float root = std::sqrt(half_diff * half_diff + b * b);
+    out[x] = ((a + c) * 0.5F - root) * scale;
+  }
+}
+
+}  // namespace
+
+void shi_tomasi_response(const cv::Mat& grey, const cv::Rect& roi, int block_size, cv::Mat& response) {
+  if (grey.type() != CV_8UC1 || roi.width <= 0 || roi.height <= 0 ||
+      (roi & cv::Rect(0, 0, grey.cols, grey.rows)) != roi || block_size < 1 || block_size % 2 == 0)
+    throw std::invalid_argument(
+        "shi_tomasi_response: expected a CV_8UC1 image, a roi inside it and an odd block size");
+  const int w = roi.width;
+  const int h = roi.height;
+  const int r = block_size / 2;
+  // The roi with one pixel around it: the image's own pixels where it has them, reflected beyond (what
+  // OpenCV's filters do on a view).
+  cv::Mat padded;
+  cv::copyMakeBorder(grey(roi), padded, 1, 1, 1, 1, cv::BORDER_REFLECT_101);
+  // Products of the derivatives per roi row, each row with r entries on both ends reflected
+  // (BORDER_REFLECT_101 within the roi, as OpenCV's box filter on the products), then summed along the row.
+  const int ext = w + 2 * r;
+  std::vector<std::int32_t> xx(static_cast<std::size_t>(ext)), xy(xx.size()), yy(xx.size());
+  std::vector<std::int32_t> sum_xx(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+  std::vector<std::int32_t> sum_xy(sum_xx.size()), sum_yy(sum_xx.size());
+  std::vector<int> reflect_col(static_cast<std::size_t>(2 * r));
+  for (int k = 0; k < r; ++k) {
+    reflect_col[static_cast<std::size_t>(k)] = cv::borderInterpolate(k - r, w, cv::BORDER_REFLECT_101);
+    reflect_col[static_cast<std::size_t>(r + k)] = cv::borderInterpolate(w + k, w, cv::BORDER_REFLECT_101);
+  }
+  for (int y = 0; y < h; ++y) {
+    const std::uint8_t* a = padded.ptr<std::uint8_t>(y);
+    const std::uint8_t* b = padded.ptr<std::uint8_t>(y + 1);
+    const std::uint8_t* c = padded.ptr<std::uint8_t>(y + 2);
+    std::int32_t* pxx = xx.data() + r;
+    std::int32_t* pxy = xy.data() + r;
+    std::int32_t* pyy = yy.data() + r;
+    for (int x = 0; x < w; ++x) {
+      const int dx = (a[x + 2] - a[x]) + 2 * (b[x + 2] - b[x]) + (c[x + 2] - c[x]);
+      const int dy = (c[x] + 2 * c[x + 1] + c[x + 2]) - (a[x] + 2 * a[x + 1] + a[x + 2]);
+      pxx[x] = dx * dx;
+      pxy[x] = dx * dy;
+      pyy[x] = dy * dy;
+    }
+    for (int k = 0; k < r; ++k) {
+      const auto left = static_cast<std::size_t>(k);
+      const auto right = static_cast<std::size_t>(r + w + k);
+      const auto from_left = static_cast<std::size_t>(r + reflect_col[left]);
+      const auto from_right = static_cast<std::size_t>(r + reflect_col[static_cast<std::size_t>(r + k)]);
+      xx[left] = xx[from_left];
+      xy[left] = xy[from_left];
+      yy[left] = yy[from_left];
+      xx[right] = xx[from_right];
+      xy[right] = xy[from_right];
+      yy[right] = yy[from_right];
+    }
+    // Summed along the row: the first term, then the others added one shifted copy at a time (a form the
+    // compiler vectorises).
+    std::int32_t* out_xx = sum_xx.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    std::int32_t* out_xy = sum_xy.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    std::int32_t* out_yy = sum_yy.data() + static_cast<std::size_t>(y) * static_cast<std::size_t>(w);
+    std::copy_n(xx.begin(), w, out_xx);
+    std::copy_n(xy.begin(), w, out_xy);
+    std::copy_n(yy.begin(), w, out_yy);
+    for (int k = 1; k <= 2 * r; ++k) {
+      const std::int32_t* in_xx = xx.data() + k;
+      const std::int32_t* in_xy = xy.data() + k;
+      const std::int32_t* in_yy = yy.data() + k;
+      for (int x = 0; x < w; ++x) {
+        out_xx[x] += in_xx[x];
+        out_xy[x] += in_xy[x];
+        out_yy[x] += in_yy[x];
+      }
+    }
+  }
+  // Down the columns (rows reflected at the roi's edges), and the smaller eigenvalue of
+  // [[A, B], [B, C]] / 2: (A + C) / 2 - sqrt(((A - C) / 2)^2 + B^2), in float as OpenCV computes it and in
+  // its units (its derivatives are scaled by 1 / (4 x block_size x 255), the sums by the square of that).
+  const double unit = 1.0 / (4.0 * block_size * 255.0);
+  const auto scale = static_cast<float>(unit * unit);
+  response.create(h, w, CV_32F);
+  std::vector<std::int32_t> col_xx(static_cast<std::size_t>(w)), col_xy(col_xx.size()), col_yy(col_xx.size());
+  for (int y = 0; y < h; ++y) {
+    for (int k = -r; k <= r; ++k) {
+      const auto src = static_cast<std::size_t>(cv::borderInterpolate(y + k, h, cv::BORDER_REFLECT_101)) *
+                       static_cast<std::size_t>(w);
+      const std::int32_t* in_xx = sum_xx.data() + src;
+      const std::int32_t* in_xy = sum_xy.data() + src;
+      const std::int32_t* in_yy = sum_yy.data() + src;
+      if (k == -r) {
+        std::copy_n(in_xx, w, col_xx.begin());
+        std::copy_n(in_xy, w, col_xy.begin());
+        std::copy_n(in_yy, w, col_yy.begin());
+        continue;
+      }
+      for (int x = 0; x < w; ++x) {
+        col_xx[static_cast<std::size_t>(x)] += in_xx[x];
+        col_xy[static_cast<std::size_t>(x)] += in_xy[x];
+        col_yy[static_cast<std::size_t>(x)] += in_yy[x];
+      }
+    }
+    min_eigenvalues(col_xx.data(), col_xy.data(), col_yy.data(), w, scale, response.ptr<float>(y));
+  }
+}
+
 TrackerImage FeatureTracker::prepare(const cv::Mat& grey) const {
   const CameraCalibration& calib = camera_.calibration();
   if (grey.empty() || grey.type() != CV_8UC1) {
@@ -149,15 +280,15 @@ const std::vector<TrackedFeature>& FeatureTracker::track(const TrackerImage& pre
       }
     }
     std::vector<unsigned char> status_fwd;
-    // No error output: OpenCV then skips its extra pass over every window at level 0 (unused here).
-    cv::calcOpticalFlowPyrLK(previous_pyramid_, pyramid, previous_pts, current_pts, status_fwd, cv::noArray(),
-                             window, config_.klt_pyramid_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    // cv::calcOpticalFlowPyrLK's tracking with exact integer window sums, twice as fast (core/klt.hpp).
+    track_klt(previous_pyramid_, pyramid, previous_pts, current_pts, status_fwd, window,
+              config_.klt_pyramid_levels, criteria, true);
     std::vector<cv::Point2f> back_pts = previous_pts;
     std::vector<unsigned char> status_bwd;
     const int check_levels =
         config_.klt_check_pyramid_levels < 0 ? config_.klt_pyramid_levels : config_.klt_check_pyramid_levels;
-    cv::calcOpticalFlowPyrLK(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, cv::noArray(),
-                             window, check_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+    track_klt(pyramid, previous_pyramid_, current_pts, back_pts, status_bwd, window, check_levels, criteria,
+              true);
     stats_.klt_ms = ms_since(t0);
     const auto border = static_cast<float>(config_.border_px);
     const float max_x = static_cast<float>(grey.cols - 1) - border;
@@ -226,7 +357,7 @@ void FeatureTracker::detect_in(const cv::Mat& grey, const cv::Mat& mask, const c
   // corner_noise_factor times the median response of the region, so that on a dark, noisy image the
   // corners of sensor noise (a high median) are not taken for features.
   cv::Mat response;
-  cv::cornerMinEigenVal(grey(roi), response, config_.shi_tomasi_block_size, 3);
+  shi_tomasi_response(grey, roi, config_.shi_tomasi_block_size, response);
   const cv::Mat roi_mask = mask(roi);
   // The largest response where the mask is set (0 where it is set nowhere, as cv::minMaxLoc gives).
   float max_masked = -std::numeric_limits<float>::infinity();

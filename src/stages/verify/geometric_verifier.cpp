@@ -14,7 +14,6 @@
 #include <opencv2/core/eigen.hpp>
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 #include <optional>
 #include <stdexcept>
 #include <vector>
@@ -570,12 +569,10 @@ std::vector<unsigned char> GeometricVerifier::track_across_illumination(
   std::vector<cv::Point2f> in_i = R_ci_cj != nullptr ? rotated(points, *R_ci_cj) : points;
   std::vector<unsigned char> forward_ok;
   std::vector<unsigned char> backward_ok;
-  // No error output: OpenCV then skips its extra pass over every window at level 0 (unused here).
-  cv::calcOpticalFlowPyrLK(pyramid_j, pyramid_i, points, in_i, forward_ok, cv::noArray(), window, levels,
-                           criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+  // cv::calcOpticalFlowPyrLK's tracking with exact integer window sums (core/klt.hpp).
+  track_klt(pyramid_j, pyramid_i, points, in_i, forward_ok, window, levels, criteria, true);
   std::vector<cv::Point2f> back = R_ci_cj != nullptr ? rotated(in_i, R_ci_cj->transpose()) : in_i;
-  cv::calcOpticalFlowPyrLK(pyramid_i, pyramid_j, in_i, back, backward_ok, cv::noArray(), window, levels,
-                           criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
+  track_klt(pyramid_i, pyramid_j, in_i, back, backward_ok, window, levels, criteria, true);
   const float max_x = static_cast<float>(pyramid_i.front().cols - 1);
   const float max_y = static_cast<float>(pyramid_i.front().rows - 1);
   for (std::size_t k = 0; k < points.size(); ++k) {
