@@ -285,15 +285,12 @@ void mismatch_portable(const Level& J, int x0, int y0, const Weights& w, const T
 #ifdef LOOPGATE_KLT_PYRAMID_X86
 // The same, 16 pixels of a row at a time: every value is an exact integer, so the sums are those of the
 // portable code whatever the order.
-[[gnu::target("avx2")]] inline __m256i bilinear16(const std::uint8_t* top, std::ptrdiff_t step, __m256i w0,
-                                                  __m256i w1, __m256i round, int shift) {
-  const std::uint8_t* bottom = top + step;
-  const __m256i a0 = load8(top);
-  const __m256i a1 = load8(top + 1);
-  const __m256i c0 = load8(bottom);
-  const __m256i c1 = load8(bottom + 1);
-  // Pairs (x, x + 1) against (w00, w01) and (w10, w11): pixels 0-3 | 8-11 and 4-7 | 12-15, which the pack
-  // puts back in order.
+
+// 16 bilinear values from the int16 values of the four corners (a0 at p, a1 at p + 1, c0 and c1 a row
+// below), the pairs (p, p + 1) against (w00, w01) and (w10, w11): lanes 0-3 | 8-11 and 4-7 | 12-15, which the
+// pack puts back in order; rounded and shifted right by `shift`.
+[[gnu::target("avx2")]] inline __m256i bilinear(__m256i a0, __m256i a1, __m256i c0, __m256i c1, __m256i w0,
+                                                __m256i w1, __m256i round, int shift) {
   __m256i low = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpacklo_epi16(a0, a1), w0),
                                  _mm256_madd_epi16(_mm256_unpacklo_epi16(c0, c1), w1));
   __m256i high = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpackhi_epi16(a0, a1), w0),
@@ -303,20 +300,17 @@ void mismatch_portable(const Level& J, int x0, int y0, const Weights& w, const T
   return _mm256_packs_epi32(low, high);
 }
 
-// 8 derivative pairs (x, y) of a row, bilinear: the pairs of pixels p and p + 1 are 2 elements apart.
+// 16 pixels of an image row.
+[[gnu::target("avx2")]] inline __m256i bilinear16(const std::uint8_t* top, std::ptrdiff_t step, __m256i w0,
+                                                  __m256i w1, __m256i round, int shift) {
+  return bilinear(load8(top), load8(top + 1), load8(top + step), load8(top + step + 1), w0, w1, round, shift);
+}
+
+// 8 derivative pairs (x, y) of a row: the pairs of pixels p and p + 1 are 2 elements apart.
 [[gnu::target("avx2")]] inline __m256i bilinear_pairs8(const std::int16_t* top, std::ptrdiff_t step,
                                                        __m256i w0, __m256i w1, __m256i round) {
-  const __m256i a0 = load16(top);
-  const __m256i a1 = load16(top + 2);
-  const __m256i c0 = load16(top + step);
-  const __m256i c1 = load16(top + step + 2);
-  __m256i low = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpacklo_epi16(a0, a1), w0),
-                                 _mm256_madd_epi16(_mm256_unpacklo_epi16(c0, c1), w1));
-  __m256i high = _mm256_add_epi32(_mm256_madd_epi16(_mm256_unpackhi_epi16(a0, a1), w0),
-                                  _mm256_madd_epi16(_mm256_unpackhi_epi16(c0, c1), w1));
-  low = _mm256_srai_epi32(_mm256_add_epi32(low, round), kWeightBits);
-  high = _mm256_srai_epi32(_mm256_add_epi32(high, round), kWeightBits);
-  return _mm256_packs_epi32(low, high);
+  return bilinear(load16(top), load16(top + 2), load16(top + step), load16(top + step + 2), w0, w1, round,
+                  kWeightBits);
 }
 
 [[gnu::target("avx2")]] inline __m256i pair_weights(int first, int second) {
