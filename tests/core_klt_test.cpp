@@ -228,7 +228,8 @@ TEST(CoreKltTrack, FindsWhatOpenCVFindsToItsLastBits) {
 TEST(CoreKltTrack, GivesTheSameBitsWithAndWithoutAvx2) {
   std::mt19937 rng(8);
   const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.01);
-  for (const cv::Size window : {cv::Size(15, 15), cv::Size(21, 21), cv::Size(9, 7), cv::Size(33, 5)}) {
+  for (const cv::Size window :
+       {cv::Size(15, 15), cv::Size(21, 21), cv::Size(9, 7), cv::Size(33, 5), cv::Size(101, 41)}) {
     const Scene s = moved_scene(rng, 5.3, -3.1, 2.0);
     std::vector<cv::Mat> previous, next;
     build_klt_pyramid(s.previous, window, 2, previous);
