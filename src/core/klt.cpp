@@ -13,7 +13,7 @@
 
 #if defined(__x86_64__) || defined(__i386__)
 #include <immintrin.h>
-#define LOOPGATE_KLT_PYRAMID_X86 1
+#define LOOPGATE_KLT_X86 1
 #endif
 
 namespace loopgate {
@@ -56,7 +56,18 @@ void scharr_row_generic(const std::uint8_t* above, const std::uint8_t* row, cons
   horizontal_from(smooth, diff, out, 0, cols);
 }
 
-#ifdef LOOPGATE_KLT_PYRAMID_X86
+// Whether the CPU runs AVX2 (a plain check, not an ifunc: ifunc resolvers run before the sanitizers' runtimes
+// start). The AVX2 code and the portable code give the same bits.
+bool has_avx2() {
+#ifdef LOOPGATE_KLT_X86
+  static const bool has = __builtin_cpu_supports("avx2");
+  return has;
+#else
+  return false;
+#endif
+}
+
+#ifdef LOOPGATE_KLT_X86
 [[gnu::target("avx2")]] inline __m256i load8(const std::uint8_t* p) {
   return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
 }
@@ -67,8 +78,7 @@ void scharr_row_generic(const std::uint8_t* above, const std::uint8_t* row, cons
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(p), v);
 }
 
-// The same, 16 pixels at a time. (A plain CPU check picks it, not an ifunc: ifunc resolvers run before the
-// sanitizers' runtimes start.)
+// The same, 16 pixels at a time.
 [[gnu::target("avx2")]] void scharr_row_avx2(const std::uint8_t* above, const std::uint8_t* row,
                                              const std::uint8_t* below, std::int16_t* smooth,
                                              std::int16_t* diff, std::int16_t* out, int cols) {
@@ -107,9 +117,8 @@ using RowFunction = void (*)(const std::uint8_t*, const std::uint8_t*, const std
                              std::int16_t*, std::int16_t*, int);
 
 RowFunction scharr_row() {
-#ifdef LOOPGATE_KLT_PYRAMID_X86
-  static const bool has_avx2 = __builtin_cpu_supports("avx2");
-  if (has_avx2) return scharr_row_avx2;
+#ifdef LOOPGATE_KLT_X86
+  if (has_avx2()) return scharr_row_avx2;
 #endif
   return scharr_row_generic;
 }
@@ -138,7 +147,7 @@ void scharr_derivatives(const cv::Mat& grey, cv::Mat& deriv) {
         "scharr_derivatives: expected a CV_8UC1 image and a CV_16SC2 output of its size");
   const int rows = grey.rows;
   const int cols = grey.cols;
-  // Scratch rows with one entry of margin on each side (index 1 is column 0) and room for 16-wide loads.
+  // Scratch rows with one entry of margin on each side (index 1 is column 0): the reflected columns.
   std::vector<std::int16_t> smooth(static_cast<std::size_t>(cols) + 2);
   std::vector<std::int16_t> diff(static_cast<std::size_t>(cols) + 2);
   const RowFunction row_function = scharr_row();
@@ -282,7 +291,7 @@ void mismatch_portable(const Level& J, int x0, int y0, const Weights& w, const T
   }
 }
 
-#ifdef LOOPGATE_KLT_PYRAMID_X86
+#ifdef LOOPGATE_KLT_X86
 // The same, 16 pixels of a row at a time: every value is an exact integer, so the sums are those of the
 // portable code whatever the order.
 
@@ -481,6 +490,11 @@ void track(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& nex
       throw std::invalid_argument("track_klt: the two pyramids' level " + std::to_string(level) +
                                   " differ in size");
     const float scale = static_cast<float>(1.0 / (1 << level));
+    // A window whose corner (x, y) leaves the bordered level: the point is lost (at level 0) or not refined
+    // here.
+    const auto off_level = [&](int x, int y) {
+      return x < -window.width || x >= I.cols || y < -window.height || y >= I.rows;
+    };
     for (std::size_t k = 0; k < points.size(); ++k) {
       cv::Point2f from = points[k] * scale;
       cv::Point2f to;
@@ -493,7 +507,7 @@ void track(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& nex
       from -= half;
       const int fx = cvFloor(from.x);
       const int fy = cvFloor(from.y);
-      if (fx < -window.width || fx >= I.cols || fy < -window.height || fy >= I.rows) {
+      if (off_level(fx, fy)) {
         if (level == 0) status[k] = 0;
         continue;
       }
@@ -514,7 +528,7 @@ void track(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& nex
       for (int j = 0; j < max_iterations; ++j) {
         const int tx = cvFloor(to.x);
         const int ty = cvFloor(to.y);
-        if (tx < -window.width || tx >= J.cols || ty < -window.height || ty >= J.rows) {
+        if (off_level(tx, ty)) {
           if (level == 0) status[k] = 0;
           break;
         }
@@ -546,9 +560,8 @@ void track_klt(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>&
                const std::vector<cv::Point2f>& points, std::vector<cv::Point2f>& found,
                std::vector<unsigned char>& status, cv::Size window, int max_level,
                const cv::TermCriteria& criteria, bool use_initial_flow) {
-#ifdef LOOPGATE_KLT_PYRAMID_X86
-  static const bool has_avx2 = __builtin_cpu_supports("avx2");
-  if (has_avx2) {
+#ifdef LOOPGATE_KLT_X86
+  if (has_avx2()) {
     track(previous, next, points, found, status, window, max_level, criteria, use_initial_flow, template_avx2,
           mismatch_avx2);
     return;
