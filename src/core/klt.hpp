@@ -36,7 +36,8 @@ void scharr_derivatives(const cv::Mat& grey, cv::Mat& deriv);
 // smaller eigenvalue below 1e-4 per pixel). What differs: the sums over the window are exact integers (OpenCV
 // adds them as floats, in an order its SIMD width decides), so a point's position can differ from OpenCV's in
 // its last bits, and is the same on every CPU; and 16 pixels of a window row at a time (AVX2, where the CPU
-// has it; OpenCV 8 and the rest one by one).
+// has it; OpenCV 8 and the rest one by one). The 2 x 2 solve from those sums is in float, as OpenCV's: its
+// thresholds then drop the same nearly flat windows.
 void track_klt(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& next,
                const std::vector<cv::Point2f>& points, std::vector<cv::Point2f>& found,
                std::vector<unsigned char>& status, cv::Size window, int max_level,
