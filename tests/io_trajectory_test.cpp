@@ -106,6 +106,11 @@ TEST(IoTrajectory, TumBadInput) {
   write_file(dir / "back.txt", "2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n");
   expect_data_error([&] { read_tum(dir / "back.txt"); }, "back.txt", 2,
                     "timestamp 1.000000000 s is before line 1 (2.000000000 s)");
+  // Nanosecond stamps in a file of seconds: the error says so and shows the time in seconds.
+  write_file(dir / "ns.txt", "1403636579763555584 0 0 0 0 0 0 1\n");
+  expect_data_error([&] { read_tum(dir / "ns.txt"); }, "ns.txt", 1,
+                    "it looks like a time in nanoseconds (19 digits): this file takes seconds, e.g. "
+                    "1403636579.763555584");
   write_file(dir / "quat.txt", "1.0 0 0 0 0 0 0 0\n");
   expect_data_error([&] { read_tum(dir / "quat.txt"); }, "quat.txt", 1, "unit quaternion");
 }

@@ -89,8 +89,13 @@ void claim_output_folder(const CompareOptions& options, const PipelineConfig& ba
   for (const std::string& method : methods)
     refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
   lock.emplace(out_dir, command);
-  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
+  // A single run's outputs in the folder count too: aggregate would read them beside the compare's.
+  std::vector<std::string> previous = compare_output_names();
+  previous.insert(previous.end(), run_output_file_names().begin(), run_output_file_names().end());
+  refuse_previous_outputs(out_dir, previous, options.force, "compare");
   remove_compare_outputs(out_dir);
+  std::error_code ec;
+  for (const std::string& name : run_output_file_names()) fs::remove(out_dir / name, ec);
 }
 
 std::string method_names() {
@@ -354,6 +359,7 @@ int compare_two_sequences(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const TwoSequenceResult result =
         run_two_sequences(config, *reference, *query, out_dir / method, signals.flag());
     summaries[method] = result.summary;
@@ -422,6 +428,7 @@ int compare_command(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const RunResult result =
         run_pipeline(config, *dataset, out_dir / method, signals.flag(), base.verify.enabled);
     std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);

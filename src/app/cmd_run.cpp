@@ -60,6 +60,16 @@ void log_missing_outputs(const std::vector<std::string>& missing, const std::vec
   for (const std::string& error : errors) spdlog::error("  {}", error);
 }
 
+// A previous run's outputs, or a compare's compare.json, refused without --force; with it, compare.json goes
+// too (aggregate would otherwise report the old compare beside this run's outputs).
+void refuse_previous_run_or_compare(const RunOptions& options) {
+  std::vector<std::string> previous = run_output_file_names();
+  previous.emplace_back("compare.json");
+  refuse_previous_outputs(options.out_dir, previous, options.force, "run");
+  std::error_code ec;
+  std::filesystem::remove(std::filesystem::path(options.out_dir) / "compare.json", ec);
+}
+
 // --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
 int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   if (options.reference.empty() || options.query.empty()) {
@@ -71,7 +81,7 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   log_config_lines(config_to_lines(config));
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run --reference --query");
-  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
+  refuse_previous_run_or_compare(options);
   const OpenOptions open_options = config.open_options();
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
@@ -114,7 +124,7 @@ int run_command(const RunOptions& options) {
   // Before anything is written: no output over an input, and one command at a time in the folder.
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run");
-  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
+  refuse_previous_run_or_compare(options);
 
   // From here a stop signal (SIGINT, SIGTERM, SIGHUP) drains the run and writes every output.
   const StopSignals signals;
