@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
@@ -216,6 +217,27 @@ TEST(IoTrajectory, EurocCameraCsvRoundTrip) {
   write_file(dir / "nofile.csv", "#t,f\n100,\n");
   expect_data_error([&] { read_euroc_camera_csv(dir / "nofile.csv"); }, "nofile.csv", 2,
                     "expected an image file");
+}
+
+// A resolution beyond any camera (1e12 px) was accepted and read as -2147483648 px: refused with its bound.
+TEST(IoTrajectory, HugeResolutionIsRefusedWithItsBound) {
+  const fs::path dir = testing::make_temp_dir("io-yaml-size");
+  CameraCalibration camera;
+  camera.width_px = 752;
+  camera.height_px = 480;
+  camera.fx = camera.fy = 458.0;
+  camera.cx = 367.0;
+  camera.cy = 248.0;
+  camera.distortion_model = DistortionModel::kRadTan;
+  camera.distortion = {0, 0, 0, 0};
+  write_euroc_camera_yaml(dir / "sensor.yaml", camera);
+  std::istringstream in(testing::read_file(dir / "sensor.yaml"));
+  std::string line, text;
+  while (std::getline(in, line))
+    text += (line.find("resolution") != std::string::npos ? "resolution: [1e12, 32]" : line) + "\n";
+  write_file(dir / "sensor.yaml", text);
+  expect_data_error([&] { read_euroc_camera_yaml(dir / "sensor.yaml"); }, "sensor.yaml", 0,
+                    "resolution: [1000000000000, 32] px, expected sides of at most 100000 px");
 }
 
 TEST(IoTrajectory, EurocYamlRoundTrip) {
