@@ -271,9 +271,20 @@ std::string config_yaml_text(const nlohmann::json& sections, const std::string& 
   std::string text;
   std::istringstream lines(header);
   for (std::string line; std::getline(lines, line);) text += "# " + line + "\n";
+  const auto& path_keys = config_path_keys();
   for (const auto& [section, fields] : sections.items()) {
     text += section + ":\n";
-    for (const auto& [key, value] : fields.items()) text += "  " + key + ": " + value.dump() + "\n";
+    for (const auto& [key, value] : fields.items()) {
+      // Paths absolute: the file is read again from its own folder, where a relative path would move.
+      const bool path = std::find(path_keys.begin(), path_keys.end(), section + "." + key) != path_keys.end();
+      if (path && value.is_string() && !value.get<std::string>().empty()) {
+        std::error_code ec;
+        const std::filesystem::path absolute = std::filesystem::absolute(value.get<std::string>(), ec);
+        text += "  " + key + ": " + nlohmann::json(absolute.lexically_normal().string()).dump() + "\n";
+      } else {
+        text += "  " + key + ": " + value.dump() + "\n";
+      }
+    }
   }
   return text;
 }
