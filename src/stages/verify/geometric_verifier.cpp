@@ -483,7 +483,7 @@ void GeometricVerifier::solve_pose(const std::vector<cv::Point3d>& object,
   // The minimal solver is AP3P (Ke & Roumeliotis 2017: 3 points and a 4th to choose among its solutions), the
   // usual one in PnP RANSAC: its samples of 4 points reach the 0.99 confidence in fewer iterations than
   // EPnP's 5 (72 against 145 at half inliers) and each costs a fraction of an EPnP solve. The pose is refined
-  // on the inliers below, whichever solver found them (docs/architecture.md § Loop closures, the
+  // on the inliers below, whichever solver found them (docs/loop-correction.md, the
   // measurement).
   try {
     ok = cv::solvePnPRansac(object, image, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rvec, tvec, false,
