@@ -30,7 +30,8 @@ const std::string kForcedLoops = " --set match.margin=4 --set dird_seqslam.min_s
 // Gated with the EKF on the bag's IMU and the ASL folder's calibration: every frame from 10 frames back is a
 // candidate, and past frames are read again from the dataset (no image cache).
 const std::string kGatedEkf =
-    " --mode gated --set odometry.source=ekf --set gate.gap_frames=10 --set gate.beta_m=20"
+    " --mode gated --set odometry.source=ekf --set ekf.init_mode=ground_truth --set gate.gap_frames=10"
+    " --set gate.beta_m=20"
     " --set run.image_cache_frames=0" +
     kForcedLoops;
 

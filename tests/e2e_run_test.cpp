@@ -299,7 +299,7 @@ TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
 
   const fs::path out = testing::make_temp_dir("e2e-run-ekf-out");
   output = run("--log-level warn run --dataset " + sim.string() + " --mode odometry --out " + out.string() +
-                   " --set odometry.source=ekf --set output.progress=off",
+                   " --set odometry.source=ekf --set ekf.init_mode=ground_truth --set output.progress=off",
                &status);
   ASSERT_EQ(status, 0) << output;
   std::vector<std::string> header;

@@ -112,8 +112,9 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
   std::vector<std::string> problems;
   if (!result.failed && !result.interrupted) {
-    problems = run_problems(run_check_input(config_, dataset_, outputs_.counters(),
-                                            steps_.odometry_source().name(), method_->detects()));
+    problems =
+        run_problems(run_check_input(config_, dataset_, outputs_.counters(), steps_.odometry_source().name(),
+                                     method_->detects(), steps_.odometry_source().start()));
     if (!problems.empty()) {
       result.failed = true;
       result.error = fmt::format("{}", fmt::join(problems, "; "));
@@ -121,6 +122,8 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   }
   result.summary = make_run_summary(parts, result, std::move(evaluation));
   result.summary["problems"] = problems;
+  if (const auto start = steps_.odometry_source().start())
+    result.summary["odometry_start"] = odometry_start_json(*start);
   result.track = {range_.first,
                   range_.second,
                   outputs_.tracked_frames(),

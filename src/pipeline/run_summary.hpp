@@ -15,6 +15,7 @@
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_counters.hpp"
 #include "pipeline/time_accounting.hpp"
+#include "stages/odometry/odometry_source.hpp"
 
 namespace loopgate {
 
@@ -63,5 +64,9 @@ std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir);
 
 nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, nlohmann::json evaluation);
+
+// summary.json "odometry_start": how a source that starts from the data started (initialiser, frame, time,
+// the state it estimated, the decision's numbers) or why it did not, and the share of frames it tracked.
+nlohmann::json odometry_start_json(const OdometryStart& start);
 
 }  // namespace loopgate
