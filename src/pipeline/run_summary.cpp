@@ -50,7 +50,8 @@ std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Ve
   return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
 }
 
-nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
+nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir,
+                            std::vector<std::pair<std::size_t, std::size_t>>* truth_loops_out) {
   const Dataset& dataset = parts.dataset;
   if (!parts.method.detects() || (!dataset.has_ground_truth() && !parts.truth_pairs))
     return {{"available", false}};
@@ -128,6 +129,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   }
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : evaluation.truth_pairs) {
+    if (truth_loops_out) truth_loops_out->emplace_back(first + q, first + r);
     truth_loops.write_row(
         {std::to_string(dataset.source_index(first + q)), std::to_string(dataset.source_index(first + r))});
   }
