@@ -168,11 +168,17 @@ def check_names(jobs):
             errors.append(f"{job.where()}: name '{job.name}' already used on line {by_name[job.name].line}")
             continue
         by_name[job.name] = job
-    names = sorted(by_name)
-    for a, b in zip(names, names[1:]):
-        if b.startswith(a + "/"):
-            errors.append(f"{by_name[b].where()}: name '{b}' lies inside the output of '{a}' "
-                          f"(line {by_name[a].line})")
+    # Every enclosing folder of a name, not only its neighbour in sorted order: 'c.x' sorts between 'c' and
+    # 'c/full', and a compare 'c' writes its method folders (c/full, c/gated, ...) itself.
+    for job in jobs:
+        if by_name.get(job.name) is not job:
+            continue
+        parts = job.name.split("/")
+        for k in range(1, len(parts)):
+            outer = by_name.get("/".join(parts[:k]))
+            if outer is not None:
+                errors.append(f"{job.where()}: name '{job.name}' lies inside the output folder of '{outer.name}' "
+                              f"(line {outer.line}, a {outer.command} line): one job per folder")
     for job in jobs:
         for ref in job.references():
             target = by_name.get(ref)
@@ -210,8 +216,25 @@ def job_argv(job, root, loopgate, force):
     return argv
 
 
+def state_name(job):
+    """The job's name as one file name: '/' becomes '%2F' ('%' is not allowed in names, so 'x/y' and 'x__y'
+    keep distinct markers and logs)."""
+    return job.name.replace("/", "%2F")
+
+
 def state_file(root, kind, job, suffix):
-    return root / STATE_DIR / kind / (job.name.replace("/", "__") + suffix)
+    return root / STATE_DIR / kind / (state_name(job) + suffix)
+
+
+def log_file(root, job):
+    return state_file(root, "logs", job, ".log")
+
+
+def folder_is_empty(folder):
+    try:
+        return not any(folder.iterdir())
+    except FileNotFoundError:
+        return True
 
 
 def is_complete(job, root):
@@ -263,14 +286,27 @@ def run_job(job, root, loopgate, jobs):
                   "(batch.sh does; with Slurm, --dependency=afterok on the simulate array)",
                   file=sys.stderr, flush=True)
             return 1
-    # A previous attempt of this job (started, never done) left outputs: replace them. Anything else in the
-    # folder is left to loopgate's own refusal (it names what it found and asks for another folder).
-    force = started.is_file() and out.exists()
+    # A previous attempt of this job (started, never done) left outputs: replace them, but only when the
+    # folder was absent or empty before batch first started the job. A folder that already held something
+    # (another run's outputs) stays so on every attempt: loopgate's own refusal names what it found.
+    previous = None
+    if started.is_file():
+        try:
+            previous = json.loads(started.read_text())
+        except (OSError, ValueError):
+            previous = {}
+    owned = previous.get("folder_was_empty_at_first_start") is True if previous is not None \
+        else folder_is_empty(out)
+    force = owned and previous is not None and out.exists()
+    if not owned:
+        print(f"batch: {label}: {out} held files before batch first started this job: they are not replaced "
+              "(no --force); remove them, or give the line another name", flush=True)
     argv = job_argv(job, root, loopgate, force)
-    log = root / STATE_DIR / "logs" / (job.name.replace("/", "__") + ".log")
+    log = log_file(root, job)
     log.parent.mkdir(parents=True, exist_ok=True)
     write_json(started, {"fields": job.fields, "argv": argv, "start_time_utc": now_utc(),
-                         "host": socket.gethostname(), "pid": os.getpid()})
+                         "host": socket.gethostname(), "pid": os.getpid(),
+                         "folder_was_empty_at_first_start": owned})
     print(f"batch: {label}: {shlex.join(argv)}", flush=True)
     t0 = time.monotonic()
     with open(log, "a") as f:
@@ -354,10 +390,13 @@ def prepare(manifest, jobs, root):
 def report(jobs, root, phase):
     by_number = {j.number: j for j in jobs}
     entries = read_joblog(joblog_path(root, phase))
-    failed = [(by_number[n], e, s) for e, s, n in entries.values() if (e != 0 or s != 0) and n in by_number]
+    # A failed entry of a job that is complete now (done by a later attempt, or by another batch on the same
+    # root before it was locked out) is no failure: the outputs and the done marker are the truth.
+    failed = [(by_number[n], e, s) for e, s, n in entries.values()
+              if (e != 0 or s != 0) and n in by_number and not is_complete(by_number[n], root)]
     for job, exit_status, sig in sorted(failed, key=lambda f: f[0].number):
         reason = f"signal {sig}" if sig else f"exit status {exit_status}"
-        log = root / STATE_DIR / "logs" / (job.name.replace("/", "__") + ".log")
+        log = log_file(root, job)
         print(f"batch: FAILED {job.where()}: job {job.number} '{job.name}' ({job.command}): {reason}; "
               f"log {log}", file=sys.stderr)
     missing = [j for j in jobs if j.phase() == phase and j.number not in {n for _, _, n in entries.values()}]

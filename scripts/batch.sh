@@ -8,8 +8,9 @@
 # ROOT defaults to out/batch/<manifest name>. A second batch.sh on the same ROOT resumes: GNU parallel's
 # --resume-failed skips what its job log (ROOT/_batch/joblog-<phase>.tsv) says succeeded and retries what
 # failed, and a job whose done marker records the same manifest line is skipped by the job itself (so a
-# changed manifest, or Slurm, skips finished runs too). Exit status: 0 every job ok, 1 a job failed (each failed line
-# named as MANIFEST:LINE), 2 a bad manifest or usage.
+# changed manifest, or Slurm, skips finished runs too). A batch.sh on a ROOT where another is running is refused.
+# Exit status: 0 every job ok, 1 a job failed (each failed line named as MANIFEST:LINE), 2 a bad manifest,
+# usage, or a ROOT in use.
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -65,8 +66,18 @@ if [[ -z "$root" ]]; then
   name="$(basename "$manifest")"
   root="out/batch/${name%.*}" # as batch.py's default (Path.stem), which the Slurm template uses
 fi
-mkdir -p "$root"
+mkdir -p "$root/_batch"
 root="$(cd "$root" && pwd)"
+# One batch.sh per root: two at once would run the same jobs into the same folders and write one job log.
+# The lock is held by this shell and its children (GNU parallel, the jobs) and released when they end.
+exec 9>>"$root/_batch/lock"
+if ! flock -n 9; then
+  holder="$(cat "$root/_batch/lock.pid" 2>/dev/null || true)"
+  echo "batch: $root is in use by another batch.sh${holder:+ (pid $holder)}: wait for it to end, or use" \
+    "another --out" >&2
+  exit 2
+fi
+echo $$ >"$root/_batch/lock.pid"
 manifest="$(cd "$(dirname "$manifest")" && pwd)/$(basename "$manifest")"
 job_args=(--out "$root")
 [[ -z "$loopgate" ]] || job_args+=(--loopgate "$(realpath "$loopgate")")

@@ -167,6 +167,109 @@ TEST(E2eBatch, FailedLineIsNamedAndRetriedAlone) {
   EXPECT_EQ(attempts(root, "bad"), 2);
 }
 
+fs::path simulate_tiny(const fs::path& dir) {
+  const fs::path data = dir / "data";
+  EXPECT_EQ(
+      testing::run_command(testing::loopgate_binary().string() +
+                           " --log-level warn simulate --preset aliasing --frames 60 --out " + data.string()),
+      0);
+  return data;
+}
+
+// A job folder that already holds another run's outputs is refused on the first call; the second call must
+// not take the first attempt's "started" marker as leave to replace them with --force.
+TEST(E2eBatch, ASecondCallDoesNotForceOverAnotherRunsOutputs) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch-foreign");
+  const fs::path data = simulate_tiny(dir);
+  const fs::path root = dir / "out";
+  ASSERT_EQ(testing::run_command(testing::loopgate_binary().string() + " --log-level warn run --dataset " +
+                                 data.string() + " --config " + kConfig +
+                                 " --mode odometry --set output.progress=off --out " + (root / "r").string()),
+            0);
+  const std::string before = testing::read_file(root / "r" / "summary.json");
+  ASSERT_FALSE(before.empty());
+  const fs::path manifest = write_manifest(dir, "foreign.tsv",
+                                           "r\trun\t" + data.string() + "\t" + kConfig +
+                                               "\toutput.progress=off match.margin=20\t--mode odometry\n");
+  for (int call = 1; call <= 2; ++call) {
+    const Result r = batch(manifest, root);
+    EXPECT_EQ(r.status, 1) << "call " << call << "\n" << r.output;
+    EXPECT_NE(r.output.find("held files before batch first started this job"), std::string::npos)
+        << "call " << call << "\n"
+        << r.output;
+    EXPECT_NE(r.output.find("already holds"), std::string::npos) << "call " << call << "\n" << r.output;
+    EXPECT_NE(r.output.find(" --out " + (root / "r").string() + "\n"), std::string::npos)
+        << "call " << call << ": the job ran without --force\n"
+        << r.output;
+    EXPECT_EQ(testing::read_file(root / "r" / "summary.json"), before) << "call " << call;
+  }
+}
+
+// The manifest check looked at neighbours in sorted order only: 'c.x' sorts between 'c' and 'c/full'.
+TEST(E2eBatch, NamesInsideAnotherJobsFolderAreRefusedWhateverTheirOrder) {
+  const fs::path dir = testing::make_temp_dir("e2e-batch-nested");
+  const fs::path manifest = write_manifest(dir, "nested.tsv",
+                                           "c\tcompare\t/data\t-\t-\t-\n"
+                                           "c.x\trun\t/data\t-\t-\t-\n"
+                                           "c/full\trun\t/data\t-\t-\t-\n"
+                                           "d/e/f\trun\t/data\t-\t-\t-\n"
+                                           "d\trun\t/data\t-\t-\t-\n");
+  Result r;
+  r.status = testing::run_command(
+      "/usr/bin/python3 " + (kSource / "scripts" / "batch.py").string() + " check " + manifest.string(),
+      &r.output);
+  EXPECT_EQ(r.status, 2) << r.output;
+  const std::string m = manifest.string();
+  EXPECT_NE(
+      r.output.find(m + ":5: name 'c/full' lies inside the output folder of 'c' (line 3, a compare line)"),
+      std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find(m + ":6: name 'd/e/f' lies inside the output folder of 'd' (line 7"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("'c.x' lies"), std::string::npos) << r.output;
+}
+
+// 'x/y' and 'x__y' shared one done marker and one log: each finished job made the other look undone.
+TEST(E2eBatch, SlashAndDoubleUnderscoreNamesKeepTheirOwnMarkers) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch-markers");
+  const fs::path data = simulate_tiny(dir);
+  const std::string line =
+      "\trun\t" + data.string() + "\t" + kConfig + "\toutput.progress=off\t--mode odometry\n";
+  const fs::path manifest = write_manifest(dir, "markers.tsv", "x/y" + line + "x__y" + line);
+  const fs::path root = dir / "out";
+  Result r = batch(manifest, root);
+  ASSERT_EQ(r.status, 0) << r.output;
+  r = batch(manifest, root);
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_EQ(attempts(root, "x%2Fy"), 1);
+  EXPECT_EQ(attempts(root, "x__y"), 1);
+  EXPECT_TRUE(fs::is_regular_file(root / "_batch" / "done" / "x%2Fy.json"));
+  EXPECT_TRUE(fs::is_regular_file(root / "_batch" / "done" / "x__y.json"));
+}
+
+// Two batch.sh at once on one root ran the same jobs into the same folders and wrote one job log, which
+// then said "FAILED" for a job that had finished. The second is refused at once.
+TEST(E2eBatch, ASecondBatchOnARootInUseIsRefused) {
+  if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
+  const fs::path dir = testing::make_temp_dir("e2e-batch-lock");
+  const fs::path manifest = write_manifest(dir, "lock.tsv", "a\trun\t/data\t-\t-\t-\n");
+  const fs::path root = dir / "out";
+  fs::create_directories(root / "_batch");
+  std::ofstream(root / "_batch" / "lock.pid") << "4242\n";
+  Result r;
+  // flock(1) holds the root's lock, as a running batch.sh does, while the second batch.sh starts.
+  r.status = testing::run_command("flock " + (root / "_batch" / "lock").string() + " " +
+                                      (kSource / "scripts" / "batch.sh").string() + " " + manifest.string() +
+                                      " --out " + root.string(),
+                                  &r.output);
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("is in use by another batch.sh (pid 4242)"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(root / "_batch" / "manifest.tsv")) << "nothing prepared";
+}
+
 TEST(E2eBatch, BadManifestLinesAreNamed) {
   if (!have_gnu_parallel()) GTEST_SKIP() << "GNU parallel not installed (Debian package parallel)";
   const fs::path dir = testing::make_temp_dir("e2e-batch-manifest");
