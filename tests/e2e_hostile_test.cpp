@@ -466,5 +466,37 @@ TEST(E2eHostile, HugeFieldsAreQuotedCapped) {
   EXPECT_NE(read_file(out / "summary.json").find("(20000001 bytes)"), std::string::npos);
 }
 
+// A two-sequence compare of one image against one image exited 0 with a score for every method, where a
+// single-sequence run says no detection is possible. It fails before writing a method's outputs.
+TEST(E2eHostile, ATwoSequenceRunOfOneFramePerSideSaysNoDetectionIsPossible) {
+  const fs::path reference = make_kitti(1, "hostile-one-ref");
+  const fs::path query = make_kitti(1, "hostile-one-query");
+  const fs::path out = testing::make_temp_dir("hostile-one-out") / "cmp";
+  int status = 0;
+  std::string output = run("compare --no-plots --reference " + reference.string() + " --query " +
+                               query.string() + " --out " + out.string(),
+                           &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(
+      output.find("no detection possible: the reference has 1 frame(s) and the query 1 in the range run; "
+                  "a two-sequence run needs at least 2 frames on each side"),
+      std::string::npos)
+      << output;
+  EXPECT_FALSE(fs::exists(out / "full" / "summary.json"));
+  for (const char* method : {"dird", "seqslam", "dird-seqslam"}) {
+    output = run("run --method " + std::string(method) + " --reference " + reference.string() + " --query " +
+                     query.string() + " --out " + (out.parent_path() / method).string(),
+                 &status);
+    EXPECT_EQ(status, 1) << method << "\n" << output;
+    EXPECT_NE(output.find("no detection possible"), std::string::npos) << method << "\n" << output;
+  }
+  // Two frames a side pass the check (the boundary).
+  const fs::path reference2 = make_kitti(2, "hostile-two-ref");
+  output = run("run --method dird --reference " + reference2.string() + " --query " + reference2.string() +
+                   " --out " + (out.parent_path() / "two").string(),
+               &status);
+  EXPECT_EQ(status, 0) << output;
+}
+
 }  // namespace
 }  // namespace loopgate

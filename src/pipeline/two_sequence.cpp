@@ -830,6 +830,17 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   const auto [query_first, query_last] = config.run.frame_range(query.frame_count());
   const AlignedSequences ranges{ref_first, ref_last - ref_first, query_first, query_last - query_first,
                                 config.eval.aligned_tolerance_frames};
+  // One frame on a side leaves no match to rank (measured: a query of one frame against copies of itself
+  // gives no loop with any method), so such a run fails before it writes anything, as a single-sequence run
+  // with no pair to compare does.
+  if (ranges.reference_count < 2 || ranges.query_count < 2) {
+    throw DataError(
+        ranges.reference_count < 2 ? reference.root() : query.root(),
+        fmt::format("no detection possible: the reference has {} frame(s) and the query {} in the "
+                    "range run; a two-sequence run needs at least 2 frames on each side (a longer "
+                    "--frames range or sequence)",
+                    ranges.reference_count, ranges.query_count));
+  }
   TraceWriter trace;
   TwoSequenceSetup setup{config, reference, query, ranges, stop, RunTrace{}};
   spdlog::info("two-sequence run ({}): reference {} ({} frames) vs query {} ({} frames), {} threads",
