@@ -498,5 +498,31 @@ TEST(E2eHostile, ATwoSequenceRunOfOneFramePerSideSaysNoDetectionIsPossible) {
   EXPECT_EQ(status, 0) << output;
 }
 
+// Truth pairs closer than the method's margin counted as positives that the run, which never compares such
+// a pair, could never find, and nothing was said. They are left out of the evaluation with a warning.
+TEST(E2eHostile, TruthPairsCloserThanTheMarginAreNamedAndLeftOut) {
+  const fs::path data = make_kitti(60, "hostile-close-pairs");
+  {
+    std::ofstream pairs(data / "pairs.csv");
+    for (int q = 40; q < 50; ++q) pairs << q << "," << q - 30 << "\n";  // findable: 30 frames apart
+    for (int q = 50; q < 55; ++q) pairs << q << "," << q - 2 << "\n";   // 2 < match.margin = 4
+  }
+  const fs::path out = testing::make_temp_dir("hostile-close-pairs-out") / "out";
+  int status = 0;
+  const std::string output =
+      run(run_args(data, out) + " --set eval.truth_pairs_file=" + (data / "pairs.csv").string(), &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_NE(
+      output.find("eval: 5 of the 15 pairs of " + (data / "pairs.csv").string() +
+                  " in the run are closer than match.margin = 4 frames (first: query 50, reference 48)"),
+      std::string::npos)
+      << output;
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  const auto& truth = summary["evaluation"]["truth"];
+  EXPECT_EQ(truth["pairs_in_run"], 15) << truth.dump();
+  EXPECT_EQ(truth["pairs_closer_than_margin"], 5) << truth.dump();
+  EXPECT_EQ(truth["positives"], 10) << truth.dump();
+}
+
 }  // namespace
 }  // namespace loopgate

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <limits>
+#include <optional>
+#include <utility>
 
 #include "core/geometry.hpp"
 #include "eval/run_evaluation.hpp"
@@ -81,16 +83,41 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
       if (it == labels.end() || *it != label) return std::nullopt;
       return static_cast<std::size_t>(it - labels.begin());
     };
+    // A pair closer than the method's margin is one the run never compares: as a positive it could never be
+    // found, so it is left out too, counted and warned about.
+    const bool seqslam = parts.config.run.seqslam();
+    const char* margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
+    int margin_frames = seqslam ? parts.config.seqslam.exclusion_margin_frames : parts.config.match.margin;
+    if (seqslam && parts.config.seqslam.exclusion == "none") margin_frames = 0;  // every pair is compared
+    const auto margin = static_cast<std::size_t>(std::max(0, margin_frames));
     std::vector<std::pair<std::size_t, std::size_t>> used;
+    std::size_t in_run = 0, too_close = 0;
+    std::optional<std::pair<std::size_t, std::size_t>> first_too_close;
     for (const auto& [q, r] : parts.truth_pairs->pairs) {
       const auto qi = index_of(q);
       const auto ri = index_of(r);
-      if (qi && ri) used.emplace_back(*qi, *ri);
+      if (!qi || !ri) continue;
+      ++in_run;
+      if (*qi - *ri < margin) {
+        ++too_close;
+        if (!first_too_close) first_too_close = {q, r};
+        continue;
+      }
+      used.emplace_back(*qi, *ri);
+    }
+    if (too_close > 0) {
+      spdlog::warn(
+          "eval: {} of the {} pairs of {} in the run are closer than {} = {} frames (first: query {}, "
+          "reference {}): the run never compares such a pair, so they are left out of the evaluation",
+          too_close, in_run, parts.config.eval.truth_pairs_file, margin_key, margin, first_too_close->first,
+          first_too_close->second);
     }
     input.pairs_truth = {{"pairs_file", parts.config.eval.truth_pairs_file},
                          {"pairs_file_rows", parts.truth_pairs->rows},
                          {"pairs", parts.truth_pairs->pairs.size()},
-                         {"pairs_in_run", used.size()}};
+                         {"pairs_in_run", in_run},
+                         {"pairs_closer_than_margin", too_close},
+                         {"margin_key", margin_key}};
     input.pairs = std::move(used);
     input.frame_count = n;
   }
