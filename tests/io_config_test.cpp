@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <fstream>
 #include <sstream>
@@ -231,7 +233,7 @@ TEST(IoWriters, CsvQuotesAndChecksWidth) {
   EXPECT_EQ(format_fixed(1.0 / 3.0, 3), "0.333");
 }
 
-// Issue 15: every output is whole or absent. While written it is FILE.partial; close() renames it; a writer
+// Every output is whole or absent. While written it is FILE.PID.partial; close() renames it; a writer
 // destroyed without close() (an exception on the way) leaves nothing; a failed write names the file and the
 // system's reason, and leaves nothing either.
 TEST(IoWriters, OutputsAreWholeOrAbsent) {
@@ -241,20 +243,20 @@ TEST(IoWriters, OutputsAreWholeOrAbsent) {
     csv.write_row({"1", "2"});
     csv.flush();
     EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv"));
-    EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv.partial"));
+    EXPECT_TRUE(std::filesystem::exists(partial_path(dir / "frames.csv")));
     csv.close();
   }
   EXPECT_TRUE(std::filesystem::exists(dir / "frames.csv"));
-  EXPECT_FALSE(std::filesystem::exists(dir / "frames.csv.partial"));
+  EXPECT_FALSE(std::filesystem::exists(partial_path(dir / "frames.csv")));
   {
     TumWriter tum(dir / "trajectory.tum");
     tum.write(0, Eigen::Isometry3d::Identity());
   }  // destroyed without close(): abandoned
   EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum"));
-  EXPECT_FALSE(std::filesystem::exists(dir / "trajectory.tum.partial"));
+  EXPECT_FALSE(std::filesystem::exists(partial_path(dir / "trajectory.tum")));
 
   // A full disk: the temporary file is /dev/full, where every write fails with ENOSPC.
-  std::filesystem::create_symlink("/dev/full", dir / "loops.csv.partial");
+  std::filesystem::create_symlink("/dev/full", partial_path(dir / "loops.csv"));
   CsvWriter full;
   full.open(dir / "loops.csv", {"i", "j"});
   std::string error;
@@ -267,11 +269,35 @@ TEST(IoWriters, OutputsAreWholeOrAbsent) {
   EXPECT_NE(error.find("loops.csv: write failed: No space left on device"), std::string::npos) << error;
   full.abandon();
   EXPECT_FALSE(std::filesystem::exists(dir / "loops.csv"));
-  EXPECT_FALSE(std::filesystem::is_symlink(dir / "loops.csv.partial"));
+  EXPECT_FALSE(std::filesystem::is_symlink(partial_path(dir / "loops.csv")));
 
   write_json_file(dir / "summary.json", {{"a", "\xff\xfe not utf-8"}});  // replaced, not a lost file
   EXPECT_TRUE(std::filesystem::exists(dir / "summary.json"));
-  EXPECT_FALSE(std::filesystem::exists(dir / "summary.json.partial"));
+  EXPECT_FALSE(std::filesystem::exists(partial_path(dir / "summary.json")));
+}
+
+// Two processes writing one output name never share a temporary file: the name carries the process id.
+TEST(IoWriters, PartialNamesAreUniquePerProcess) {
+  const std::filesystem::path file = "out/frames.csv";
+  EXPECT_EQ(partial_path(file), "out/frames.csv." + std::to_string(::getpid()) + ".partial");
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    const std::string name = partial_path(file).string();
+    ::_exit(::write(fds[1], name.data(), name.size()) == static_cast<ssize_t>(name.size()) ? 0 : 1);
+  }
+  ::close(fds[1]);
+  char buffer[256] = {};
+  const ssize_t n = ::read(fds[0], buffer, sizeof(buffer) - 1);
+  ::close(fds[0]);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  ASSERT_GT(n, 0);
+  EXPECT_EQ(std::string(buffer, static_cast<std::size_t>(n)),
+            "out/frames.csv." + std::to_string(child) + ".partial");
+  EXPECT_NE(std::string(buffer, static_cast<std::size_t>(n)), partial_path(file).string());
 }
 
 }  // namespace

@@ -102,6 +102,46 @@ TEST(IoFileGuard, AFolderInsideAnotherCommandsFolderIsRefused) {
   EXPECT_NO_THROW(OutputLock after(out / "full", "loopgate run"));  // released with the process
 }
 
+// The other way round: `compare --out O` while `run --out O/full` runs. The folder that holds another
+// command's folder is refused, naming the inner folder and its holder, and no lock is left behind.
+TEST(IoFileGuard, AFolderHoldingAnotherCommandsFolderIsRefused) {
+  const fs::path out = testing::make_temp_dir("guard-outer") / "out";
+  int ready[2], release[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  ASSERT_EQ(::pipe(release), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    int code = 0;
+    try {
+      const OutputLock run(out / "full", "loopgate run");
+      char c = 1;
+      code = ::write(ready[1], &c, 1) == 1 ? 0 : 2;
+      (void)::read(release[0], &c, 1);
+    } catch (...) {
+      code = 1;
+    }
+    ::_exit(code);
+  }
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  for (const fs::path& outer : {out, out.parent_path()}) {
+    const std::string error = error_of([&] { OutputLock compare(outer, "loopgate compare"); });
+    EXPECT_NE(error.find("the output folder holds " + (out / "full").string() +
+                         ", which another loopgate command is writing (pid " + std::to_string(child) +
+                         ": loopgate run)"),
+              std::string::npos)
+        << error;
+    EXPECT_FALSE(fs::exists(outer / OutputLock::kFileName)) << outer;
+  }
+  c = 1;
+  ASSERT_EQ(::write(release[1], &c, 1), 1);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  EXPECT_NO_THROW(OutputLock after(out, "loopgate compare"));  // released with the process
+}
+
 TEST(IoFileGuard, OneCommandAtATimeInAnOutputFolder) {
   const fs::path out = testing::make_temp_dir("guard-lock") / "out";  // created by the lock
   {

@@ -1,11 +1,14 @@
 #include "io/csv_text.hpp"
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <array>
 #include <charconv>
 #include <cmath>
 #include <fstream>
 #include <limits>
+#include <string>
 #include <system_error>
 
 #include "io/file_guard.hpp"
@@ -243,7 +246,7 @@ void write_text_file(const std::filesystem::path& file, const std::string& text)
   }
   // Whole or absent: written under a temporary name, renamed when complete.
   std::filesystem::path partial = file;
-  partial += ".partial";
+  partial += "." + std::to_string(::getpid()) + ".partial";  // unique per process, as partial_path()
   std::ofstream out(partial, std::ios::binary | std::ios::trunc);
   if (!out) throw DataError(file, "cannot open file for writing");
   out.write(text.data(), static_cast<std::streamsize>(text.size()));

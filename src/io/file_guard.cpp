@@ -147,6 +147,27 @@ OutputLock::OutputLock(const fs::path& dir, const std::string& holder) : file_(d
   if (::ftruncate(fd_, 0) != 0 || ::pwrite(fd_, text.data(), text.size(), 0) < 0) {
     // The lock holds without the note; only the message of a second command is less precise.
   }
+  // And the other way round: a folder that holds one another command is writing (`compare --out O` while
+  // `run --out O/full` runs) is refused too. Checked after our own lock is taken, so a command that starts
+  // inside this folder from now on sees our lock. The walk is bounded: an output folder is not a dataset.
+  std::error_code walk_ec;
+  std::size_t entries = 0;
+  for (auto it =
+           fs::recursive_directory_iterator(dir, fs::directory_options::skip_permission_denied, walk_ec);
+       !walk_ec && it != fs::recursive_directory_iterator() && entries < kMaxEntriesChecked;
+       it.increment(walk_ec), ++entries) {
+    if (it->path().filename() != kFileName || it.depth() == 0) continue;
+    const std::string who = held_by_another_process(it->path());
+    if (!who.empty()) {
+      const fs::path inner = it->path().parent_path();
+      ::unlink(file_.c_str());
+      ::close(fd_);
+      fd_ = -1;
+      throw DataError(dir, "the output folder holds " + inner.string() +
+                               ", which another loopgate command is writing (" + who +
+                               "): wait for it to finish or choose another --out");
+    }
+  }
 }
 
 OutputLock::~OutputLock() {

@@ -6,6 +6,7 @@
 //  - one command at a time writes into an output folder (OutputLock).
 #pragma once
 
+#include <cstddef>
 #include <filesystem>
 #include <string>
 #include <vector>
@@ -36,7 +37,8 @@ void refuse_outputs_over_inputs(const std::vector<NamedPath>& outputs, const std
 // An exclusive lock on an output folder for the lifetime of the object (the folder is created when absent):
 // DIR/.loopgate.lock, held with flock(). A second command writing into the same folder fails at once with a
 // DataError naming the folder and the holder ("in use by pid N: loopgate run"). The lock file is removed when
-// the lock is released; a lock left by a killed process is released by the kernel with it.
+// the lock is released; a lock left by a killed process is released by the kernel with it. A folder inside
+// one another process holds, or one that holds a folder another process holds, is refused in the same way.
 class OutputLock {
  public:
   OutputLock(const std::filesystem::path& dir, const std::string& holder);
@@ -45,6 +47,8 @@ class OutputLock {
   OutputLock& operator=(const OutputLock&) = delete;
 
   static constexpr const char* kFileName = ".loopgate.lock";
+  // Entries of the folder looked at for a lock another process holds inside it.
+  static constexpr std::size_t kMaxEntriesChecked = 100000;
 
  private:
   std::filesystem::path file_;

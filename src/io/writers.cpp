@@ -1,11 +1,13 @@
 #include "io/writers.hpp"
 
 #include <spdlog/fmt/fmt.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <string>
 
 #include "core/error.hpp"
 
@@ -76,7 +78,7 @@ void commit(std::ofstream& out, const std::filesystem::path& file) {
 
 std::filesystem::path partial_path(const std::filesystem::path& file) {
   std::filesystem::path partial = file;
-  partial += ".partial";
+  partial += "." + std::to_string(::getpid()) + ".partial";
   return partial;
 }
 

@@ -73,7 +73,8 @@ class TumWriter {
 // Throws DataError naming the file (the temporary file removed) when it cannot.
 void write_json_file(const std::filesystem::path& file, const nlohmann::json& json);
 
-// The temporary name of an output being written: FILE.partial.
+// The temporary name of an output being written: FILE.PID.partial, unique per process, so that two
+// processes never write one temporary file.
 std::filesystem::path partial_path(const std::filesystem::path& file);
 
 // One event of the Chrome trace-event format: a span ("X", start and duration) or an instant ("i", at
