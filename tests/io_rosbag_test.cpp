@@ -243,6 +243,7 @@ TEST(IoRosbag, MissingTopicListsTheTopicsOfTheBag) {
   const fs::path bag = write_euroc_bag(testing::make_temp_dir("rosbag-topic"), 3);
   OpenOptions options = strict();
   options.bag_image_topic = "/cam1/image_raw";
+  options.camera_index = 1;
   std::string error = open_error(bag, options);
   EXPECT_NE(error.find(bag.string() + ": topic /cam1/image_raw is not in the bag; its topics: "),
             std::string::npos)
@@ -262,6 +263,30 @@ TEST(IoRosbag, MissingTopicListsTheTopicsOfTheBag) {
   const auto d = open_dataset(bag, options);
   EXPECT_FALSE(d->has_imu());
   EXPECT_EQ(d->frame_count(), 3u);
+}
+
+// run.camera_index 1 with the default /cam0 topic paired cam0's images with cam1's calibration, silently.
+TEST(IoRosbag, ATopicOfAnotherCameraThanCameraIndexIsRefused) {
+  LOOPGATE_REQUIRE_ROSBAG();
+  const fs::path bag = write_euroc_bag(testing::make_temp_dir("rosbag-camera-index"), 3);
+  OpenOptions options = strict();
+  options.camera_index = 1;  // the topic stays /cam0/image_raw
+  std::string error;
+  try {
+    open_dataset(bag, options);
+  } catch (const ConfigError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(error.find("dataset.bag_image_topic '/cam0/image_raw' is camera 0's images, and run.camera_index "
+                       "is 1 (cam1's calibration): set dataset.bag_image_topic=/cam1/image_raw, or "
+                       "run.camera_index=0"),
+            std::string::npos)
+      << error;
+  options.camera_index = 0;
+  EXPECT_EQ(open_dataset(bag, options)->frame_count(), 3u);
+  options.bag_image_topic = "/camera/image_raw";  // names no camera number: no check
+  options.camera_index = 1;
+  EXPECT_NE(open_error(bag, options).find("topic /camera/image_raw is not in the bag"), std::string::npos);
 }
 
 TEST(IoRosbag, TopicOfAnotherTypeIsNamed) {

@@ -236,6 +236,21 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
     throw ConfigError(
         "dataset.bag_image_topic: empty, expected the topic of the images (e.g. /cam0/image_raw)");
   }
+  // A topic that names its camera (/cam0/image_raw) must be the camera whose calibration is read
+  // (run.camera_index): otherwise cam0's images would be paired with cam1's calibration.
+  for (std::size_t at = 0; at < options.bag_image_topic.size();) {
+    const std::size_t end = std::min(options.bag_image_topic.find('/', at), options.bag_image_topic.size());
+    const std::string part = options.bag_image_topic.substr(at, end - at);
+    if (part.size() == 4 && part.rfind("cam", 0) == 0 && part[3] >= '0' && part[3] <= '9' &&
+        part[3] - '0' != options.camera_index) {
+      throw ConfigError("dataset.bag_image_topic '" + options.bag_image_topic + "' is camera " + part[3] +
+                        "'s images, and run.camera_index is " + std::to_string(options.camera_index) +
+                        " (cam" + std::to_string(options.camera_index) +
+                        "'s calibration): set dataset.bag_image_topic=/cam" +
+                        std::to_string(options.camera_index) + "/image_raw, or run.camera_index=" + part[3]);
+    }
+    at = end + 1;
+  }
   std::error_code ec;
   if (!fs::exists(bag_file, ec)) throw DataError(bag_file, "bag file not found");
   require_regular_file(bag_file);
