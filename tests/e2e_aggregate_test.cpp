@@ -201,6 +201,30 @@ TEST(E2eAggregate, ReadsWhatRunAndCompareWrite) {
   }
 }
 
+// Two folders of one name (a/out, b/out) gave rows of one label; the same folder given twice, two rows of
+// one label too. Folders of one name are labelled by their paths; a folder given twice is refused.
+TEST(E2eAggregate, RowLabelsAreUnique) {
+  const fs::path root = testing::make_temp_dir("e2e-aggregate-labels");
+  write(root / "a" / "out" / "r" / "summary.json", run_summary("dird", "full", 0.9, 1.0).dump(1));
+  write(root / "b" / "out" / "r" / "summary.json", run_summary("dird", "full", 0.5, 1.0).dump(1));
+  Result r = loopgate("aggregate " + (root / "a" / "out").string() + " " + (root / "b" / "out").string() +
+                      " --out " + (root / "table").string() + " --no-plots");
+  ASSERT_EQ(r.status, 0) << r.output;
+  const auto table = read_table(root / "table" / "aggregate.csv");
+  ASSERT_EQ(table.size(), 2u) << r.output;
+  EXPECT_EQ(table.count((root / "a" / "out").generic_string() + "/r|full"), 1u) << r.output;
+  EXPECT_EQ(table.count((root / "b" / "out").generic_string() + "/r|full"), 1u) << r.output;
+
+  r = loopgate("aggregate " + (root / "a" / "out").string() + " " + (root / "a" / "out").string() +
+               "/ --out " + (root / "table2").string() + " --no-plots");
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("is also that of " + (root / "a" / "out" / "r" / "summary.json").string() +
+                          " (the same file: a folder given twice, or inside another argument): give each "
+                          "folder once"),
+            std::string::npos)
+      << r.output;
+}
+
 TEST(E2eAggregate, BadInputNamesTheFileAndWhatWasExpected) {
   const fs::path root = testing::make_temp_dir("e2e-aggregate-bad");
   const fs::path broken = root / "broken" / "summary.json";

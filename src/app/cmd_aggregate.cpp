@@ -432,23 +432,51 @@ void write_plot(const AggregateOptions& options, const fs::path& out_dir) {
 int aggregate_command(const AggregateOptions& options) {
   std::vector<Source> sources;
   std::vector<fs::path> skipped;
+  // "out/x/" names itself x; "." names itself after the working directory. Two folders of one name (a/out,
+  // b/out) are named by their paths as given instead, so that their rows keep apart.
+  std::vector<std::string> names;
   for (const std::string& input : options.inputs) {
     const fs::path dir = input;
+    std::error_code ec;
+    std::string name = dir.lexically_normal().filename().string();
+    if (name.empty() || name == ".") name = fs::absolute(dir, ec).lexically_normal().filename().string();
+    if (name.empty()) name = fs::absolute(dir, ec).lexically_normal().parent_path().filename().string();
+    names.push_back(name);
+  }
+  const std::vector<std::string> basenames = names;
+  for (std::size_t k = 0; k < names.size(); ++k) {
+    if (std::count(basenames.begin(), basenames.end(), basenames[k]) > 1) {
+      std::string path = fs::path(options.inputs[k]).lexically_normal().generic_string();
+      while (path.size() > 1 && path.back() == '/') path.pop_back();
+      names[k] = path;
+    }
+  }
+  for (std::size_t k = 0; k < options.inputs.size(); ++k) {
+    const fs::path dir = options.inputs[k];
     std::error_code ec;
     if (!fs::is_directory(dir, ec)) {
       throw DataError(dir, fs::exists(dir, ec) ? "expected a folder of runs (or a run or compare folder)"
                                                : "no such folder");
     }
     const std::size_t before = sources.size();
-    // "out/x/" names itself x; "." names itself after the working directory.
-    std::string name = dir.lexically_normal().filename().string();
-    if (name.empty() || name == ".") name = fs::absolute(dir, ec).lexically_normal().filename().string();
-    if (name.empty()) name = fs::absolute(dir, ec).lexically_normal().parent_path().filename().string();
-    find_sources(dir, dir, name, options.inputs.size() > 1, sources, skipped);
+    find_sources(dir, dir, names[k], options.inputs.size() > 1, sources, skipped);
     if (sources.size() == before) {
       throw DataError(dir,
                       "no summary.json or compare.json in this folder or below it (expected the --out "
                       "folder of a run or compare, or a folder holding such folders)");
+    }
+  }
+  // Every row label names one folder: the same folder given twice (or once inside another argument) would
+  // give two rows of one label.
+  for (std::size_t a = 0; a < sources.size(); ++a) {
+    for (std::size_t b = a + 1; b < sources.size(); ++b) {
+      if (sources[a].run != sources[b].run) continue;
+      std::error_code ec;
+      const bool same = fs::equivalent(sources[a].file, sources[b].file, ec);
+      throw DataError(sources[b].file,
+                      "row label '" + sources[b].run + "' is also that of " + sources[a].file.string() +
+                          (same ? " (the same file: a folder given twice, or inside another argument)" : "") +
+                          ": give each folder once");
     }
   }
   for (const fs::path& dir : skipped) {
