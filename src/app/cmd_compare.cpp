@@ -313,6 +313,20 @@ void correct_trajectory(const PipelineConfig& base, const std::string& method, c
   }
 }
 
+// The console note of a compare stopped by a signal: which methods ran (the last one only over the frames
+// it reached) and which did not; empty when not stopped.
+std::string interrupted_note(const StopSignals& signals, const std::vector<std::string>& ran,
+                             const std::vector<std::string>& methods) {
+  if (!signals.stopped()) return "";
+  std::vector<std::string> not_run;
+  for (const std::string& m : methods)
+    if (std::find(ran.begin(), ran.end(), m) == ran.end()) not_run.push_back(m);
+  return fmt::format(
+      "interrupted by {}: {} stopped early (its column covers the frames it reached){}\n",
+      signals.signal_name(), ran.empty() ? std::string("the first method") : ran.back(),
+      not_run.empty() ? std::string() : fmt::format("; not run: {}", fmt::join(not_run, ", ")));
+}
+
 // The run's example descriptor (DIRD: its first loop's query frame, else the middle frame) for the plots.
 void write_descriptor_example(const RunResult& result, const fs::path& run_dir) {
   if (!result.example_descriptor) return;
@@ -388,7 +402,8 @@ int compare_two_sequences(const CompareOptions& options) {
   if (const json* tolerance = find_path(summaries.at(ran.front()), {"aligned", "tolerance_frames"})) {
     header += fmt::format("; aligned sequences, a match is true within +-{} frames", number(*tolerance));
   }
-  std::printf("%s\n%s", header.c_str(), table(ran, summaries, true).c_str());
+  std::printf("%s\n%s%s", header.c_str(), table(ran, summaries, true).c_str(),
+              interrupted_note(signals, ran, methods).c_str());
   if (!options.no_plots) write_plots(options, out_dir);
   std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
               fmt::format("{}", fmt::join(ran, "/, ")).c_str());
@@ -420,6 +435,11 @@ int compare_command(const CompareOptions& options) {
   }
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
+  if (!dataset->has_images()) {  // compare has no --mode: say what it needs, not what `run` would take
+    throw DataError(dataset->root(),
+                    "compare: every method describes images, and this dataset has none; for its odometry "
+                    "alone use `loopgate run --mode odometry`");
+  }
   // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
   // by default they are left out, asked for by name they are an error.
   if (resolve_odometry_source(base.odometry, base.ekf, *dataset) == "none") {
@@ -576,8 +596,8 @@ int compare_command(const CompareOptions& options) {
             number(truth->at("accept_radius_m"), 2));
       }
     }
-    std::printf("%s\n%s%s%s%s", header.c_str(), truth_counts.c_str(), table(ran, summaries, false).c_str(),
-                kTimeNote, ratios.c_str());
+    std::printf("%s\n%s%s%s%s%s", header.c_str(), truth_counts.c_str(), table(ran, summaries, false).c_str(),
+                kTimeNote, ratios.c_str(), interrupted_note(signals, ran, methods).c_str());
   }
 
   if (!options.no_plots && !ran.empty()) write_plots(options, out_dir);
