@@ -1,10 +1,12 @@
 // A mutation fuzzer over the readers of every input format (GCC has no libFuzzer, so this is a small driver):
 // seed inputs written here (a ROS1 bag, EuRoC / TUM-VI camera, IMU and ground-truth CSVs, KITTI poses and
-// times, a Kalibr camchain, the shipped config YAMLs, a truth-pairs file) are mutated with a fixed seed (bit
+// times, a Kalibr camchain, the shipped config YAMLs, a truth-pairs file, a batch manifest, a
+// summary.json for `loopgate aggregate`) are mutated with a fixed seed (bit
 // flips, bytes set to edge values, tokens such as "nan", "1e308", a BOM or a 20-digit number inserted, ranges
 // deleted or duplicated, the file cut short) and each mutant is read by the real reader function in a forked
-// child. The property: the child exits normally (the input read, or refused with an exception), never by a
-// signal, never after the time limit, and nothing is written in the input folder.
+// child (the manifest and the summary by the programs that read them, scripts/batch.py and loopgate
+// aggregate, run from the child). The property: the child exits normally (the input read, or refused with an
+// exception), never by a signal, never after the time limit, and nothing is written in the input folder.
 //
 // In the suite it runs for LOOPGATE_FUZZ_SECONDS (default 40) split over the targets; by hand, e.g.
 //   LOOPGATE_FUZZ_SECONDS=1200 LOOPGATE_FUZZ_SEED=7 build/release/e2e_fuzz_test
@@ -23,6 +25,7 @@
 #include <functional>
 #include <map>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -266,6 +269,33 @@ std::string seed_bag(const fs::path& dir) {
   return read_bytes(file);
 }
 
+// Runs a program (a reader that is not a function of ours: the batch manifest's Python, `loopgate aggregate`)
+// on the mutant in the child: its exit statuses that mean "read" and "refused" map to those outcomes; any
+// other status (a Python traceback exits 1, a signal) is a crash.
+void run_program(const std::string& command, int read_status, int refused_status) {
+  const int status = std::system((command + " >/dev/null 2>&1").c_str());
+  if (status != -1 && WIFEXITED(status)) {
+    if (WEXITSTATUS(status) == read_status) return;
+    if (WEXITSTATUS(status) == refused_status) throw std::runtime_error("refused");
+  }
+  std::abort();
+}
+
+const char* kManifest =
+    "# seed\nname\tcommand\tdataset\tconfig\tset\toptions\nsim\tsimulate\taliasing\t-\t-\t--frames 120\n"
+    "gated\trun\t@sim\t-\toutput.progress=off match.margin=50\t--mode gated\n"
+    "cmp/x\tcompare\t@sim\t-\t-\t--methods gated,seqslam --no-plots\n";
+
+const char* kSummary = R"({"mode": "gated", "method": "dird", "wall_s": 2.5, "realtime_factor": 12.5,
+ "frames_processed": 300, "loops": 12, "end_of_stream_ms": 5.0,
+ "stages": {"describe": {"total_ms": 100.0}, "match": {"total_ms": 20.25}},
+ "config": {"run": {"dataset": "/data/demo"}, "standardize": {"mode": "off"}},
+ "evaluation": {"loop_truth": {"loops_true": 10, "loops_false": 2},
+  "precision_recall": {"average_precision": 0.9, "recall_at_100": 0.5, "recall_at_99": 0.6, "recall_at_95": 0.7}},
+ "trajectory_accuracy": {"available": true, "rmse_m": 0.72},
+ "provenance": {"version": "0.1.0", "command_line": "loopgate run --out x", "config_hash": "00112233aabbccdd"}}
+)";
+
 std::vector<Target> targets(const fs::path& scratch) {
   std::vector<Target> out;
   const std::string source = LOOPGATE_SOURCE_DIR;
@@ -320,6 +350,20 @@ std::vector<Target> targets(const fs::path& scratch) {
                  "query_index0,match_index0\n40,0\n41,1\n52 3\n",
                  {},
                  [](const fs::path& d) { (void)read_truth_pairs(d / "pairs.csv", 100); }});
+  // The batch manifest (scripts/batch.py check: exit 0 read, 2 a bad manifest).
+  out.push_back({"batch-manifest", "manifest.tsv", kManifest, {}, [source](const fs::path& d) {
+                   run_program("/usr/bin/python3 " + source + "/scripts/batch.py check " +
+                                   (d / "manifest.tsv").string(),
+                               0, 2);
+                 }});
+  // A run's summary.json read by `loopgate aggregate` (exit 0 read, 1 an error naming the file); its table
+  // goes to a folder outside the input folder, which must stay as it was.
+  const std::string loopgate = testing::loopgate_binary().string();
+  out.push_back({"aggregate-summary", "runs/r/summary.json", kSummary, {}, [loopgate](const fs::path& d) {
+                   run_program(loopgate + " --log-level off aggregate " + (d / "runs").string() + " --out " +
+                                   (d.parent_path() / "aggregate-out").string() + " --no-plots",
+                               0, 1);
+                 }});
   return out;
 }
 
