@@ -204,6 +204,18 @@ TEST(E2eHostile, TwoSequenceRunsHandleStopSignals) {
   expect_whole_csv(out / "loops.csv");
   if (summary["query_frames"].get<std::size_t>() > 0) expect_whole_csv(out / "frames.csv");
   EXPECT_EQ(read_csv(out / "frames.csv").size(), summary["query_frames"].get<std::size_t>());
+
+  // A compare stopped the same way says so under its console table, and names the methods it did not run.
+  Child compare({kBinary, "compare", "--no-plots", "--reference", (root / "reference").string(), "--query",
+                 (root / "query").string(), "--out", (root / "cmp").string()});
+  ASSERT_TRUE(compare.wait_for_output("compare: running full into")) << compare.output();
+  compare.send(SIGTERM);
+  EXPECT_EQ(compare.wait(), 143) << compare.output();
+  EXPECT_NE(
+      compare.output().find("interrupted by SIGTERM: full stopped early (its column covers the frames it "
+                            "reached); not run: std-full, seqslam, dird-seqslam"),
+      std::string::npos)
+      << compare.output();
 }
 
 TEST(E2eHostile, ASecondRunIntoTheSameFolderFailsAtOnce) {
