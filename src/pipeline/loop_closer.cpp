@@ -266,7 +266,7 @@ double LoopCloser::scale_now() const {
   return odometry_cov_scale_from_loops(innovations_, 3, 1e6);
 }
 
-PoseCov LoopCloser::relative_odometry_cov(std::size_t j, std::size_t i) {
+PoseCov LoopCloser::relative_odometry_cov(std::size_t j, std::size_t i, double scale) {
   const Eigen::Isometry3d T_j_i = pose_of(j)->inverse() * *pose_of(i);
   if (step_cov_.empty()) return graph_config_.model_cov(T_j_i);
   const std::size_t a = j - first_, b = i - first_;
@@ -275,7 +275,26 @@ PoseCov LoopCloser::relative_odometry_cov(std::size_t j, std::size_t i) {
   const PoseCov cov = step_pose_cov(chain_T_[a], chain_cov_[a], chain_T_[b], chain_cov_[b]);
   const double nodes = std::max(1.0, std::floor(static_cast<double>(b > a ? b - a : a - b) /
                                                 static_cast<double>(graph_config_.node_every_frames)));
-  return scale_now() * cov + nodes * graph_config_.with_floors(PoseCov::Zero());
+  return scale * cov + nodes * graph_config_.with_floors(PoseCov::Zero());
+}
+
+std::optional<LoopCloser::SkipBasis> LoopCloser::skip_basis(const Detection& loop) const {
+  const std::size_t lo = std::min(loop.query, loop.reference), hi = std::max(loop.query, loop.reference);
+  std::optional<SkipBasis> basis;
+  for (const CheckedSpan& c : checked_spans_) {
+    const std::size_t overlap_lo = std::max(lo, c.reference), overlap_hi = std::min(hi, c.query);
+    const std::size_t shared = overlap_hi > overlap_lo ? overlap_hi - overlap_lo : 0;
+    const std::size_t either = std::max(hi, c.query) - std::min(lo, c.reference);
+    if (either == 0 || 2 * shared < either) continue;
+    const double scale = std::max(basis ? basis->scale : 0.0, c.scale);
+    basis = SkipBasis{scale, c.loop_cov};  // the most recent covering edge
+  }
+  if (!basis) return std::nullopt;
+  if (step_cov_.empty() || graph_config_.odometry_cov_scale > 0)
+    basis->scale = scale_now();
+  else
+    basis->scale = std::max(basis->scale, scale_now());
+  return basis;
 }
 
 void LoopCloser::add_innovation(const LoopResult& r) {
@@ -291,21 +310,32 @@ void LoopCloser::add_innovation(const LoopResult& r) {
   innovation.odometry_cov = step_pose_cov(chain_T_[j], chain_cov_[j], chain_T_[i], chain_cov_[i]);
   innovation.loop_cov = r.result.cov;
   innovations_.push_back(innovation);
+  checked_spans_.push_back(
+      {r.loop.query, r.loop.reference, odometry_cov_scale_from_loops({innovation}, 1, 1e6), r.result.cov});
 }
 
 std::string LoopCloser::skip_reason(const Detection& loop) {
-  // A loop the odometry already knows (standing still, hovering, the frames just before a query): its edge,
-  // as uncertain as verification allows (min_inliers), would shrink the odometry's own uncertainty of T_j_i
-  // by less than verify.min_information_gain. Such an edge corrects nothing.
+  // A loop the odometry already knows (standing still, hovering, the frames just before a query): an edge as
+  // certain as the last one verified over the same odometry would shrink the odometry's own uncertainty of
+  // T_j_i, scaled by what the verified loops showed, by less than verify.min_information_gain. Such an edge
+  // corrects nothing. A loop over odometry no verified loop has checked is never skipped for its gain.
   if (verify_config_.min_information_gain > 0 && pose_of(loop.query) && pose_of(loop.reference) &&
       loop.reference != loop.query) {
-    PoseCov edge = PoseCov::Zero();
-    edge.topLeftCorner<3, 3>().diagonal().setConstant(verify_config_.sigma_position_m *
-                                                      verify_config_.sigma_position_m);
-    edge.bottomRightCorner<3, 3>().diagonal().setConstant(verify_config_.sigma_rotation_rad *
-                                                          verify_config_.sigma_rotation_rad);
-    const PoseCov odometry = relative_odometry_cov(loop.reference, loop.query);
-    const double gain = loop_information_gain(odometry, edge);
+    const std::optional<SkipBasis> basis = skip_basis(loop);
+    const PoseCov odometry =
+        relative_odometry_cov(loop.reference, loop.query, basis ? basis->scale : scale_now());
+    const PoseCov edge = basis ? basis->edge_cov : PoseCov(PoseCov::Identity());
+    // The loops of one revisit correct the trajectory together: this one and those before it over the same
+    // odometry, each an edge as certain as the last verified.
+    std::size_t together = 1;
+    const std::size_t lo = std::min(loop.query, loop.reference), hi = std::max(loop.query, loop.reference);
+    for (const LoopResult& r : results_) {
+      const std::size_t overlap_lo = std::max(lo, r.loop.reference), overlap_hi = std::min(hi, r.loop.query);
+      const std::size_t shared = overlap_hi > overlap_lo ? overlap_hi - overlap_lo : 0;
+      const std::size_t either = std::max(hi, r.loop.query) - std::min(lo, r.loop.reference);
+      if (either > 0 && 2 * shared >= either) ++together;
+    }
+    const double gain = basis ? loop_information_gain(odometry, edge / static_cast<double>(together)) : 1.0;
     if (gain < verify_config_.min_information_gain) {
       const double sigma_m = std::sqrt(
           std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(odometry.topLeftCorner<3, 3>())
@@ -314,7 +344,8 @@ std::string LoopCloser::skip_reason(const Detection& loop) {
       return fmt::format(
           "skipped: information gain {:.2f} < {} (the odometry's sigma from j to i {:.3f} m, a loop edge's "
           "{:.3f} m)",
-          gain, verify_config_.min_information_gain, sigma_m, verify_config_.sigma_position_m);
+          gain, verify_config_.min_information_gain, sigma_m,
+          std::sqrt(edge.topLeftCorner<3, 3>().diagonal().maxCoeff()));
     }
   }
   int tried_for_query = 0;

@@ -162,7 +162,19 @@ class LoopCloser {
   // from j to i composed (the prefix chain below), times the graph's scale (scale_now()), plus an edge's
   // floors per node between them; the model's (posegraph.odometry_cov model, or a frame without a step
   // covariance in between) otherwise.
-  PoseCov relative_odometry_cov(std::size_t j, std::size_t i);
+  PoseCov relative_odometry_cov(std::size_t j, std::size_t i, double scale);
+  // What the skip rule weighs the loop (i, j) with, taken from the verified loops over most of the same
+  // odometry (their chains from j' to i' and from j to i share at least half of their union): the scale of
+  // the odometry's covariance, the largest of scale_now() and the scales those loops' innovations show, and
+  // the covariance of the most recent one's edge (what verification gives at this place and speed, not the
+  // least certain edge it could accept). nullopt when no verified loop covers the loop yet: it is then
+  // verified whatever its gain, so that every stretch of odometry is checked against the images before its
+  // covariance is trusted to skip loops.
+  struct SkipBasis {
+    double scale = 1.0;
+    PoseCov edge_cov = PoseCov::Zero();
+  };
+  std::optional<SkipBasis> skip_basis(const Detection& loop) const;
   // posegraph.odometry_cov_scale, or when it is 0 the scale the loops verified so far show (1 before 3).
   double scale_now() const;
   // Extends the chain below to the frames of index < span (worker only).
@@ -176,6 +188,13 @@ class LoopCloser {
   std::int64_t chains_ = -1;
   // The verified loops against the odometry so far (worker only): scale_now()'s input.
   std::vector<LoopInnovation> innovations_;
+  // Per verified loop (query, reference) the scale its innovation alone shows (worker only).
+  struct CheckedSpan {
+    std::size_t query = 0, reference = 0;
+    double scale = 1.0;
+    PoseCov loop_cov = PoseCov::Zero();
+  };
+  std::vector<CheckedSpan> checked_spans_;
   void add_innovation(const LoopResult& r);
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
   std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);

@@ -45,13 +45,14 @@ struct VerifyConfig {
   // Which loops are verified (the loop closer; 0 = no limit / no skipping). A revisit gives one loop per
   // query frame; one verified edge every few frames is all the pose graph needs.
   // A loop (i, j) is verified only when its edge would tell the pose graph something the odometry does not
-  // know: the loop edge's covariance at min_inliers (sigma_position_m, sigma_rotation_rad: the least certain
-  // edge verification accepts) fused with the odometry's own covariance of T_j_i (the step covariances from j
-  // to i composed, as the graph's odometry edges compose them, times the scale the graph uses) must shrink
-  // the largest position variance of T_j_i by at least this fraction (loop_information_gain(),
-  // stages/posegraph). Below 10% the edge moves the relative position's sigma by under 5% (sqrt(0.9) = 0.95):
-  // standing still, hovering, the frames just before the query. A property of the two estimates, not of a
-  // data set (docs/loop-correction.md). 0: verify regardless.
+  // know. The odometry's covariance of T_j_i (its step covariances composed from j to i, as the graph's
+  // odometry edges compose them) is trusted only over odometry a verified loop has checked: a loop no
+  // verified loop covers is verified whatever its gain. Otherwise that covariance, scaled by what the
+  // verified loops' innovations show, fused with the covering loop's edge covariance divided by the loops of
+  // the revisit so far (they correct together) must shrink the largest position variance of T_j_i by at
+  // least this fraction (loop_information_gain(), stages/posegraph). Below 10% the edges move the relative
+  // position's sigma by under 5% (sqrt(0.9) = 0.95). A property of the covariances, not of a data set
+  // (docs/loop-correction.md). 0: verify regardless.
   double min_information_gain = 0.1;
   int max_per_query = 0;               // loops verified per query frame (the first ones submitted)
   int skip_after_verified_frames = 0;  // skip (i, j) when (i', j') was verified with |i-i'|, |j-j'| <= N
