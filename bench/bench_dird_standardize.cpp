@@ -1,6 +1,7 @@
 // Descriptor standardisation (dird_standardize.hpp) on one core: the cost per descriptor of the statistics
 // and of standardising (batch and streaming), and the cost per pair of the distances: raw L1 vs int8-code
-// L1 (the same psadbw kernel) vs int8-code cosine vs float z-score L1 / cosine.
+// L1 (the same psadbw kernel) vs int8-code cosine vs float z-score L1 / cosine vs the compact codes of
+// dird_codes.hpp (sign: Hamming, ternary: popcount dot; the dispatched AVX2 kernel and the portable one).
 // Every iteration is one descriptor or one pair, so the reported time is per descriptor / per pair.
 // Distances run over a KITTI-00-sized set of 4541 descriptors (raw / codes 15.7 MB, floats 62.8 MB: the
 // database a query is compared with) and over 2 descriptors (everything in L1 cache).
@@ -12,6 +13,7 @@
 #include <random>
 #include <vector>
 
+#include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/dird/dird_standardize.hpp"
 
@@ -220,6 +222,43 @@ void BM_PairFloatCosine(benchmark::State& state) {
     return 1.0 - static_cast<double>(loopgate::float_dot(set[a], set[b])) / (norms[a] * norms[b]);
   });
 }
+// The compact codes of the int8 codes, as the pipeline keeps them (one contiguous matrix).
+const loopgate::CompactCodeMatrix& compact_set(loopgate::DirdCode code) {
+  static const auto make = [](loopgate::DirdCode c) {
+    loopgate::CompactCodeMatrix m({c, 0.5}, loopgate::StandardizeConfig{}.clamp_sigma, kDatabase);
+    for (std::size_t k = 0; k < kDatabase; ++k) m.set(k, code_set()[k]);
+    return m;
+  };
+  static const loopgate::CompactCodeMatrix sign = make(loopgate::DirdCode::kSign);
+  static const loopgate::CompactCodeMatrix ternary = make(loopgate::DirdCode::kTernary);
+  return code == loopgate::DirdCode::kSign ? sign : ternary;
+}
+void BM_PairSignHamming(benchmark::State& state) {
+  const auto& m = compact_set(loopgate::DirdCode::kSign);
+  run_pairs(state, [&](std::size_t a, std::size_t b) { return m.distance(a, b); });
+}
+void BM_PairTernaryDot(benchmark::State& state) {
+  const auto& m = compact_set(loopgate::DirdCode::kTernary);
+  run_pairs(state, [&](std::size_t a, std::size_t b) { return m.distance(a, b); });
+}
+// The portable popcount kernel on the same sign codes (its own copy, as contiguous words).
+void BM_PairSignHammingPortable(benchmark::State& state) {
+  static const std::vector<std::uint64_t> words = [] {
+    std::vector<std::uint64_t> out(kDatabase * loopgate::kCodePlaneWords);
+    for (std::size_t k = 0; k < kDatabase; ++k)
+      loopgate::make_compact_code({loopgate::DirdCode::kSign, 0.5}, loopgate::StandardizeConfig{}.clamp_sigma,
+                                  code_set()[k], out.data() + k * loopgate::kCodePlaneWords);
+    return out;
+  }();
+  run_pairs(state, [&](std::size_t a, std::size_t b) {
+    return loopgate::hamming_words_portable(words.data() + a * loopgate::kCodePlaneWords,
+                                            words.data() + b * loopgate::kCodePlaneWords,
+                                            loopgate::kCodePlaneWords);
+  });
+}
+BENCHMARK(BM_PairSignHamming)->Arg(2)->Arg(kDatabase)->ArgName("set");
+BENCHMARK(BM_PairSignHammingPortable)->Arg(2)->Arg(kDatabase)->ArgName("set");
+BENCHMARK(BM_PairTernaryDot)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairRawL1)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairCodeL1)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairCodeCosine)->Arg(2)->Arg(kDatabase)->ArgName("set");

@@ -16,6 +16,7 @@
 #include "pipeline/pipeline.hpp"
 #include "pipeline_dird_reference.hpp"
 #include "pipeline_fake_dataset.hpp"
+#include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/contrast_search.hpp"
 #include "test_support.hpp"
@@ -194,6 +195,51 @@ TEST(PipelineDirdSeqSlam, TakesItsDescriptorsFromItsOwnSection) {
     EXPECT_NE(std::string(e.what()).find("dird_seqslam.standardize"), std::string::npos) << e.what();
   }
   EXPECT_THROW(load_config<PipelineConfig>("", {"dird_seqslam.resize=bicubic"}), ConfigError);
+}
+
+// Compact codes: a full run's rows are the reference's int8 codes turned into sign / ternary codes and
+// compared by their distance, searched in batch; the summary names the code.
+TEST(PipelineDirdSeqSlam, CompactCodesAreTheReferenceCodesReducedAndCompared) {
+  const RevisitDataset dataset(kPeriod, kLaps);
+  const std::size_t frames = kPeriod * kLaps;
+  for (const DirdCode code : {DirdCode::kTernary, DirdCode::kSign}) {
+    PipelineConfig config = seqslam_config(RunMode::kFull);
+    config.dird_seqslam.codes.code = code;
+    const auto out = testing::make_temp_dir("pipeline-dseq-compact");
+    const RunResult result = run_pipeline(config, dataset, out);
+    ASSERT_FALSE(result.failed) << result.error;
+
+    const DirdConfig dird = config.dird_seqslam.descriptor(config.dird);
+    const StandardizeConfig standardize = config.dird_seqslam.standardization(config.standardize);
+    const auto [codes, ready_frame] = testing::reference_codes(dataset, dird, standardize, frames);
+    const std::size_t words = code_words(code);
+    std::vector<std::uint64_t> bits(frames * words);
+    std::vector<std::int32_t> nonzero(frames);
+    for (std::size_t k = 0; k < frames; ++k) {
+      nonzero[k] = make_compact_code(config.dird_seqslam.codes, standardize.clamp_sigma, codes[k],
+                                     bits.data() + k * words);
+    }
+    const auto margin = static_cast<std::size_t>(config.match.margin);
+    std::vector<std::vector<DistanceEntry>> rows(frames);
+    for (std::size_t i = std::max(ready_frame, margin); i < frames; ++i) {
+      for (std::size_t j = 0; j + margin <= i; ++j) {
+        const std::uint64_t* a = bits.data() + i * words;
+        const std::uint64_t* b = bits.data() + j * words;
+        rows[i].push_back({static_cast<std::int64_t>(j),
+                           code == DirdCode::kSign ? sign_code_distance(a, b)
+                                                   : ternary_code_distance(a, nonzero[i], b, nonzero[j])});
+      }
+    }
+    const ContrastOutput expected = reference_search(rows, config);
+    EXPECT_GT(expected.loops.size(), kPeriod);
+    expect_run_is(out, expected);
+    const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+    EXPECT_EQ(summary["standardize"]["code"], std::string(enum_name(code)));
+  }
+  // A compact code codes the standardised descriptor: refused without the standardisation, naming the key.
+  EXPECT_THROW(load_config<PipelineConfig>("", {"dird_seqslam.code=ternary", "dird_seqslam.standardize=off"}),
+               ConfigError);
+  EXPECT_THROW(load_config<PipelineConfig>("", {"dird_seqslam.code=binary"}), ConfigError);
 }
 
 }  // namespace

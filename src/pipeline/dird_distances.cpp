@@ -15,7 +15,7 @@
 namespace loopgate {
 
 DirdDistances::DirdDistances(const MethodContext& context, const DirdConfig& dird,
-                             const StandardizeConfig& standardize)
+                             const StandardizeConfig& standardize, const DirdCodeConfig& codes)
     : context_(context),
       dird_(dird),
       standardize_(standardize),
@@ -23,15 +23,27 @@ DirdDistances::DirdDistances(const MethodContext& context, const DirdConfig& dir
       raw_(context.capacity),
       codes_(new Descriptor[context.capacity]),
       norms_(context.capacity, 0.0),
-      coded_(context.capacity, 0) {
+      coded_(context.capacity, 0),
+      code_config_(codes) {
   if (standardize.enabled()) {
     standardizer_.emplace(observations_config(standardize));
     observe_every_ = static_cast<std::size_t>(standardize.observe_every);
   }
+  if (codes.compact()) {
+    if (!standardizer_)
+      throw std::invalid_argument("DirdDistances: a compact code needs the standardisation");
+    compact_.emplace(codes, standardize.clamp_sigma, context.capacity);
+    pending_.resize(context.capacity);
+  }
 }
 
 void DirdDistances::describe(std::size_t seq, const cv::Mat* image) {
-  if (image) {
+  if (image && compact_) {
+    auto raw = std::make_unique<Descriptor>();
+    extractor_.extract(*image, *raw);
+    pending_.at(seq) = std::move(raw);
+    descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
+  } else if (image) {
     extractor_.extract(*image, raw_.slot(seq));
     descriptors_computed_.fetch_add(1, std::memory_order_relaxed);
   }
@@ -39,12 +51,22 @@ void DirdDistances::describe(std::size_t seq, const cv::Mat* image) {
 }
 
 void DirdDistances::begin_frame(std::size_t seq) {
-  if (!observed_frame(seq) || !valid(seq)) return;
-  standardizer_->observe(static_cast<std::int64_t>(seq), raw_.descriptor(seq));
-  if (standardizer_->ready() && !waiting_.empty()) {
-    for (const std::size_t k : waiting_) code(k);
-    waiting_.clear();
+  if (observed_frame(seq) && valid(seq)) {
+    standardizer_->observe(static_cast<std::int64_t>(seq), raw(seq));
+    if (standardizer_->ready() && !waiting_.empty()) {
+      for (const std::size_t k : waiting_) code(k);
+      waiting_.clear();
+    }
   }
+  // Compact codes: no later observation changes this frame's codes (the causal rule), so it is coded now
+  // and its raw descriptor dropped.
+  if (compact_ && raw_.state(seq) != DescriptorStore::State::kEmpty) code(seq);
+}
+
+const Descriptor& DirdDistances::raw(std::size_t seq) const {
+  if (!compact_) return raw_.descriptor(seq);
+  if (!pending_.at(seq)) throw std::logic_error(fmt::format("raw descriptor of seq {} already dropped", seq));
+  return *pending_[seq];
 }
 
 std::size_t DirdDistances::distance_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
@@ -86,6 +108,11 @@ bool DirdDistances::code(std::size_t seq) {
   if (!valid(seq)) return false;
   if (!standardizer_) {
     codes_[seq] = raw_.descriptor(seq);
+  } else if (compact_ && standardizer_->ready()) {
+    Descriptor standard;
+    standardizer_->standardize(static_cast<std::int64_t>(seq), raw(seq), standard);
+    compact_->set(seq, standard);
+    pending_[seq].reset();
   } else if (!standardizer_->ready()) {
     if (std::find(waiting_.begin(), waiting_.end(), seq) == waiting_.end()) {
       waiting_.push_back(seq);
@@ -93,7 +120,7 @@ bool DirdDistances::code(std::size_t seq) {
     }
     return false;
   } else {
-    standardizer_->standardize(static_cast<std::int64_t>(seq), raw_.descriptor(seq), codes_[seq]);
+    standardizer_->standardize(static_cast<std::int64_t>(seq), raw(seq), codes_[seq]);
     if (standardize_.cosine()) norms_[seq] = standard_norm(codes_[seq]);
   }
   coded_[seq] = 1;
@@ -102,6 +129,7 @@ bool DirdDistances::code(std::size_t seq) {
 }
 
 double DirdDistances::distance(std::size_t a, std::size_t b) const {
+  if (compact_) return compact_->distance(a, b);
   if (!standardizer_) {
     return dird_.l2_metric() ? l2_distance(codes_[a], codes_[b])
                              : static_cast<double>(l1_distance(codes_[a], codes_[b]));
@@ -114,6 +142,16 @@ double DirdDistances::distance(std::size_t a, std::size_t b) const {
 
 nlohmann::json DirdDistances::summary() const {
   if (!standardizer_) return nlohmann::json::object();
+  if (compact_) {
+    return {{"standardize",
+             {{"mode", standardize_.mode},
+              {"code", enum_name(code_config_.code)},
+              {"code_bytes", compact_->bytes_per_code()},
+              {"observations", standardizer_->observations()},
+              {"snapshots", standardizer_->snapshots()},
+              {"frames_coded", frames_coded_},
+              {"frames_before_statistics", frames_before_statistics_}}}};
+  }
   return {{"standardize",
            {{"mode", standardize_.mode},
             {"distance", standardize_.distance},
@@ -124,8 +162,13 @@ nlohmann::json DirdDistances::summary() const {
 }
 
 std::pair<std::size_t, Descriptor> DirdDistances::example_descriptor(std::optional<std::int64_t> seq) const {
-  if (seq) return {context_.seqs.frame(*seq), raw_.descriptor(static_cast<std::size_t>(*seq))};
   const Dataset& dataset = context_.images.dataset();
+  if (seq && compact_) {
+    // Its raw descriptor was dropped once coded: described again from the dataset.
+    const std::size_t frame = context_.seqs.frame(*seq);
+    return {frame, extractor_.extract(dataset.load_image(frame))};
+  }
+  if (seq) return {context_.seqs.frame(*seq), raw_.descriptor(static_cast<std::size_t>(*seq))};
   const std::size_t frame = dataset.frame_count() / 2;
   return {frame, extractor_.extract(dataset.load_image(frame))};
 }

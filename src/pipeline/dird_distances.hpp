@@ -23,6 +23,7 @@
 
 #include "pipeline/descriptor_store.hpp"
 #include "pipeline/detection_method.hpp"
+#include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_standardize.hpp"
 #include "stages/match/contrast_search.hpp"
@@ -32,8 +33,11 @@ namespace loopgate {
 class DirdDistances {
  public:
   // Descriptors extracted with `dird`, standardised when `standardize` is enabled (mode causal; the caller
-  // rejects batch).
-  DirdDistances(const MethodContext& context, const DirdConfig& dird, const StandardizeConfig& standardize);
+  // rejects batch), matched in the representation `codes` (a compact code needs the standardisation). With a
+  // compact code a frame is coded as soon as its statistics allow (at the latest when its own frame or a
+  // later one is matched) and its raw descriptor is dropped then.
+  DirdDistances(const MethodContext& context, const DirdConfig& dird, const StandardizeConfig& standardize,
+                const DirdCodeConfig& codes = {});
 
   bool standardized() const { return standardizer_.has_value(); }
   // Frames whose raw descriptor feeds the statistics.
@@ -50,7 +54,6 @@ class DirdDistances {
                              std::vector<DistanceEntry>& out);
 
   bool valid(std::size_t seq) const { return raw_.state(seq) == DescriptorStore::State::kValid; }
-  const Descriptor& raw(std::size_t seq) const { return raw_.descriptor(seq); }
   std::size_t descriptors_computed() const { return descriptors_computed_.load(); }
   std::size_t distances_computed() const { return distances_computed_; }
   // summary.json: "standardize" (when standardised): mode, distance, observations, snapshots, frames coded,
@@ -66,6 +69,8 @@ class DirdDistances {
   // (then it waits for them).
   bool code(std::size_t seq);
   double distance(std::size_t a, std::size_t b) const;
+  // The raw descriptor of a described frame not yet dropped.
+  const Descriptor& raw(std::size_t seq) const;
 
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
   DirdConfig dird_;
@@ -76,6 +81,11 @@ class DirdDistances {
   std::vector<double> norms_;            // match node only
   std::vector<std::uint8_t> coded_;      // match node only
   std::optional<CausalStandardizer> standardizer_;
+  DirdCodeConfig code_config_;
+  std::optional<CompactCodeMatrix> compact_;  // match node only
+  // Compact codes: the raw descriptors until coded (written by describe before the store's publish, read
+  // after its state; the store's own slots stay unwritten).
+  std::vector<std::unique_ptr<Descriptor>> pending_;
   std::size_t observe_every_ = 1;
   std::vector<std::size_t> waiting_;  // frames described before the statistics were ready
   std::vector<double> distances_;     // the current range's distances (NaN: not compared)

@@ -120,7 +120,7 @@ class ContrastMatching {
 DirdDistances make_distances(const MethodContext& context) {
   const PipelineConfig& c = context.config;
   return DirdDistances(context, c.dird_seqslam.descriptor(c.dird),
-                       c.dird_seqslam.standardization(c.standardize));
+                       c.dird_seqslam.standardization(c.standardize), c.dird_seqslam.codes);
 }
 
 // What the full and gated methods report alike.

@@ -143,6 +143,11 @@ void DirdSeqSlamConfig::validate() const {
   require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
   require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
   require_one_of("dird_seqslam.standardize", standardize, {"off", "causal", "batch"});
+  codes.validate();
+  if (codes.compact() && standardize == "off") {
+    throw ConfigError("dird_seqslam.code: '" + std::string(enum_name(codes.code)) +
+                      "' codes the standardised descriptor: needs dird_seqslam.standardize causal or batch");
+  }
   search.validate();
 }
 

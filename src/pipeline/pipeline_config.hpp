@@ -11,6 +11,7 @@
 
 #include "core/enum_names.hpp"
 #include "io/dataset.hpp"
+#include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_config.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/gate/gate_config.hpp"
@@ -198,6 +199,7 @@ struct DirdSeqSlamConfig {
   // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
   // of section standardize.
   std::string standardize = "causal";
+  DirdCodeConfig codes;  // keys code, ternary_threshold_sigma (docs/detection.md § Compact codes)
   ContrastSearchConfig search;
 
   template <class Self, class V>
@@ -205,6 +207,7 @@ struct DirdSeqSlamConfig {
     v("normalization", self.normalization);
     v("resize", self.resize);
     v("standardize", self.standardize);
+    DirdCodeConfig::fields(self.codes, v);
     ContrastSearchConfig::fields(self.search, v);
   }
   void validate() const;

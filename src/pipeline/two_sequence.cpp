@@ -29,6 +29,7 @@
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/run_resources.hpp"
 #include "pipeline/seqslam_batch.hpp"
+#include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/dird/dird_similarity.hpp"
@@ -651,6 +652,23 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   query_count = setup.ranges.query_count = setup.query_taken(ref, qry);  // all, unless a stop request came
   const CodedSequence ref_codes = code_sequence(ref, standardize);
   const CodedSequence qry_codes = code_sequence(qry, standardize);
+  // Compact codes (dird_seqslam.code sign or ternary) of both sequences, from their int8 codes.
+  std::optional<CompactCodeMatrix> ref_compact, qry_compact;
+  if (config.dird_seqslam.codes.compact()) {
+    const auto compact = [&](const CodedSequence& coded, const DescribedSequence& described) {
+      CompactCodeMatrix m(config.dird_seqslam.codes, standardize.clamp_sigma,
+                          std::max<std::size_t>(1, coded.codes.size()));
+      for (std::size_t k = 0; k < coded.codes.size(); ++k)
+        if (described.valid[k]) m.set(k, coded.codes[k]);
+      return m;
+    };
+    ref_compact.emplace(compact(ref_codes, ref));
+    qry_compact.emplace(compact(qry_codes, qry));
+  }
+  const auto distance_of = [&](std::size_t q, std::size_t r) {
+    return qry_compact ? qry_compact->distance(q, *ref_compact, r)
+                       : coded_distance(dird, standardize, qry_codes, q, ref_codes, r);
+  };
   const double describe_s = seconds_since(t0);
   setup.phase("describe and code (reference and query)", t0);
 
@@ -673,9 +691,7 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
           if (!qry.valid[q]) return;
           rows[k].reserve(ref_count);
           for (std::size_t r = 0; r < ref_count; ++r) {
-            if (ref.valid[r])
-              rows[k].push_back({static_cast<std::int64_t>(r),
-                                 coded_distance(dird, standardize, qry_codes, q, ref_codes, r)});
+            if (ref.valid[r]) rows[k].push_back({static_cast<std::int64_t>(r), distance_of(q, r)});
           }
         },
         setup.blocks("distances"));
