@@ -79,7 +79,7 @@ void add_run_flags(const CompareOptions& options, std::vector<FlagValue>& flags)
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
 }
 
-// Before a compare writes anything (issue 15): no output over an input (compare.json, each method's run
+// Before a compare writes anything: no output over an input (compare.json, each method's run
 // files), one command at a time in the folder (`lock`, taken here for `command`), and no earlier compare's
 // outputs unless --force, whose folders then go (none is taken for this one's).
 void claim_output_folder(const CompareOptions& options, const PipelineConfig& base,
@@ -140,7 +140,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
   if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
-  // Geometric verification and the pose graph (issue 13) compare the trajectory, not the detectors: off here,
+  // Geometric verification and the pose graph compare the trajectory, not the detectors: off here,
   // so every column times the same loop-detection work (a full method's thousands of loops would each be
   // verified); `run` with the config runs them.
   config.verify.enabled = false;
@@ -290,7 +290,7 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
   return out;
 }
 
-// Loop correction (issue 13) of one method, after its timed run and outside its timing: the run's loops
+// Loop correction of one method, after its timed run and outside its timing: the run's loops
 // verified and its pose graph solved (what `run` does with verify.enabled), trajectory_corrected.tum and
 // loop_edges.csv into its folder, the fields into its summary as "loop_correction". Only when the config
 // enables verification; a failure is reported there, it does not stop the compare.
@@ -358,7 +358,7 @@ int compare_two_sequences(const CompareOptions& options) {
   std::optional<OutputLock> lock;
   claim_output_folder(options, base, methods, lock, "loopgate compare --reference --query");
   // SIGINT, SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is
-  // written (issue 15, as for the single-sequence compare).
+  // written (as for the single-sequence compare).
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
@@ -544,8 +544,7 @@ int compare_command(const CompareOptions& options) {
                                  {"positives_without_min_travel", truth->at("positives_without_min_travel")}};
       truth_counts = fmt::format(
           "ground-truth loop query frames: {} in 3-D, {} horizontal ({}); {} in the evaluation's plane ({}), "
-          "{} "
-          "before eval.min_travel_m = {} m took out revisits without travel\n",
+          "{} before eval.min_travel_m = {} m took out revisits without travel\n",
           number(truth->at("positives_3d")), number(truth->at("positives_horizontal")),
           truth->at("horizontal_plane").get<std::string>(), number(truth->at("positives")),
           truth->at("plane").get<std::string>(), number(truth->at("positives_without_min_travel")),

@@ -79,7 +79,7 @@ int run_describe(const DescribeOptions& opt) {
   config.flip_vertical = opt.flip_vertical;
   const DirdExtractor extractor(config);
 
-  // Every output path is known before anything is written: none may be an input (issue 15: `--out IMAGE`
+  // Every output path is known before anything is written: none may be an input (`--out IMAGE`
   // truncated the image before reading it; `--picture DIR` replaced the input PNGs when DIR was their
   // folder).
   std::set<std::string> used_names;

@@ -40,7 +40,7 @@ struct RunOptions {
 };
 
 // The problems lenient opening collected: when the run stops before summary.json (which lists them) is
-// written, they are the likely cause and must be seen (issue 15).
+// written, they are the likely cause and must be seen.
 void log_dataset_problems(const Dataset& dataset) {
   constexpr std::size_t kShown = 20;
   const auto& issues = dataset.issues();
@@ -86,7 +86,7 @@ void write_run_config(const PipelineConfig& config, const RunOptions& options) {
   }
 }
 
-// --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
+// --reference DIR --query DIR: docs/detection.md § Two sequences, appearance only (no odometry).
 int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   if (options.reference.empty() || options.query.empty()) {
     throw ConfigError("two-sequence mode needs both --reference DIR and --query DIR");

@@ -35,8 +35,7 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     if (run.mode == RunMode::kGated) {
       spdlog::info(
           "run: SeqSLAM gated (run.mode gated): only inside the pose gate's candidate areas, the frames "
-          "their "
-          "cells and sequences need; matches at the end of the stream");
+          "their cells and sequences need; matches at the end of the stream");
       return make_seqslam_gated(context);
     }
     spdlog::info(
@@ -66,8 +65,7 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     if (d.standardize == "batch") {
       throw ConfigError(
           "dird_seqslam.standardize: 'batch' needs the whole sequence before the first comparison "
-          "(two-sequence "
-          "runs); a single sequence streams: use 'causal'");
+          "(two-sequence runs); a single sequence streams: use 'causal'");
     }
     spdlog::info(
         "run: dird-seqslam {} (DIRD {} normalisation, {} resize, {} standardisation): contrast over {} "

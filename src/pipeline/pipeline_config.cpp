@@ -134,8 +134,7 @@ void PipelineConfig::validate_gate_feedback() const {
   if (run.seqslam()) {
     throw ConfigError(
         "gate.feedback: run.method seqslam decides its loops at the end of the stream, so no loop exists "
-        "while "
-        "the gate runs: use run.method dird or dird-seqslam, or gate.feedback=false");
+        "while the gate runs: use run.method dird or dird-seqslam, or gate.feedback=false");
   }
 }
 

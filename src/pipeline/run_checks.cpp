@@ -80,9 +80,8 @@ std::vector<std::string> run_problems(const RunCheckInput& in) {
   if (in.detects && in.frames_processed <= static_cast<std::size_t>(std::max(0, in.margin_frames))) {
     problems.push_back(fmt::format(
         "no detection possible: the run has {} frames, and run.method {} compares a frame only with frames "
-        "at "
-        "least {} = {} frames before it; expected more than {} frames (a longer --frames range or sequence, "
-        "or a smaller {})",
+        "at least {} = {} frames before it; expected more than {} frames (a longer --frames range or "
+        "sequence, or a smaller {})",
         in.frames_processed, in.method, in.margin_key, in.margin_frames, in.margin_frames, in.margin_key));
   }
   return problems;
