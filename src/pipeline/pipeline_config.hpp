@@ -156,8 +156,8 @@ struct EvalConfig {
   // much ground-truth path (3-D, summed frame to frame) between query and reference, so that hovering or
   // standing still within truth_radius_m is not a loop (on an EuRoC flight many "positives" within 0.2 m and
   // 20 frames are the drone hovering; on KITTI 00, 21 are the car stopped). 2 m: what the simulator's
-  // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (before issue
-  // 14). Not used with truth_pairs_file.
+  // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (the former
+  // behaviour). Not used with truth_pairs_file.
   double min_travel_m = 2.0;
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
