@@ -1,5 +1,5 @@
 // Sanitizer suppressions, each scoped to a system library (oneTBB; GDAL under OpenCV's image reading) and
-// given with its reason (issue 15; DEVELOPERS.md § Sanitizers). In sanitizer builds CMake links this object
+// given with its reason (DEVELOPERS.md § Sanitizers). In sanitizer builds CMake links this object
 // into every executable (the `loopgate` binary, every test and benchmark), so they hold for a program run by
 // hand as well as under ctest, whether or not it runs the pipeline: io tests decode images too.
 

@@ -26,12 +26,12 @@
 #include <vector>
 
 #include "app/commands.hpp"
-#include "app/compare_methods.hpp"
 #include "app/plot_script.hpp"
 #include "app/summary_fields.hpp"
 #include "core/error.hpp"
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
+#include "pipeline/method_registry.hpp"
 
 namespace loopgate::app {
 
@@ -224,7 +224,7 @@ Row make_row(const Summary& sum, const std::string& run, const std::string& comp
   const std::string standardize = sum.optional_text({"config", "standardize", "mode"}).value_or("off");
   if (!compare_name.empty()) {
     row.method = compare_name;
-  } else if (const CompareMethod* m = find_compare_method(method, row.mode, standardize)) {
+  } else if (const MethodEntry* m = find_method_entry(method, row.mode, standardize)) {
     row.method = m->name;
   } else {
     row.method = row.mode == "odometry" ? "odometry" : method;

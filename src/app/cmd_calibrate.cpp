@@ -1,6 +1,7 @@
 // loopgate calibrate: derives the logistic constants mu and sigma of the DIRD similarity for one dataset,
-// normalisation mode and metric from the dataset's own distance distributions (dird.md §6; the rule is
-// stated in stages/dird/dird_calibration.hpp) and prints them as a YAML `dird:` section.
+// normalisation mode and metric from the dataset's own distance distributions (docs/detection.md § The
+// paper's matcher; the rule is stated in stages/dird/dird_calibration.hpp) and prints them as a YAML `dird:`
+// section.
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
@@ -159,8 +160,7 @@ void add_calibrate_command(CLI::App& app, int& exit_code) {
       "frame pairs beyond the safety margin; sim = 0.5 at the median distance of ground-truth revisits "
       "(pairs beyond the margin closer than --revisit-radius-m and --max-rotation-deg), or without ground "
       "truth at the --mu-quantile of the beyond-margin distances. Prints a YAML 'dird:' section (use --out "
-      "to "
-      "save it: log lines may share standard output).");
+      "to save it: log lines may share standard output).");
   cmd->add_option("dataset", opt->dataset, "Dataset directory (EuRoC, KITTI or image folder)")->required();
   cmd->add_option("--normalization", opt->normalization, "libdird|l2")
       ->capture_default_str()

@@ -1,8 +1,12 @@
-// loopgate compare: the same dataset and configuration through the methods of kCompareMethods (DIRD raw and
+// loopgate compare: the same dataset and configuration through the registry's methods (DIRD raw and
 // standardised, SeqSLAM, each full and gated; --methods picks), one after the other (each run alone on the
 // machine), side by side: a table on stdout, compare.json (one object per
 // method holding that run's summary.json, plus the ratios), each run's outputs in OUT/<method>, and the
 // plots of scripts/plot.py in OUT/plots.
+// GCC 12 at -O3 reports a "potential null pointer dereference" inside nlohmann::json::value() as inlined
+// into this file's functions (a false positive: the object is a reference to a live summary).
+#pragma GCC diagnostic ignored "-Wnull-dereference"
+
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
@@ -20,7 +24,7 @@
 #include <vector>
 
 #include "app/commands.hpp"
-#include "app/compare_methods.hpp"
+#include "app/compare_report.hpp"
 #include "app/plot_script.hpp"
 #include "app/result_block.hpp"
 #include "app/stop_signals.hpp"
@@ -32,6 +36,7 @@
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loop_closer.hpp"
+#include "pipeline/method_registry.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
@@ -58,13 +63,13 @@ struct CompareOptions {
   std::vector<std::string> overrides;
 };
 
-// The methods of a two-sequence compare (no poses: no gate).
-constexpr const char* kTwoSequenceMethods = "full,std-full,seqslam,dird-seqslam";
+// The methods of a two-sequence compare: the registry's rows with a two-sequence form (no poses: no gate).
+const std::string kTwoSequenceMethods = method_entry_names(true);
 
 // What a compare writes into its folder: compare.json, the plots and one run folder per method.
 std::vector<std::string> compare_output_names() {
   std::vector<std::string> names = {"compare.json", "plots"};
-  for (const CompareMethod& m : kCompareMethods) names.emplace_back(m.name);
+  for (const MethodEntry& m : kMethods) names.emplace_back(m.name);
   return names;
 }
 
@@ -79,7 +84,7 @@ void add_run_flags(const CompareOptions& options, std::vector<FlagValue>& flags)
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
 }
 
-// Before a compare writes anything (issue 15): no output over an input (compare.json, each method's run
+// Before a compare writes anything: no output over an input (compare.json, each method's run
 // files), one command at a time in the folder (`lock`, taken here for `command`), and no earlier compare's
 // outputs unless --force, whose folders then go (none is taken for this one's).
 void claim_output_folder(const CompareOptions& options, const PipelineConfig& base,
@@ -100,15 +105,11 @@ void claim_output_folder(const CompareOptions& options, const PipelineConfig& ba
 }
 
 std::string method_names() {
-  std::string out;
-  for (const CompareMethod& m : kCompareMethods) out += (out.empty() ? "" : ",") + std::string(m.name);
-  return out;
+  return method_entry_names();
 }
 
-const CompareMethod& find_method(const std::string& name) {
-  for (const CompareMethod& m : kCompareMethods) {
-    if (name == m.name) return m;
-  }
+const MethodEntry& find_method(const std::string& name) {
+  if (const MethodEntry* m = find_method_entry(name)) return *m;
   throw ConfigError("--methods: '" + name + "' is not one of " + method_names());
 }
 
@@ -132,7 +133,7 @@ std::vector<std::string> split_methods(const std::string& text) {
 
 // The shared configuration made into one method's (validated again: the mode changes what must hold).
 PipelineConfig method_config(const PipelineConfig& base, const std::string& method) {
-  const CompareMethod& m = find_method(method);
+  const MethodEntry& m = find_method(method);
   PipelineConfig config = base;
   config.run.mode = m.mode;
   config.run.method = m.detector;
@@ -140,7 +141,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
   if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
-  // Geometric verification and the pose graph (issue 13) compare the trajectory, not the detectors: off here,
+  // Geometric verification and the pose graph compare the trajectory, not the detectors: off here,
   // so every column times the same loop-detection work (a full method's thousands of loops would each be
   // verified); `run` with the config runs them.
   config.verify.enabled = false;
@@ -150,147 +151,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   return config;
 }
 
-// The run's time by kind of work (summary.json "time_accounting", pipeline/time_accounting.hpp): thread
-// CPU time in ms, images decoded inside describe booked as decode, the method's end-of-stream work as match,
-// so that each row holds the same work in every column and decode + describe + match + rest = total.
-struct TimeParts {
-  double decode_ms = 0, describe_ms = 0, match_ms = 0, rest_ms = 0, total_ms = 0;
-  double describe_and_match_ms() const { return describe_ms + match_ms; }
-  double with_decode_ms() const { return decode_ms + describe_ms + match_ms; }
-};
-TimeParts time_parts(const json& summary) {
-  TimeParts t;
-  const json* a = summary.contains("time_accounting") ? &summary.at("time_accounting") : nullptr;
-  if (a == nullptr) return t;
-  t.decode_ms = a->value("decode_ms", 0.0);
-  t.describe_ms = a->value("describe_ms", 0.0);
-  t.match_ms = a->value("match_ms", 0.0);
-  t.rest_ms = a->value("rest_ms", 0.0);
-  t.total_ms = a->value("total_ms", 0.0);
-  return t;
-}
-json time_parts_json(const TimeParts& t) {
-  return {{"decode_ms", t.decode_ms},
-          {"describe_ms", t.describe_ms},
-          {"match_ms", t.match_ms},
-          {"rest_ms", t.rest_ms},
-          {"total_ms", t.total_ms}};
-}
-
-// The paper's Fig. 8 (KITTI 00): "the total time of loop-closure detection", 182 763.66 ms for pure DIRD and
-// 28 329.93 ms with the pose constraint: feature extraction (its Fig. 7) and similarity, i.e. describe +
-// match here. The paper does not say whether reading the images is in it; decode + describe + match is
-// printed beside it.
-constexpr const char* kTimeNote =
-    "time: CPU time of the threads that did the work, summed over frames (a node body's thread and the "
-    "threads of its parallel loops; a loaded machine does not inflate it); decode includes the images read "
-    "inside describe, match the similarities full DIRD computes inside describe and the end-of-stream work, "
-    "rest = sync, odometry, gate, sink; decode + describe + "
-    "match + rest = total\n";
-constexpr double kPaperFullMs = 182763.66;
-constexpr double kPaperGatedMs = 28329.93;
-
-std::string number(const json& value, int decimals = 0) {
-  if (value.is_null()) return "-";
-  if (value.is_number_integer() || value.is_number_unsigned()) return std::to_string(value.get<long long>());
-  return fmt::format("{:.{}f}", value.get<double>(), decimals);
-}
-
-std::string table(const std::vector<std::string>& methods, const std::map<std::string, json>& summaries,
-                  bool two_sequence) {
-  struct Row {
-    std::string label;
-    std::function<std::string(const json&)> cell;
-  };
-  const auto at = [](std::vector<std::string> path, int decimals = 0) {
-    return [path, decimals](const json& s) {
-      const json* v = find_path(s, path);
-      return v ? number(*v, decimals) : std::string("-");
-    };
-  };
-  const auto ms = [](double (*part)(const TimeParts&)) {
-    return [part](const json& s) { return fmt::format("{:.1f}", part(time_parts(s))); };
-  };
-  // Precision and recall are undefined (n/a, not 0) when the range holds no true loop.
-  const auto pr = [&at](const char* key) {
-    return [cell = at({"evaluation", "precision_recall", key}, 3)](const json& s) {
-      const json* positives = find_path(s, {"evaluation", "precision_recall", "positives"});
-      if (positives && positives->is_number() && positives->get<double>() <= 0) return std::string("n/a");
-      return cell(s);
-    };
-  };
-  const Row wall = {"wall time (s)", at({"wall_s"}, 2)};
-  const Row rss = {"peak RSS (MiB)", at({"peak_rss_mb"}, 0)};
-  const std::vector<Row> quality = {
-      {"loops", at({"loops"})},
-      {"loops true", at({"evaluation", "loop_truth", "loops_true"})},
-      {"loops false", at({"evaluation", "loop_truth", "loops_false"})},
-      {"loops without travel", at({"evaluation", "loop_truth", "loops_without_travel"})},
-      {"positive query frames", at({"evaluation", "precision_recall", "positives"})},
-      {"average precision", pr("average_precision")},
-      {"recall at 1 (top match)", pr("recall_at_1")},
-      {"recall at 100% precision", pr("recall_at_100")},
-      {"recall at 99% precision", pr("recall_at_99")},
-      {"recall at 95% precision", pr("recall_at_95")},
-  };
-  // With verify.enabled: the loop correction after each run (outside its timing).
-  const bool corrected = std::any_of(methods.begin(), methods.end(), [&](const std::string& m) {
-    return summaries.at(m).contains("loop_correction");
-  });
-  const std::vector<Row> correction = {
-      {"loops verified (geometry)", at({"loop_correction", "loops_verified"})},
-      {"ATE odometry (m)", at({"trajectory_accuracy", "rmse_m"}, 3)},
-      {"ATE corrected (m)", at({"loop_correction", "trajectory_accuracy_corrected", "rmse_m"}, 3)},
-      {"loop correction (ms)", at({"loop_correction", "ms"}, 0)},
-  };
-  std::vector<Row> rows;
-  if (two_sequence) {
-    rows = {wall,
-            rss,
-            {"images decoded", at({"images_decoded"})},
-            {"similarities computed", at({"similarities_computed"})}};
-  } else {
-    rows = {
-        wall,
-        {"cpu time (s)", at({"cpu_s"}, 2)},
-        {"real-time factor", at({"realtime_factor"}, 1)},
-        {"time (ms, thread CPU):", [](const json&) { return std::string(); }},
-        {"  decode", ms([](const TimeParts& t) { return t.decode_ms; })},
-        {"  describe", ms([](const TimeParts& t) { return t.describe_ms; })},
-        {"  match", ms([](const TimeParts& t) { return t.match_ms; })},
-        {"  rest", ms([](const TimeParts& t) { return t.rest_ms; })},
-        {"  total", ms([](const TimeParts& t) { return t.total_ms; })},
-        {"  describe + match", ms([](const TimeParts& t) { return t.describe_and_match_ms(); })},
-        {"  decode+describe+match", ms([](const TimeParts& t) { return t.with_decode_ms(); })},
-        {"  of rest: odometry", at({"time_accounting", "stages_cpu_ms", "odometry"}, 1)},
-        {"  of rest: gate", at({"time_accounting", "stages_cpu_ms", "gate"}, 1)},
-        {"  of decode: in describe", at({"time_accounting", "decode_in_describe_ms"}, 1)},
-        {"  of match: in describe", at({"time_accounting", "match_in_describe_ms"}, 1)},
-        rss,
-        {"images decoded", at({"images_decoded"})},
-        {"descriptors computed", at({"descriptors_computed"})},
-        {"similarities computed", at({"similarities_computed"})},
-        {"candidate areas", at({"candidate_areas"})},
-    };
-  }
-  rows.insert(rows.end(), quality.begin(), quality.end());
-  if (corrected) rows.insert(rows.end(), correction.begin(), correction.end());
-  // Columns as wide as the longest method name.
-  std::size_t width = 12;
-  for (const auto& m : methods) width = std::max(width, m.size());
-  width += 2;
-  std::string out = fmt::format("{:<26}", "");
-  for (const auto& m : methods) out += fmt::format("{:>{}}", m, width);
-  out += "\n";
-  for (const Row& row : rows) {
-    out += fmt::format("{:<26}", row.label);
-    for (const auto& m : methods) out += fmt::format("{:>{}}", row.cell(summaries.at(m)), width);
-    out += "\n";
-  }
-  return out;
-}
-
-// Loop correction (issue 13) of one method, after its timed run and outside its timing: the run's loops
+// Loop correction of one method, after its timed run and outside its timing: the run's loops
 // verified and its pose graph solved (what `run` does with verify.enabled), trajectory_corrected.tum and
 // loop_edges.csv into its folder, the fields into its summary as "loop_correction". Only when the config
 // enables verification; a failure is reported there, it does not stop the compare.
@@ -365,14 +226,14 @@ int compare_two_sequences(const CompareOptions& options) {
   std::vector<FlagValue> flags;
   add_run_flags(options, flags);
   const PipelineConfig base =
-      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
+      load_pipeline_config(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
   std::optional<OutputLock> lock;
   claim_output_folder(options, base, methods, lock, "loopgate compare --reference --query");
   // SIGINT, SIGTERM, SIGHUP: the current method stops describing and writes its outputs, compare.json is
-  // written (issue 15, as for the single-sequence compare).
+  // written (as for the single-sequence compare).
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
   const auto query = open_dataset(options.query, open_options);
@@ -419,7 +280,7 @@ int compare_command(const CompareOptions& options) {
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
   add_run_flags(options, flags);
   const PipelineConfig base =
-      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
+      load_pipeline_config(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
@@ -493,85 +354,10 @@ int compare_command(const CompareOptions& options) {
   json parts = json::object();
   for (const auto& m : ran) parts[m] = time_parts_json(time_parts(summaries.at(m)));
   comparison["time_parts_ms"] = parts;
-  if (summaries.count("full") && summaries.count("gated")) {
-    const json& f = summaries.at("full");
-    const json& g = summaries.at("gated");
-    const TimeParts ft = time_parts(f);
-    const TimeParts gt = time_parts(g);
-    const auto ratio = [](double a, double b) { return b > 0 ? a / b : 0.0; };
-    comparison.update({
-        {"full_over_gated_decode_time", ratio(ft.decode_ms, gt.decode_ms)},
-        {"full_over_gated_describe_time", ratio(ft.describe_ms, gt.describe_ms)},
-        {"full_over_gated_match_time", ratio(ft.match_ms, gt.match_ms)},
-        {"full_over_gated_describe_and_match_time",
-         ratio(ft.describe_and_match_ms(), gt.describe_and_match_ms())},
-        {"full_over_gated_decode_describe_and_match_time", ratio(ft.with_decode_ms(), gt.with_decode_ms())},
-        {"full_over_gated_total_time", ratio(ft.total_ms, gt.total_ms)},
-        {"full_over_gated_wall_time", ratio(f.value("wall_s", 0.0), g.value("wall_s", 0.0))},
-        {"full_over_gated_descriptors",
-         ratio(f.value("descriptors_computed", 0.0), g.value("descriptors_computed", 0.0))},
-        {"full_over_gated_similarities",
-         ratio(f.value("similarities_computed", 0.0), g.value("similarities_computed", 0.0))},
-        {"paper_ratio", kPaperFullMs / kPaperGatedMs},
-        {"paper_ratio_compares_with", "full_over_gated_describe_and_match_time"},
-    });
-    if (const json* cov = find_path(g, {"evaluation", "gate_coverage", "covered_fraction"}))
-      comparison["gated_true_loop_frames_in_candidate_areas"] = *cov;
-    // The paper's ratio is over a drive with loops; over a range without a true loop the ratio says nothing
-    // about the paper's.
-    const json* positives = find_path(g, {"evaluation", "precision_recall", "positives"});
-    const bool loops_in_range = !positives || !positives->is_number() || positives->get<double>() > 0;
-    const std::string paper =
-        loops_in_range
-            ? fmt::format(
-                  ": the paper's {:.2f}x (KITTI 00, {:.1f} s -> {:.1f} s, its Fig. 8 \"total time of "
-                  "loop-closure detection\": feature extraction + similarity) compares with this one",
-                  kPaperFullMs / kPaperGatedMs, kPaperFullMs / 1000.0, kPaperGatedMs / 1000.0)
-            : std::string(" (no true loop in the range: not comparable with the paper's ratio)");
-    if (!loops_in_range) comparison.erase("paper_ratio_compares_with");
-    ratios = fmt::format(
-        "full / gated, thread CPU time: decode {:.2f}x, describe {:.2f}x, match {:.2f}x, total {:.2f}x\n"
-        "  describe + match {:.2f}x{}\n"
-        "  decode + describe + match {:.2f}x (the paper does not say whether its time includes reading the "
-        "images); wall {:.2f}x; descriptors {:.2f}x, similarities {:.1f}x\n",
-        ratio(ft.decode_ms, gt.decode_ms), ratio(ft.describe_ms, gt.describe_ms),
-        ratio(ft.match_ms, gt.match_ms), ratio(ft.total_ms, gt.total_ms),
-        ratio(ft.describe_and_match_ms(), gt.describe_and_match_ms()), paper,
-        ratio(ft.with_decode_ms(), gt.with_decode_ms()),
-        comparison["full_over_gated_wall_time"].get<double>(),
-        comparison["full_over_gated_descriptors"].get<double>(),
-        comparison["full_over_gated_similarities"].get<double>());
-    if (comparison.contains("gated_true_loop_frames_in_candidate_areas")) {
-      const json& cov = g.at("evaluation").at("gate_coverage");
-      ratios += fmt::format("true-loop query frames inside candidate areas: {} of {} ({:.1f}%)\n",
-                            cov.at("covered_query_frames").get<std::size_t>(),
-                            cov.at("positive_query_frames").get<std::size_t>(),
-                            100.0 * cov.at("covered_fraction").get<double>());
-    }
-  }
-  // The ground truth's loop query frames in 3-D and in the ground plane, and before eval.min_travel_m (issue
-  // 14): how much the counts depend on the rule (a drone's flight differs in 3-D; hovering is not a loop).
-  std::string truth_counts;
-  if (!ran.empty()) {
-    if (const json* truth = find_path(summaries.at(ran.front()), {"evaluation", "truth"});
-        truth && truth->contains("positives_3d")) {
-      compare["truth_counts"] = {{"plane", truth->at("plane")},
-                                 {"positives", truth->at("positives")},
-                                 {"positives_3d", truth->at("positives_3d")},
-                                 {"horizontal_plane", truth->at("horizontal_plane")},
-                                 {"positives_horizontal", truth->at("positives_horizontal")},
-                                 {"min_travel_m", truth->at("min_travel_m")},
-                                 {"positives_without_min_travel", truth->at("positives_without_min_travel")}};
-      truth_counts = fmt::format(
-          "ground-truth loop query frames: {} in 3-D, {} horizontal ({}); {} in the evaluation's plane ({}), "
-          "{} "
-          "before eval.min_travel_m = {} m took out revisits without travel\n",
-          number(truth->at("positives_3d")), number(truth->at("positives_horizontal")),
-          truth->at("horizontal_plane").get<std::string>(), number(truth->at("positives")),
-          truth->at("plane").get<std::string>(), number(truth->at("positives_without_min_travel")),
-          number(truth->at("min_travel_m"), 1));
-    }
-  }
+  if (summaries.count("full") && summaries.count("gated"))
+    ratios = full_over_gated(summaries.at("full"), summaries.at("gated"), comparison);
+  const std::string truth_counts =
+      ran.empty() ? std::string() : truth_counts_text(summaries.at(ran.front()), compare);
   compare["comparison"] = comparison;
   compare["methods"] = ran;
   compare["recommended"] = recommended_method(ran);
@@ -579,23 +365,7 @@ int compare_command(const CompareOptions& options) {
   write_json_file(out_dir / "compare.json", compare);
 
   if (!ran.empty()) {
-    const json& any = summaries.at(ran.front());
-    std::string header =
-        fmt::format("compare on {} ({} frames)", base.run.dataset, any.value("frames_processed", 0));
-    if (const json* truth = find_path(any, {"evaluation", "truth"})) {
-      if (truth->contains("pairs_file")) {
-        header += fmt::format("; ground-truth loops: the {} pairs of {} ({} in the run's frames)",
-                              number(truth->at("pairs")), truth->at("pairs_file").get<std::string>(),
-                              number(truth->at("pairs_in_run")));
-      } else {
-        header += fmt::format(
-            "; ground-truth loops within {} m ({}), gap {} frames, {} m of travel, detections true "
-            "within {} m",
-            number(truth->at("radius_m"), 2), truth->at("plane").get<std::string>(),
-            number(truth->at("gap_frames")), number(truth->value("min_travel_m", json(0.0)), 1),
-            number(truth->at("accept_radius_m"), 2));
-      }
-    }
+    const std::string header = compare_header(base.run.dataset, summaries.at(ran.front()));
     std::printf("%s\n%s%s%s%s%s", header.c_str(), truth_counts.c_str(), table(ran, summaries, false).c_str(),
                 kTimeNote, ratios.c_str(), interrupted_note(signals, ran, methods).c_str());
   }
@@ -630,7 +400,7 @@ void add_compare_command(CLI::App& app, int& exit_code) {
                   "output folder: compare.json, plots/, and one run folder per method")
       ->required();
   std::string methods_help = "comma-separated subset of:";
-  for (const CompareMethod& m : kCompareMethods) methods_help += fmt::format("\n  {:<14} {}", m.name, m.what);
+  for (const MethodEntry& m : kMethods) methods_help += fmt::format("\n  {:<14} {}", m.name, m.what);
   CLI::Option* methods_option =
       cmd->add_option("--methods", options->methods, methods_help)->capture_default_str();
   cmd->add_option("--frames", options->frames, "frame range A:B (indices, B exclusive; A: or :B)");

@@ -46,8 +46,8 @@ std::string csv_field(const std::string& text) {
 
 // Decodes an image for DIRD: grey/BGR/BGRA, 16-bit unsigned samples scaled to 8 bits by the rule of every
 // reader (to_8bit_samples, io/dataset.hpp). Other sample types or channel layouts are refused with the same
-// words as `loopgate run`, so that an image describe accepts is one a run accepts, read the same way (issue
-// 15). Throws DataError naming the file.
+// words as `loopgate run`, so that an image describe accepts is one a run accepts, read the same way.
+// Throws DataError naming the file.
 cv::Mat read_image(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) throw DataError(path, "no such image file");
@@ -79,7 +79,7 @@ int run_describe(const DescribeOptions& opt) {
   config.flip_vertical = opt.flip_vertical;
   const DirdExtractor extractor(config);
 
-  // Every output path is known before anything is written: none may be an input (issue 15: `--out IMAGE`
+  // Every output path is known before anything is written: none may be an input (`--out IMAGE`
   // truncated the image before reading it; `--picture DIR` replaced the input PNGs when DIR was their
   // folder).
   std::set<std::string> used_names;

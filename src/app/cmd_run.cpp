@@ -16,12 +16,20 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
+#include "pipeline/method_registry.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
 
 namespace loopgate::app {
 
 namespace {
+
+// The registry's methods, one per line, for --method's help.
+std::string method_help() {
+  std::string out;
+  for (const MethodEntry& m : kMethods) out += fmt::format("\n  {:<19} {}", m.name, m.what);
+  return out;
+}
 
 struct RunOptions {
   std::string config_file;
@@ -40,7 +48,7 @@ struct RunOptions {
 };
 
 // The problems lenient opening collected: when the run stops before summary.json (which lists them) is
-// written, they are the likely cause and must be seen (issue 15).
+// written, they are the likely cause and must be seen.
 void log_dataset_problems(const Dataset& dataset) {
   constexpr std::size_t kShown = 20;
   const auto& issues = dataset.issues();
@@ -86,7 +94,7 @@ void write_run_config(const PipelineConfig& config, const RunOptions& options) {
   }
 }
 
-// --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
+// --reference DIR --query DIR: docs/detection.md § Two sequences, appearance only (no odometry).
 int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   if (options.reference.empty() || options.query.empty()) {
     throw ConfigError("two-sequence mode needs both --reference DIR and --query DIR");
@@ -134,7 +142,7 @@ int run_command(const RunOptions& options) {
   if (options.trace) flags.push_back({"output.trace", "true", "--trace"});
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
   PipelineConfig config =
-      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
+      load_pipeline_config(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
   if (config.run.dataset.empty())
     throw ConfigError("run.dataset: no dataset (pass --dataset DIR or --dataset FILE.bag)");
@@ -198,9 +206,11 @@ void add_run_command(CLI::App& app, int& exit_code) {
                   "frame) or odometry (no loop detection); overrides run.mode");
   cmd->add_option(
       "--method", options->method,
-      "dird-seqslam (the shipped configs' choice: DIRD matched by contrast and sequence, robust "
-      "across day/night and seasons), dird (the paper's matcher; the default without a config) or "
-      "seqslam (the baseline); gated or full as --mode says; overrides run.method");
+      "a detector, gated or full as --mode says: dird-seqslam (the shipped configs' choice: DIRD matched by "
+      "contrast and sequence, robust across day/night and seasons), dird (the paper's matcher; the default "
+      "without a config) or seqslam (the baseline); or one of the methods below, which sets the mode too. "
+      "Overrides run.method" +
+          method_help());
   cmd->add_option("--reference", options->reference,
                   "two-sequence mode (with --query): reference dataset folder, e.g. Nordland summer");
   cmd->add_option("--query", options->query, "two-sequence mode (with --reference): query dataset folder");

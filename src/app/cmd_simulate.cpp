@@ -110,7 +110,7 @@ int run_simulate(const SimulateOptions& opt) {
   apply_input_overrides(opt, config);
 
   // --force clears OUT/mav0 and OUT/simulation.json before the inputs are read: none of them may be there
-  // (issue 15: outputs never over inputs).
+  // (outputs never over inputs).
   const std::filesystem::path out_dir = opt.out_dir;
   const sim::SimulationSettings& s = config.simulation;
   for (const auto& [what, file] : std::vector<std::pair<std::string, std::string>>{

@@ -1,4 +1,4 @@
-// Covariances of relative poses, for odometry edges that carry the odometry's own uncertainty (issue 13).
+// Covariances of relative poses, for odometry edges that carry the odometry's own uncertainty.
 //
 // Convention (the pose graph's residual, stages/posegraph): the error of a relative pose T_a_b is
 // [dp; dtheta], dp the position error in a's frame, dtheta a right perturbation (in b's frame):

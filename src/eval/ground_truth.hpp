@@ -1,4 +1,4 @@
-// Ground-truth loops (../shared/docs/evaluation.md): from positions (radius, gap, plane) or from a
+// Ground-truth loops (docs/evaluation.md): from positions (radius, gap, plane) or from a
 // pairs file, and the true-match test used to score detections.
 #pragma once
 

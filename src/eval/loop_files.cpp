@@ -24,7 +24,7 @@ void strip_bom(std::string& line, std::size_t line_no) {
 // Reads rows of exactly `columns` comma-separated numbers ("nan" allowed); calls row(values, line_no).
 template <class RowFn>
 void read_numeric_csv(const std::filesystem::path& file, std::size_t columns, RowFn&& row) {
-  // A FIFO or a device would block open() or never end (issue 15).
+  // A FIFO or a device would block open() or never end.
   std::error_code ec;
   if (std::filesystem::exists(file, ec) && !std::filesystem::is_regular_file(file, ec))
     throw DataError(file, "not a regular file (a FIFO, socket, device or directory), expected a csv file");

@@ -1,5 +1,5 @@
 // Scoring loop detections against a ground truth: PR curve, average precision, recall at a
-// precision (../shared/docs/evaluation.md).
+// precision (docs/evaluation.md).
 #pragma once
 
 #include <cstddef>

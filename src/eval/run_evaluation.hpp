@@ -1,5 +1,5 @@
-// The "evaluation" block of a run's summary.json from plain data (evaluation.md): ground-truth loops from
-// positions or from aligned sequences, the reported loops and the ranked detections scored against them,
+// The "evaluation" block of a run's summary.json from plain data (docs/evaluation.md): ground-truth loops
+// from positions or from aligned sequences, the reported loops and the ranked detections scored against them,
 // and the gated run's coverage of the true loops by candidate areas. No files: the caller writes
 // truth_loops.csv and ground_truth.tum from what these return.
 #pragma once

@@ -55,7 +55,7 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
     throw ConfigError(origin + ": expected a mapping of sections (section: {key: value})");
   }
   // yaml-cpp keeps both entries of a key given twice, and the last one would silently win: an error, naming
-  // both lines (issue 15).
+  // both lines.
   std::map<std::string, std::string> section_origin;
   std::map<std::string, std::string> key_origin;
   for (const auto& section : root) {

@@ -80,7 +80,7 @@ namespace {
 
 // Frames probed for the reference image size when the calibration does not give it, spread evenly over the
 // sequence: the majority size wins, so that one odd frame (frame 0 of another size) does not make every
-// other frame "the wrong size" (issue 15).
+// other frame "the wrong size".
 constexpr std::size_t kSizeProbeFrames = 15;
 
 // Width and height from a PNG's IHDR chunk (no decoding); nullopt when `file` is not a PNG.

@@ -77,7 +77,7 @@ class Dataset {
   // Problems recorded in lenient mode (empty in strict mode).
   virtual const std::vector<DataIssue>& issues() const = 0;
 
-  // ---- additions (io owner); defaults keep other implementations of this interface compiling ----
+  // Optional queries: the defaults suit a dataset without frame numbers, sensors or ground truth of its own.
 
   // Index of frame `frame` in the original sequence: the KITTI image number (a subset folder such as
   // kitti/00/frames holds images 0, 1000, 2000 -> frames 0, 1, 2), else `frame` itself.

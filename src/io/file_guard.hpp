@@ -1,4 +1,4 @@
-// Guards on the files a command reads and writes (issue 15):
+// Guards on the files a command reads and writes:
 //  - every input is a regular file: a FIFO, socket or device given as a config or a csv would block open()
 //    forever or never end;
 //  - no output path is an input path: a run must not overwrite what it reads (a previous run's

@@ -1,8 +1,8 @@
 // A fast path for the commonest image file of a replay: an 8-bit grey, non-interlaced PNG (every EuRoC,
 // TUM-VI and rendered loopgate image). The zlib stream is inflated in one call by libdeflate (Debian
 // libdeflate-dev), which is 1.5-2x faster than zlib's streaming inflate that OpenCV's libpng decoder uses,
-// and the rows are unfiltered here (PNG filter types 0-4, ISO/IEC 15948 § 9). Issue 16: decoding was a third
-// of the CPU time of a rendered MH_05 run.
+// and the rows are unfiltered here (PNG filter types 0-4, ISO/IEC 15948 § 9). Decoding was a third of the CPU
+// time of a rendered MH_05 run before this path.
 //
 // The fast path answers only what it is sure of. Anything else (another colour type or bit depth, interlace,
 // a chunk that could change the pixels - tRNS, sBIT, PLTE..., a CRC or Adler-32 mismatch, a truncated or

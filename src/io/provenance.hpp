@@ -1,4 +1,4 @@
-// Provenance of a run's outputs (issue 14): which program made them, how it was called, when, where, and with
+// Provenance of a run's outputs: which program made them, how it was called, when, where, and with
 // which effective configuration. summary.json (`provenance`) and compare.json carry it, so a folder of
 // outputs says how to make it again.
 #pragma once

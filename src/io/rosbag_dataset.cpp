@@ -1,4 +1,4 @@
-// ROS1 bag reader (issue 14): EuRoC and TUM-VI publish their sequences as bags too.
+// ROS1 bag reader: EuRoC and TUM-VI publish their sequences as bags too.
 //   frames        the messages of OpenOptions::bag_image_topic (sensor_msgs/Image: mono8, bgr8, rgb8, bgra8,
 //                 rgba8; sensor_msgs/CompressedImage: whatever OpenCV decodes), timed by header.stamp; a
 //                 frame's number is the position of its message on the topic

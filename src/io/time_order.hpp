@@ -1,4 +1,4 @@
-// Private: the time-order rule of the dataset readers (issue 15), shared by the text tables (rows are lines)
+// Private: the time-order rule of the dataset readers, shared by the text tables (rows are lines)
 // and the ROS1 bag reader (rows are the messages of one topic).
 #pragma once
 

@@ -36,8 +36,6 @@ void write_euroc_groundtruth(const std::filesystem::path& csv_file,
 void write_euroc_camera_yaml(const std::filesystem::path& yaml_file, const CameraCalibration& camera);
 void write_euroc_imu_yaml(const std::filesystem::path& yaml_file, const ImuCalibration& imu);
 
-// ---- additions (io owner) ----
-
 // KITTI poses with times; with allow_fewer the poses file may have fewer rows than times.txt
 // (ground truth that stops early); more rows is always an error. A pose file with 13 columns (a time in
 // seconds first, then the 12) is timed by itself: times_file is then not read.

@@ -1,5 +1,5 @@
 // Streaming writers for run outputs: CSV tables, TUM trajectories, JSON documents and Chrome trace-event
-// files (which Perfetto and chrome://tracing open). Every file is whole or absent (issue 15): it is written
+// files (which Perfetto and chrome://tracing open). Every file is whole or absent: it is written
 // under a temporary name (FILE.partial, rows streamed as they come, flushed now and then, so that a killed
 // process leaves what it had under that name) and renamed to FILE by close() once complete; a writer
 // destroyed without close(), or whose close() fails, removes its temporary file. Every writer throws

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include "core/error.hpp"
+#include "pipeline/method_registry.hpp"
 
 namespace loopgate {
 
@@ -35,14 +36,13 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     if (run.mode == RunMode::kGated) {
       spdlog::info(
           "run: SeqSLAM gated (run.mode gated): only inside the pose gate's candidate areas, the frames "
-          "their "
-          "cells and sequences need; matches at the end of the stream");
-      return make_seqslam_gated(context);
+          "their cells and sequences need; matches at the end of the stream");
+    } else {
+      spdlog::info(
+          "run: SeqSLAM full (run.mode full): every frame, the whole difference matrix; matches at the "
+          "end of the stream");
     }
-    spdlog::info(
-        "run: SeqSLAM full (run.mode full): every frame, the whole difference matrix; matches at the end of "
-        "the stream");
-    return make_seqslam(context);
+    return method_entry(context.config)->make(context);
   }
   if (!run.detects_loops()) return make_no_detection(context);
   if (!dataset_has_images) {
@@ -66,8 +66,7 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     if (d.standardize == "batch") {
       throw ConfigError(
           "dird_seqslam.standardize: 'batch' needs the whole sequence before the first comparison "
-          "(two-sequence "
-          "runs); a single sequence streams: use 'causal'");
+          "(two-sequence runs); a single sequence streams: use 'causal'");
     }
     spdlog::info(
         "run: dird-seqslam {} (DIRD {} normalisation, {} resize, {} standardisation): contrast over {} "
@@ -75,14 +74,16 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
         enum_name(run.mode), d.normalization, d.resize, d.standardize,
         2 * d.search.contrast_half_window_frames + 1, config.match.sequence_length,
         d.search.velocities().size(), config.match.sequence_length - 1);
-    return run.mode == RunMode::kFull ? make_dird_seqslam_full(context) : make_dird_seqslam_gated(context);
+    return method_entry(config)->make(context);
   }
   if (config.standardize.enabled() || config.scale.online()) {
     spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", config.standardize.mode,
                  config.standardize.distance, config.scale.mode);
-    return run.mode == RunMode::kFull ? make_standard_dird_full(context) : make_standard_dird_gated(context);
+    // The standardised object also holds the online scale, for raw descriptors too.
+    if (!config.standardize.enabled())
+      return find_method_entry("dird", enum_name(run.mode), "causal")->make(context);
   }
-  return run.mode == RunMode::kFull ? make_dird_full(context) : make_dird_gated(context);
+  return method_entry(config)->make(context);
 }
 
 }  // namespace loopgate

@@ -120,8 +120,7 @@ class DirdFull final : public DetectionMethod {
     if (run.max_in_flight > context.config.match.margin) {
       spdlog::info(
           "run: match.margin {} < run.max_in_flight {}: the similarities against the last {} frames before "
-          "the "
-          "margin are computed in the (serial) match node",
+          "the margin are computed in the (serial) match node",
           context.config.match.margin, run.max_in_flight, run.max_in_flight - context.config.match.margin);
     }
   }

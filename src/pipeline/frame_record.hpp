@@ -82,7 +82,7 @@ struct FrameMsg {
 // (preallocated for every frame the run may release), read by any stage after that.
 // frame(): the dataset frame index (what the dataset is asked for); label(): the frame's number in the
 // outputs, its identity in the dataset (Dataset::source_index: the KITTI image number, the EuRoC data row),
-// which a rejected input row does not shift (issue 15). Both are equal unless rows were rejected or the
+// which a rejected input row does not shift. Both are equal unless rows were rejected or the
 // dataset is a subset folder.
 class SeqIndex {
  public:

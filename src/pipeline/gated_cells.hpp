@@ -1,4 +1,4 @@
-// The pose gate of a gated method (pose-gating.md): the gate (eq. 8-10) and the candidate-area tracker
+// The pose gate of a gated method (docs/gating.md): the gate (eq. 8-10) and the candidate-area tracker
 // per frame, the cells each frame's update newly covers and the frames that newly need a descriptor, and
 // everything the run reports about them (frames.csv gate columns, candidate_areas.csv, candidate_cells.csv,
 // descriptors.csv, the summary's "gate" block, the evaluation's coverage). Every gated method (DIRD raw or

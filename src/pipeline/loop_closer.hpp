@@ -1,4 +1,4 @@
-// Loop closures that correct the trajectory (issue 13): every loop the method accepts (LoopsWriter's
+// Loop closures that correct the trajectory: every loop the method accepts (LoopsWriter's
 // listener) is queued to one worker thread that verifies it geometrically (stages/verify) and, while the
 // stream runs, solves the pose graph (stages/posegraph) whenever verified loops arrived, bounded by
 // posegraph.max_solve_s. Nothing of the frame's path waits for it: the sink only holds a loop frame's

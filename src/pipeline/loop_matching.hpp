@@ -1,7 +1,7 @@
 // The matching end of a DIRD method (full or gated, raw or standardised): the streaming sequence matcher
-// (DP + NMS, dird.md §3-4), its loop closures to loops.csv, and the frames' detection rows once the matcher
-// has finalised them. Rows go in through push() in sequence order (the serial match node); the sink reads
-// detection(seq) in sequence order.
+// (DP + NMS, docs/detection.md § The paper's matcher), its loop closures to loops.csv, and the frames'
+// detection rows once the matcher has finalised them. Rows go in through push() in sequence order (the serial
+// match node); the sink reads detection(seq) in sequence order.
 #pragma once
 
 #include <cstddef>

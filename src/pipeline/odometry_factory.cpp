@@ -163,7 +163,7 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
     TrajectoryFile trajectory = read_trajectory_file(config.file, config.file_format, dataset.source_times());
     std::vector<StampedPose>& poses = trajectory.poses;
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
-    // A trajectory that does not overlap the dataset would make every frame "odometry lost" (issue 15).
+    // A trajectory that does not overlap the dataset would make every frame "odometry lost".
     const auto gap_ns = static_cast<Timestamp>(config.file_max_gap_s * 1e9);
     std::size_t covered = 0;
     for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
@@ -172,7 +172,7 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
     }
     if (covered == 0) {
       // Said now, and again when the run ends (it exits non-zero, run_checks.hpp); the run still goes
-      // through the frames so that its outputs show it frame by frame (issue 14).
+      // through the frames so that its outputs show it frame by frame.
       spdlog::error("odometry: {}: every frame will be 'odometry lost'",
                     odometry_expectation(config, ekf, dataset));
     } else if (covered < dataset.frame_count()) {

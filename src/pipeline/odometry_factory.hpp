@@ -1,4 +1,4 @@
-// Odometry sources built from a Dataset (vio-ekf.md § Odometry sources). The sources of
+// Odometry sources built from a Dataset (docs/ekf.md). The sources of
 // src/stages/odometry take plain data (a trajectory, ground-truth states, calibrations, an axis); this is
 // the composition root's half: it reads those out of the dataset and the trajectory file, resolves
 // `odometry.source: auto` and says what is missing.
@@ -30,7 +30,7 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
 std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset);
 
 // What the configured source needs from `dataset` and its inputs, naming the file (odometry.file, the
-// dataset) and the times they cover: the run's checks say it when no frame got a pose (issue 14).
+// dataset) and the times they cover: the run's checks say it when no frame got a pose.
 std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset);
 
 // ConfigError when the run needs poses (run.mode gated: the pose gate; run.mode odometry; verify.enabled) and

@@ -92,8 +92,7 @@ void PipelineRun::connect_gate_feedback() {
   feedback_on_ = true;
   spdlog::info(
       "gate.feedback: on: the gate of frame i is re-anchored through the latest loop verified among the "
-      "query "
-      "frames <= i - {} (run.max_in_flight {} + the method's verdict delay {} frames)",
+      "query frames <= i - {} (run.max_in_flight {} + the method's verdict delay {} frames)",
       lag, config_.run.max_in_flight, *delay);
 }
 

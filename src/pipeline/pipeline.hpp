@@ -22,12 +22,11 @@
 // - The detection method is chosen once (pipeline/detection_method.hpp): none (run.mode odometry), DIRD full,
 //   DIRD gated (default), SeqSLAM full or gated (run.method seqslam). After the drain its finish() runs
 //   (matcher flush, SeqSLAM's search), then the rows held for their detection are written and summary.json.
-// - The producer runs on the calling thread, outside the worker arena (ReplayClock: `rate: max` waits for a
-// free
-//   slot, `rate: R` releases frame i at start + (t_i - t_first) / R and drops it when K frames are in
+// - The producer runs on the calling thread, outside the worker arena (ReplayClock: `rate: max` waits for
+//   a free slot, `rate: R` releases frame i at start + (t_i - t_first) / R and drops it when K frames are in
 //   flight).
-// - Every released frame gets the next contiguous sequence number and passes every node, whatever happens to
-// it.
+// - Every released frame gets the next contiguous sequence number and passes every node, whatever happens
+//   to it.
 // - Bad data in one frame (image that fails to decode, IMU gap/out-of-order/duplicates, odometry lost) is
 //   recorded in that frame's status and in the summary; the run goes on. Any other exception escaping a node
 //   cancels the graph; it is reported once with its stage and frame, the outputs of the frames already
@@ -97,14 +96,14 @@ struct RunResult {
 const std::vector<std::string>& run_output_file_names();
 
 // Throws ConfigError when `out_dir` already holds another run's outputs (any of `names`, files or folders)
-// and `force` is false: outputs of two runs must not mix in one folder (issue 14). The message names what
+// and `force` is false: outputs of two runs must not mix in one folder. The message names what
 // was found and says --force replaces it. `command` names the refusing command ("run", "compare").
 void refuse_previous_outputs(const std::filesystem::path& out_dir, const std::vector<std::string>& names,
                              bool force, const std::string& command);
 
 // Throws ConfigError when an input the run reads (odometry.file with source file; `extra` inputs of the
 // command, e.g. its --config file) is one of the files it writes into `out_dir`: a previous run's
-// trajectory.tum given as odometry.file would be read, then overwritten (issue 15).
+// trajectory.tum given as odometry.file would be read, then overwritten.
 void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
                                 const std::vector<std::filesystem::path>& extra_inputs = {});
 

@@ -142,7 +142,7 @@ struct OutputConfig {
   void validate() const;
 };
 
-// Evaluation of the detections against the dataset's ground truth (when it has one), evaluation.md.
+// Evaluation of the detections against the dataset's ground truth (when it has one), docs/evaluation.md.
 struct EvalConfig {
   // Ground-truth loops: query i is positive when some j <= i - truth_gap_frames lies within
   // truth_radius_m of it (r_true), distances in `plane`: "xz" (KITTI camera frame), "xy", "xyz", or
@@ -153,12 +153,12 @@ struct EvalConfig {
   // r_accept: a detection (i, j) is a true positive when the ground-truth positions of i and j are at
   // most this far apart (in `plane`); 0 = truth_radius_m.
   double accept_radius_m = 0.0;
-  // A revisit needs travel in between (issue 14): a true loop, and a true detection, also needs at least this
+  // A revisit needs travel in between: a true loop, and a true detection, also needs at least this
   // much ground-truth path (3-D, summed frame to frame) between query and reference, so that hovering or
   // standing still within truth_radius_m is not a loop (on an EuRoC flight many "positives" within 0.2 m and
   // 20 frames are the drone hovering; on KITTI 00, 21 are the car stopped). 2 m: what the simulator's
-  // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (before issue
-  // 14). Not used with truth_pairs_file.
+  // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (the former
+  // behaviour). Not used with truth_pairs_file.
   double min_travel_m = 2.0;
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
@@ -257,7 +257,7 @@ struct PipelineConfig {
   // and the contrast enhancement and sequence search (stages/match/contrast_search.hpp); its sequence
   // length is match.sequence_length, its margin match.margin.
   DirdSeqSlamConfig dird_seqslam;
-  // Loop closures that correct the trajectory (issue 13): geometric verification of every accepted loop and
+  // Loop closures that correct the trajectory: geometric verification of every accepted loop and
   // the pose graph they feed (trajectory_corrected.tum, loop_edges.csv).
   VerifyConfig verify;
   PoseGraphConfig posegraph;

@@ -93,7 +93,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
                  end_of_stream_ms, std::nullopt, &closer_,     end_of_stream_time};
   parts.truth_pairs = truth_pairs_ ? &*truth_pairs_ : nullptr;
   // The evaluation covers the frames the run got to: an interrupted run stops at the last frame presented, a
-  // failed one at the last frame through the sink (issue 15: not the ground truth of frames never seen).
+  // failed one at the last frame through the sink (not the ground truth of frames never seen).
   const std::size_t processed = outputs_.frames_through();
   parts.evaluated_end_frame =
       result.failed
@@ -110,7 +110,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
                [&] { evaluation = evaluate_run(parts, out_dir_, &truth_loops); });
   if (config_.output.trace) trace_end_of_stream("end of stream: evaluation", step_ns);
-  // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
+  // A run that went through its frames and got nothing usable fails loudly, outputs written.
   std::vector<std::string> problems;
   if (!result.failed && !result.interrupted) {
     problems =

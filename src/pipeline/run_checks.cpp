@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "io/dataset.hpp"
+#include "pipeline/method_registry.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline_config.hpp"
 #include "pipeline/run_counters.hpp"
@@ -30,9 +31,11 @@ RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& datas
   in.dataset_root = dataset.root().string();
   in.detects = detects;
   in.method = enum_name(config.run.method);
-  const bool seqslam = config.run.seqslam();
-  in.margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
-  in.margin_frames = seqslam ? config.seqslam.exclusion_margin_frames : config.match.margin;
+  const MethodEntry* method = method_entry(config);
+  const MarginKey margin = method != nullptr ? method->margin : MarginKey::kMatchMargin;
+  in.margin_key = enum_name(margin);
+  in.margin_frames =
+      margin == MarginKey::kSeqSlamExclusion ? config.seqslam.exclusion_margin_frames : config.match.margin;
   return in;
 }
 
@@ -80,9 +83,8 @@ std::vector<std::string> run_problems(const RunCheckInput& in) {
   if (in.detects && in.frames_processed <= static_cast<std::size_t>(std::max(0, in.margin_frames))) {
     problems.push_back(fmt::format(
         "no detection possible: the run has {} frames, and run.method {} compares a frame only with frames "
-        "at "
-        "least {} = {} frames before it; expected more than {} frames (a longer --frames range or sequence, "
-        "or a smaller {})",
+        "at least {} = {} frames before it; expected more than {} frames (a longer --frames range or "
+        "sequence, or a smaller {})",
         in.frames_processed, in.method, in.margin_key, in.margin_frames, in.margin_frames, in.margin_key));
   }
   return problems;

@@ -1,4 +1,4 @@
-// The checks that keep a run from failing silently (issue 14): a run that went through every frame and
+// The checks that keep a run from failing silently: a run that went through every frame and
 // produced nothing usable says so on the console and exits non-zero, with its outputs written (they show
 // what happened frame by frame). The cases, each judged from what the run saw, not predicted:
 //   - no odometry: an odometry source was configured and not one frame got a pose from it (a trajectory file

@@ -130,7 +130,7 @@ void RunOutputs::sink(FrameRecord& r) {
   } else {
     frames_csv_.write_row(row.values());
   }
-  // trajectory.tum holds only the poses the odometry estimated (issue 14): the identity an initialising
+  // trajectory.tum holds only the poses the odometry estimated: the identity an initialising
   // filter reports and a lost frame's last good pose are not estimates of this frame.
   if (r.usable_pose()) {
     const PoseEstimate& pose = r.odometry.pose;

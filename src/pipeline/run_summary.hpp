@@ -57,9 +57,9 @@ std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Ve
 // line), before the run starts; nullopt when the key is empty.
 std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset& dataset);
 
-// Evaluation block (evaluation.md): {"available": false} without ground truth (positions or pairs) or for a
-// method that does not detect loops; else positives from positions (r_true, gap, plane) or the listed pairs,
-// the loops and the ranked detections scored (within r_accept, or listed), the PR curve, and for gated
+// Evaluation block (docs/evaluation.md): {"available": false} without ground truth (positions or pairs) or
+// for a method that does not detect loops; else positives from positions (r_true, gap, plane) or the listed
+// pairs, the loops and the ranked detections scored (within r_accept, or listed), the PR curve, and for gated
 // methods the gate coverage. Writes ground_truth.tum (with ground-truth poses) and truth_loops.csv into
 // `out_dir`. Only frames the run processed take part.
 // `truth_loops`, when given, receives the ground-truth pairs truth_loops.csv lists, as dataset frame indices

@@ -1,4 +1,4 @@
-// SeqSLAM as a method of the pipeline (`run.method: seqslam`, ../shared/docs/seqslam.md): the describe node
+// SeqSLAM as a method of the pipeline (`run.method: seqslam`, docs/detection.md § SeqSLAM): the describe node
 // preprocesses every frame (step 1, in parallel, stored by sequence number); at the end of the stream the
 // difference matrix, the contrast enhancement and the sequence search (steps 2-4) run over the whole run
 // in parallel blocks (single-sequence: reference = query = the run, with the configured exclusion;

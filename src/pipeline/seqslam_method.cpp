@@ -1,8 +1,8 @@
-// Full SeqSLAM as a detection method (run.method seqslam, run.mode full; seqslam.md; the gated one is
-// seqslam_gated_method.cpp): describe preprocesses every frame
-// (parallel, stored by sequence number in a SeqSlamBatch); the search runs over the whole run at the end of
-// the stream (a query's sequence needs ds/2 later frames and the contrast statistics need neighbouring
-// rows), so every frame's detection row is known only then.
+// Full SeqSLAM as a detection method (run.method seqslam, run.mode full; docs/detection.md § SeqSLAM; the
+// gated one is seqslam_gated_method.cpp): describe preprocesses every frame (parallel, stored by sequence
+// number in a SeqSlamBatch); the search runs over the whole run at the end of the stream (a query's sequence
+// needs ds/2 later frames and the contrast statistics need neighbouring rows), so every frame's detection row
+// is known only then.
 #include <spdlog/fmt/fmt.h>
 
 #include <atomic>

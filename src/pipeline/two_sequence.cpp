@@ -76,7 +76,7 @@ struct BlockTrace {
 // order everything the caller prepared and the bodies wrote, visibly for ThreadSanitizer too). Indices are
 // handed out in small blocks; each body writes only its own outputs, so the result does not depend on
 // the thread count. The first exception of a body is rethrown after the join.
-// Stop requests (issue 15): once `stop` is set no block is handed out; the blocks handed out are finished, so
+// Stop requests: once `stop` is set no block is handed out; the blocks handed out are finished, so
 // the indices done are a prefix [0, returned). A second stop signal aborts (stop_request::check_abort).
 // With a BlockTrace, each block is a span on its thread's track.
 template <class Body>
@@ -496,7 +496,8 @@ TwoSequenceResult finish_run(const TwoSequenceSetup& setup, MethodRun run, const
   return result;
 }
 
-// DIRD (dird.md §5): describe both, S for every (reference, query) pair, the streaming matcher.
+// DIRD (docs/detection.md § Two sequences): describe both, S for every (reference, query) pair, the streaming
+// matcher.
 TwoSequenceResult run_dird(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                            Clock::time_point start) {
   const PipelineConfig& config = setup.config;
@@ -748,8 +749,9 @@ TwoSequenceResult run_dird_seqslam(TwoSequenceSetup setup, const std::filesystem
   return finish_run(setup, std::move(run), frames, out_dir, start, outputs_start);
 }
 
-// SeqSLAM (seqslam.md) between two runs: step 1 on both sequences in parallel, then the difference matrix
-// (reference rows x query columns), contrast enhancement and sequence search with exclusion "none".
+// SeqSLAM (docs/detection.md § SeqSLAM) between two runs: step 1 on both sequences in parallel, then the
+// difference matrix (reference rows x query columns), contrast enhancement and sequence search with exclusion
+// "none".
 TwoSequenceResult run_seqslam(TwoSequenceSetup setup, const std::filesystem::path& out_dir,
                               Clock::time_point start) {
   const PipelineConfig& config = setup.config;
@@ -835,8 +837,7 @@ TwoSequenceResult run_two_sequences(const PipelineConfig& config, const Dataset&
   if (!config.eval.truth_pairs_file.empty()) {
     throw ConfigError(
         "eval.truth_pairs_file: pairs of frame numbers within one sequence (single-sequence runs); two "
-        "sequences "
-        "are evaluated with eval.aligned_tolerance_frames");
+        "sequences are evaluated with eval.aligned_tolerance_frames");
   }
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");

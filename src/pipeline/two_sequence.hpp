@@ -1,4 +1,4 @@
-// Two-sequence mode (docs: ../shared/docs/dird.md §5): a reference sequence against a query sequence
+// Two-sequence mode (docs/detection.md § Two sequences): a reference sequence against a query sequence
 // (e.g. Nordland summer vs winter), appearance only. Every image of both is described (in parallel,
 // `run.threads` workers), S is computed for every (reference r, query q) pair with no safety margin, and
 // the query rows feed the streaming SequenceMatcher in its two-sequence mode (same DP and NMS as the
@@ -13,10 +13,10 @@
 // run.frames (A:B) selects the same index range of both sequences. Images that fail to decode are
 // recorded (frame status "error") and take part in no pair (SeqSLAM: they take part as all-zero images).
 //
-// run.method selects the method: "dird" (above) or "seqslam" (seqslam.md: both sequences preprocessed in
-// parallel, the difference matrix reference rows x query columns, contrast enhancement and sequence
-// search, with exclusion "none" whatever seqslam.exclusion says, logged; frames.csv gives every query's
-// best reference match and its ratio, accepted or not; loops.csv the accepted ones, score = ratio).
+// run.method selects the method: "dird" (above) or "seqslam" (docs/detection.md § SeqSLAM: both sequences
+// preprocessed in parallel, the difference matrix reference rows x query columns, contrast enhancement and
+// sequence search, with exclusion "none" whatever seqslam.exclusion says, logged; frames.csv gives every
+// query's best reference match and its ratio, accepted or not; loops.csv the accepted ones, score = ratio).
 // summary.json has "mode": "two-sequence", "method", "score_order" (DIRD higher_is_better, SeqSLAM
 // lower_is_better) and "evaluation" (evaluate_aligned below; {"available": false} when
 // eval.aligned_tolerance_frames < 0; AlignedSequences and evaluate_aligned are in
@@ -49,7 +49,7 @@ struct TwoSequenceResult {
 
 // `config` must be valid (load_config / apply_config validate it; run.mode is not used). Throws
 // ConfigError/DataError for bad input found before the run (no frames, no images, an empty frame range).
-// `stop` (may be null; issue 15): once set, no further frame is described; the query frames described so
+// `stop` (may be null): once set, no further frame is described; the query frames described so
 // far (a prefix of the range) are matched and every output is written for them, with "interrupted" in
 // summary.json (none when the stop came while the reference was described). A second stop signal
 // (core/stop_request.hpp) aborts the remaining work at once.

@@ -339,8 +339,8 @@ SimulationPlan plan_simulation(SimulationConfig& config) {
     for (const GroundTruthState& st : recorded_states) samples.push_back(StampedPose{st.t_ns, st.T_w_b});
     if (samples.size() < 2) throw DataError(s.trajectory_file, "needs at least 2 ground-truth rows");
     if (s.frame_times_file.empty()) {
-      // No camera times: frames at simulation.frame_rate_hz over the ground truth's span. Said loudly (issue
-      // 14): the dataset then does not have the recording's frame times, and nothing else would show it.
+      // No camera times: frames at simulation.frame_rate_hz over the ground truth's span. Said loudly:
+      // the dataset then does not have the recording's frame times, and nothing else would show it.
       const double period_s = 1.0 / s.frame_rate_hz;
       for (std::int64_t k = 0;; ++k) {
         const Timestamp t = samples.front().t_ns + s_to_ns(static_cast<double>(k) * period_s);

@@ -1,5 +1,5 @@
 // Calibration of the logistic similarity sim(d) = 1 / (1 + exp((d - mu) / sigma)) from a dataset's own
-// distance distributions (docs: ../shared/docs/dird.md §6).
+// distance distributions (docs/detection.md § The paper's matcher).
 //
 // Rule (state it with the config it produced):
 //   beyond  = distances of the pairs beyond the safety margin (mostly different places),

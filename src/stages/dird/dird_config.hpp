@@ -1,4 +1,5 @@
-// Configuration of the DIRD descriptor and of its similarity (docs: ../shared/docs/dird.md §1-2, §6).
+// Configuration of the DIRD descriptor and of its similarity (docs/detection.md § DIRD, the descriptor, and §
+// The paper's matcher).
 #pragma once
 
 #include <string>
@@ -21,8 +22,8 @@ struct DirdConfig {
   std::string normalization = "libdird";
   // Read the image bottom-up, as the reference command-line tool does.
   bool flip_vertical = false;
-  // How the image becomes the 192 x 192 working image: "nearest" (dird.md §1 step 2, bit-exact with the
-  // reference: one source pixel per working pixel, the others ignored) or "area" (each working pixel the
+  // How the image becomes the 192 x 192 working image: "nearest" (docs/detection.md § DIRD, bit-exact with
+  // the reference: one source pixel per working pixel, the others ignored) or "area" (each working pixel the
   // rounded mean of the source pixels its footprint covers: a box filter before sampling, which averages
   // sensor noise and aliasing away on images larger than 192 x 192; on smaller ones it is nearest
   // neighbour with integer index arithmetic). docs/illumination.md measures it.

@@ -13,7 +13,7 @@ namespace loopgate {
 
 namespace {
 
-// dird.md §1 constants.
+// The constants of the DIRD extraction (docs/detection.md § DIRD).
 constexpr int kTiles = 4;
 constexpr int kTileSize = 48;
 constexpr int kLevels = 4;
@@ -58,7 +58,7 @@ void check_input(const cv::Mat& image) {
   }
 }
 
-// Nearest-neighbour source index tables (dird.md §1 step 2, 32-bit float arithmetic).
+// Nearest-neighbour source index tables (docs/detection.md § DIRD, 32-bit float arithmetic).
 void source_indices(const cv::Mat& image, bool flip_vertical, int* rows, int* cols) {
   const float sx = static_cast<float>(image.cols) / static_cast<float>(kSide);
   const float sy = static_cast<float>(image.rows) / static_cast<float>(kSide);
@@ -139,7 +139,7 @@ inline std::uint8_t quantise(double s) {
   return static_cast<std::uint8_t>(value);  // truncation toward zero
 }
 
-// Responses of one pixel (dird.md §1 steps 4-5). Returns false for an invalid pixel (libdird mode).
+// Responses of one pixel (docs/detection.md § DIRD). Returns false for an invalid pixel (libdird mode).
 inline bool pixel_responses(const std::int32_t* integral, int x, int y, bool l2_normalization,
                             double* responses) {
   if (x < kBandLo || x >= kBandHi || y < kBandLo || y >= kBandHi) {

@@ -1,4 +1,4 @@
-// DIRD extraction (docs: ../shared/docs/dird.md §1): an 8-bit image of any size -> 3456 bytes.
+// DIRD extraction (docs/detection.md § DIRD, the descriptor): an 8-bit image of any size -> 3456 bytes.
 //
 // Only the 1728 distinct sample positions of the pooling stage are evaluated, from the integral image of
 // the 192 x 192 nearest-neighbour working image; the per-thread workspace is reused across calls (no
@@ -34,7 +34,7 @@ inline std::uint8_t bt601_grey(std::uint8_t r, std::uint8_t g, std::uint8_t b) {
 // Throws std::invalid_argument for empty images or other types.
 cv::Mat to_grey_bt601(const cv::Mat& image);
 
-// The 192 x 192 working image of dird.md §1 step 2 (after the optional vertical flip and grey
+// The 192 x 192 working image of docs/detection.md § DIRD (after the optional vertical flip and grey
 // conversion): work[v][u] = src[int(v * sy)][int(u * sx)], sx = float(W) / 192, sy = float(H) / 192.
 // Reference path for tests and pictures; extract() computes the same pixels without building it.
 cv::Mat dird_working_image(const cv::Mat& image, bool flip_vertical = false);

@@ -1,4 +1,4 @@
-// DIRD distances and the logistic similarity (docs: ../shared/docs/dird.md §2).
+// DIRD distances and the logistic similarity (docs/detection.md § The paper's matcher).
 //
 // L1 (default, the reference): sum of absolute byte differences over the 3456 bytes, SSE2 psadbw
 // (baseline x86-64; a plain loop elsewhere). L2: Euclidean norm of the byte differences.

@@ -34,7 +34,7 @@ void StandardizeConfig::validate() const {
     throw ConfigError("standardize.min_stddev: must be in (0, 128] descriptor byte units (got " +
                       std::to_string(min_stddev) + ")");
   }
-  // Counts bounded by what makes sense (issue 15): a million frames is longer than any dataset.
+  // Counts bounded by what makes sense: a million frames is longer than any dataset.
   require_in("standardize.warm_up", warm_up, std::int64_t{2}, std::int64_t{1'000'000}, "observations");
   if (window != 0) {
     require(window >= warm_up && window <= 1'000'000, "standardize.window",

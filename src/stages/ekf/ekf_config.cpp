@@ -26,7 +26,7 @@ void EkfConfig::validate() const {
           "must be in [1, 10]");
   require(positive(gravity_mps2), "gravity_mps2", "must be > 0");
   // Upper bounds on counts, windows and pixel sizes: what makes sense for a feature tracker, so that no value
-  // makes a run hang or exhaust memory (issue 15).
+  // makes a run hang or exhaust memory.
   require(max_features >= 8 && max_features <= 10'000, "max_features", "must be in [8, 10000]");
   require(grid_cols >= 1 && grid_cols <= 100, "grid_cols", "must be in [1, 100]");
   require(grid_rows >= 1 && grid_rows <= 100, "grid_rows", "must be in [1, 100]");

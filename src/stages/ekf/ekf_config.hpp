@@ -1,4 +1,4 @@
-// Configuration of the `ekf` odometry source (vio-ekf.md): an MSCKF visual-inertial filter with a KLT
+// Configuration of the `ekf` odometry source (docs/ekf.md): an MSCKF visual-inertial filter with a KLT
 // front end. Every tunable of src/stages/ekf lives here.
 #pragma once
 
@@ -56,10 +56,10 @@ struct EkfConfig {
   double klt_epsilon = 0.01;
   bool klt_predict_rotation = true;  // start the KLT search at the gyro-predicted position
   double fb_check_max_px = 1.0;      // forward-backward consistency threshold
-  // Pyramid levels of the backward (check) flow; -1: klt_pyramid_levels (before 2026-11-27). The backward
+  // Pyramid levels of the backward (check) flow; -1: klt_pyramid_levels (the former default). The backward
   // flow starts at the feature's previous position, where it ends when the forward track is right, so its
   // coarse levels have nothing to find: 0 cuts the KLT's time by about a quarter (README § Known
-  // limitations, issue 16).
+  // limitations).
   int klt_check_pyramid_levels = 0;
   double ransac_threshold_px = 1.0;  // on undistorted points expressed in pixels of the mean focal length
   double ransac_confidence = 0.99;

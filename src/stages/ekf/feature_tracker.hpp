@@ -1,4 +1,4 @@
-// KLT front end of the ekf source (vio-ekf.md § Front end): Shi-Tomasi corners, pyramidal Lucas-Kanade
+// KLT front end of the ekf source (docs/ekf.md): Shi-Tomasi corners, pyramidal Lucas-Kanade
 // with a forward-backward check, RANSAC (fundamental matrix on undistorted points) and grid-based
 // re-detection to keep about config.max_features tracked. With the rotation between the two images (from
 // the gyro) the KLT search starts at the rotation-predicted position, which needs fewer iterations and

@@ -1,4 +1,4 @@
-// IMU state and its propagation for the MSCKF (vio-ekf.md § State, § Propagation).
+// IMU state and its propagation for the MSCKF (docs/ekf.md).
 //
 // Error state (15): [dtheta (right perturbation of R_w_i: R = R_hat Exp(dtheta)), dp_w, dv_w, dbg, dba].
 // Noise densities follow the EuRoC (Kalibr) continuous-time convention.

@@ -1,4 +1,4 @@
-// The MSCKF filter (vio-ekf.md § The ekf source): IMU error state + a sliding window of cloned IMU poses,
+// The MSCKF filter (docs/ekf.md): IMU error state + a sliding window of cloned IMU poses,
 // fed with feature observations in undistorted normalised camera coordinates. No images here: the KLT
 // front end (FeatureTracker) or a simulation produces the observations, so the filter can be tested alone.
 #pragma once

@@ -1,4 +1,4 @@
-// The `ekf` odometry source as a plain class (vio-ekf.md, docs/ekf.md): KLT front end + MSCKF, started by
+// The `ekf` odometry source as a plain class (docs/ekf.md): KLT front end + MSCKF, started by
 // the initialiser(s) of ekf.init_mode (from the sensors, or from ground truth for experiments), failure
 // detection with re-initialisation by the same initialisers. One call per image, in order.
 // To wrap it as an OdometrySource: feed OdometryInput::imu / ::image, and for init_mode ground_truth the

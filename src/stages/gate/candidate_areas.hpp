@@ -1,4 +1,5 @@
-// Streaming clustering of gated frames into candidate areas (pose-gating.md §4, paper §4.2 and Fig. 6).
+// Streaming clustering of gated frames into candidate areas (docs/gating.md § Candidate areas, paper §4.2 and
+// Fig. 6).
 //
 // Feed every frame's GateDecision in order. Gated frames whose nearest j is too recent for the matcher
 // (i - j < pair_margin) are ignored: they are along-track neighbours, not loops. A gated frame i with

@@ -1,5 +1,5 @@
 // The combined Euclidean/Mahalanobis distance of the paper (eq. 8-9) and the gate threshold (eq. 10).
-// docs: ../shared/docs/pose-gating.md §2-3.
+// docs/gating.md § The distance and the threshold.
 #pragma once
 
 #include <Eigen/Core>

@@ -1,5 +1,5 @@
-// The set of frames whose descriptor has been requested (pose-gating.md §5: a descriptor is computed at
-// most once, only for frames some candidate area needs). A growable bitmap indexed by frame.
+// The set of frames whose descriptor has been requested (docs/gating.md § Lazy description: a descriptor is
+// computed at most once, only for frames some candidate area needs). A growable bitmap indexed by frame.
 #pragma once
 
 #include <cstddef>

@@ -9,7 +9,7 @@
 namespace loopgate {
 
 void GateConfig::validate() const {
-  // Upper bounds: far beyond any use, so that no value makes a run hang or exhaust memory (issue 15).
+  // Upper bounds: far beyond any use, so that no value makes a run hang or exhaust memory.
   require_in("gate.gap_frames", gap_frames, 1, 1'000'000, "frames");
   require_in("gate.min_travel_m", min_travel_m, 0.0, 1e6, "m");
   require_in("gate.beta_m", beta_m, 0.0, 1e5, "m");

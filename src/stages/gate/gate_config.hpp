@@ -1,5 +1,5 @@
-// Configuration of the pose gate and of the candidate areas (docs: ../shared/docs/pose-gating.md §2-4,
-// paper.md §4 eq. 8-10). Section "gate".
+// Configuration of the pose gate and of the candidate areas (docs/gating.md,
+// the paper §4 eq. 8-10). Section "gate".
 #pragma once
 
 #include <string>
@@ -28,8 +28,8 @@ struct GateConfig {
   int kdtree_leaf_size = 10;
   int kdtree_seed_neighbours = 4;
 
-  // Candidate areas (pose-gating.md §4). Two gated query frames belong to one cluster when at most
-  // area_max_hole_frames non-gated frames separate them and their nearest j differ by at most
+  // Candidate areas (docs/gating.md § Candidate areas). Two gated query frames belong to one cluster when at
+  // most area_max_hole_frames non-gated frames separate them and their nearest j differ by at most
   // area_j_tolerance_frames plus the number of query frames between them.
   int area_max_hole_frames = 10;
   int area_j_tolerance_frames = 30;

@@ -1,4 +1,4 @@
-// The pose gate (paper eq. 8-10, ../shared/docs/pose-gating.md §2-3): for every frame i, the exact nearest
+// The pose gate (paper eq. 8-10, docs/gating.md): for every frame i, the exact nearest
 // past frame j <= i - gap under the combined distance, found with a dynamic KD-tree over past positions and
 // an exact rescoring, and the decision d < 1.96 * sigma_i + beta.
 //

@@ -1,6 +1,6 @@
-// Sequence search on locally contrast-enhanced distances: SeqSLAM's matching back end (seqslam.md steps
-// 3-4) on any image distance, streaming, for DIRD descriptors in particular (run.method dird-seqslam,
-// docs/illumination.md).
+// Sequence search on locally contrast-enhanced distances: SeqSLAM's matching back end (docs/detection.md §
+// SeqSLAM steps 3-4) on any image distance, streaming, for DIRD descriptors in particular (run.method
+// dird-seqslam, docs/illumination.md).
 //
 // Why: across day and night (or seasons) every distance of a query grows, so an absolute scale (DIRD's
 // logistic with mu/sigma) rejects the true match with everything else. What survives the change of
@@ -66,7 +66,7 @@ struct ContrastSearchConfig {
   }
   // Throws ConfigError naming "dird_seqslam.<key>": contrast_half_window_frames in [1, 1000],
   // contrast_min_cells in [2, 2 w + 1], 0 < velocity_min <= velocity_max <= 10, velocity_steps in [1, 64]
-  // (1 only when min == max), min_score in [-100, 100]; each message states the bound (issue 15).
+  // (1 only when min == max), min_score in [-100, 100]; each message states the bound.
   void validate() const;
 
   // The velocities, ascending.

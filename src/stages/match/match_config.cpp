@@ -9,7 +9,7 @@ namespace loopgate {
 
 void MatchConfig::validate() const {
   // Upper bounds: what makes sense for a sequence match (the NMS visits 2W+1 cells per DP entry and the DP
-  // keeps L columns), far beyond any configuration in use, so that no value makes a run hang (issue 15).
+  // keeps L columns), far beyond any configuration in use, so that no value makes a run hang.
   require_in("match.margin", margin, 0, 1'000'000, "frames");
   require_in("match.sequence_length", sequence_length, 1, 1000, "frames");
   require_in("match.tau3", tau3, 0.0, 1.0, "(DP > tau3 * L; similarities are at most 1)");

@@ -1,4 +1,5 @@
-// Configuration of the sequence matching and non-maximum suppression (docs: ../shared/docs/dird.md §2-4).
+// Configuration of the sequence matching and non-maximum suppression (docs/detection.md § The paper's
+// matcher).
 #pragma once
 
 namespace loopgate {

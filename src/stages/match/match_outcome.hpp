@@ -11,7 +11,8 @@
 namespace loopgate {
 
 struct MatchOutcomeContext {
-  bool two_sequence = false;   // query vs reference (dird.md §5): shorter reasons, no margin
+  bool two_sequence =
+      false;  // query vs reference (docs/detection.md § Two sequences): shorter reasons, no margin
   bool described = true;       // the frame had a descriptor when its status became final
   bool outside_areas = false;  // gated run: no candidate-area cell in the frame's row
   bool before_margin = false;  // single sequence: no earlier frame beyond match.margin yet

@@ -1,5 +1,5 @@
-// Streaming assembly of sparse rows for the gated run (pose-gating.md §4-5): a candidate area adds cells
-// (query row i, reference columns j) to rows behind the current frame, so a row stays open for
+// Streaming assembly of sparse rows for the gated run (docs/gating.md § Candidate areas): a candidate area
+// adds cells (query row i, reference columns j) to rows behind the current frame, so a row stays open for
 // `horizon_frames` frames after it arrived and only then goes, complete, to the matcher (which needs its
 // rows in order). Rows without cells go to the matcher empty.
 //

@@ -1,5 +1,5 @@
 // Sequence matching (online DP) and delayed non-maximum suppression over the sparse similarity matrix
-// S(j, i) of DIRD (docs: ../shared/docs/dird.md §3-5).
+// S(j, i) of DIRD (docs/detection.md § The paper's matcher).
 //
 // DP (§3): for each stored entry S(j, i), the best path of L cells ending at (j, i) that goes back one
 // frame in i per step and 0..max_step frames in j (staying >= 0), missing entries counting 0:
@@ -67,7 +67,7 @@ class SequenceMatcher {
  public:
   enum class Mode {
     kSingleSequence,  // j earlier frame of the same sequence; requires i - j >= margin
-    kTwoSequence,     // j reference frame, i query frame; no margin (dird.md §5)
+    kTwoSequence,     // j reference frame, i query frame; no margin (docs/detection.md § Two sequences)
   };
 
   explicit SequenceMatcher(const MatchConfig& config = {}, Mode mode = Mode::kSingleSequence,
@@ -123,15 +123,16 @@ class SequenceMatcher {
 // DP entries above tau3 * L in ascending (i, j).
 std::vector<LoopClosure> sequence_dp_batch(std::span<const std::vector<SimilarityEntry>> columns,
                                            const MatchConfig& config);
-// NMS of dird.md §4 on DP entries (distinct (i, j)); returns the survivors in ascending (i, j).
+// NMS of docs/detection.md § The paper's matcher on DP entries (distinct (i, j)); returns the survivors in
+// ascending (i, j).
 std::vector<LoopClosure> nms_batch(std::span<const LoopClosure> dp, int nms_half_window);
 // sequence_dp_batch + nms_batch.
 std::vector<LoopClosure> match_batch(std::span<const std::vector<SimilarityEntry>> columns,
                                      const MatchConfig& config);
 
-// Two-sequence mode (dird.md §5): S for every (reference r, query q) pair, no safety margin, then the
-// streaming DP and NMS with i = query index and j = reference index. `statuses` (optional) receives the
-// status of every query frame.
+// Two-sequence mode (docs/detection.md § Two sequences): S for every (reference r, query q) pair, no safety
+// margin, then the streaming DP and NMS with i = query index and j = reference index. `statuses` (optional)
+// receives the status of every query frame.
 std::vector<LoopClosure> match_two_sequences(std::span<const Descriptor> reference,
                                              std::span<const Descriptor> query,
                                              const DirdSimilarity& similarity, const MatchConfig& config,

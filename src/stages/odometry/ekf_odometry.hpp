@@ -1,4 +1,4 @@
-// The `ekf` odometry source (vio-ekf.md): the MSCKF of src/stages/ekf (VioEkf) behind the OdometrySource
+// The `ekf` odometry source (docs/ekf.md): the MSCKF of src/stages/ekf (VioEkf) behind the OdometrySource
 // interface. Per frame it takes the decoded grey image and the IMU samples the sync node delivered since
 // the previous frame; it reports the filter status (initialising / tracking / lost with the reason), the
 // number of tracked features and the position sigma. It never throws for a bad frame: a missing or bad

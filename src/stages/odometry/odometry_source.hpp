@@ -1,10 +1,10 @@
-// Odometry sources (vio-ekf.md § Odometry sources): one interface, chosen by `odometry.source`.
+// Odometry sources (docs/ekf.md): one interface, chosen by `odometry.source`.
 //   drift: ground truth corrupted by a seeded random walk in position, heading and scale, with the
 //          covariance of that drift model (for datasets without IMU and controlled experiments);
 //   file:  an external trajectory (TUM, KITTI or EuRoC format: file_format), covariance from the growth model
 //          sigma^2 = a + b * distance;
 //   ekf:   the MSCKF visual-inertial filter of src/stages/ekf on the images and IMU (ekf_odometry.hpp);
-//   none:  no poses at all (appearance-only runs, issue 14): frames carry no pose, frames.csv says
+//   none:  no poses at all (appearance-only runs): frames carry no pose, frames.csv says
 //          odom_status none, trajectory.tum is empty; only run.mode full can detect loops without poses (the
 //          pose gate, run.mode odometry and verify need them: config errors).
 //   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth when

@@ -1,4 +1,4 @@
-// SeqSLAM steps 2-5 (../shared/docs/seqslam.md): difference matrix, local contrast enhancement,
+// SeqSLAM steps 2-5 (docs/detection.md § SeqSLAM): difference matrix, local contrast enhancement,
 // velocity-constrained sequence search with the ratio test. Plain functions over blocks of rows or
 // columns so a caller can split the work across threads; SeqSlam::run does everything in order.
 #pragma once

@@ -16,7 +16,7 @@ void require(bool ok, const std::string& key, const std::string& what) {
 }  // namespace
 
 void SeqSlamConfig::validate() const {
-  // Upper bounds: what makes sense for SeqSLAM's downsampled images and windows (issue 15: no value may
+  // Upper bounds: what makes sense for SeqSLAM's downsampled images and windows (no value may
   // make a run hang or exhaust memory).
   require(image_width_px > 0 && image_width_px <= 4096, "image_width_px", "must be in [1, 4096] px");
   require(image_height_px > 0 && image_height_px <= 4096, "image_height_px", "must be in [1, 4096] px");

@@ -1,4 +1,4 @@
-// SeqSLAM parameters (OpenSeqSLAM defaults, see ../shared/docs/seqslam.md) and the exclusion rule
+// SeqSLAM parameters (OpenSeqSLAM defaults, docs/detection.md § SeqSLAM) and the exclusion rule
 // that keeps a run from matching itself.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Gated SeqSLAM (issue 12, docs/seqslam-gated.md): SeqSLAM steps 2-4 (../shared/docs/seqslam.md) only
+// Gated SeqSLAM (docs/seqslam-gated.md): SeqSLAM steps 2-4 (docs/detection.md § SeqSLAM) only
 // where the pose gate's candidate areas cover cells (query i, reference j). A plain class, no threads: the
 // caller (pipeline/seqslam_gated_method.cpp) computes columns and queries in parallel.
 //

@@ -1,0 +1,71 @@
+// The method registry: run.method naming a row sets the detector, mode and standardisation; the detector
+// words keep meaning "this detector, in run.mode"; unknown names and a contradicting --mode are errors.
+#include <gtest/gtest.h>
+
+#include <set>
+#include <string>
+
+#include "core/error.hpp"
+#include "io/config.hpp"
+#include "pipeline/method_registry.hpp"
+#include "pipeline/pipeline_config.hpp"
+
+namespace loopgate {
+namespace {
+
+PipelineConfig load(const std::string& yaml, const std::vector<FlagValue>& flags = {}) {
+  RawConfig raw = RawConfig::from_yaml_string(yaml);
+  for (const FlagValue& f : flags) {
+    const std::size_t dot = f.key.find('.');
+    raw.set(f.key.substr(0, dot), f.key.substr(dot + 1), f.value, f.flag);
+  }
+  expand_method_name(raw);
+  PipelineConfig config;
+  apply_config(raw, config);
+  return config;
+}
+
+TEST(MethodRegistry, NamesAreUniqueAndEveryRowIsFoundByItsWords) {
+  std::set<std::string> names;
+  for (const MethodEntry& m : kMethods) {
+    EXPECT_TRUE(names.insert(m.name).second) << m.name;
+    EXPECT_EQ(find_method_entry(m.name), &m);
+    EXPECT_EQ(find_method_entry(enum_name(m.detector), enum_name(m.mode), m.standardize), &m) << m.name;
+  }
+}
+
+TEST(MethodRegistry, RunMethodNamesARow) {
+  const PipelineConfig c = load("run:\n  method: dird-seqslam-gated\n  mode: full\n");
+  EXPECT_EQ(c.run.method, Detector::kDirdSeqSlam);
+  EXPECT_EQ(c.run.mode, RunMode::kGated);  // the row's mode wins over the file's
+  const PipelineConfig s = load("run:\n  method: std-full\n");
+  EXPECT_EQ(s.run.method, Detector::kDird);
+  EXPECT_EQ(s.run.mode, RunMode::kFull);
+  EXPECT_EQ(s.standardize.mode, "causal");
+  EXPECT_EQ(method_entry(s)->name, std::string("std-full"));
+}
+
+TEST(MethodRegistry, OldSpellingsStayAliases) {
+  const PipelineConfig c = load("run:\n  method: seqslam\n  mode: gated\n");
+  EXPECT_EQ(c.run.method, Detector::kSeqSlam);
+  EXPECT_EQ(c.run.mode, RunMode::kGated);
+  EXPECT_EQ(method_entry(c)->name, std::string("seqslam-gated"));
+  const PipelineConfig d = load("run:\n  method: dird-seqslam\n", {{"run.mode", "full", "--mode"}});
+  EXPECT_EQ(method_entry(d)->name, std::string("dird-seqslam"));
+}
+
+TEST(MethodRegistry, UnknownNameAndContradictingModeAreErrors) {
+  EXPECT_THROW(load("run:\n  method: dird-gated-please\n"), ConfigError);
+  EXPECT_THROW(load("run:\n  method: seqslam-gated\n", {{"run.mode", "full", "--mode"}}), ConfigError);
+}
+
+TEST(MethodRegistry, SeqSlamRowsRefuseGateFeedbackAndNameTheirMargin) {
+  for (const MethodEntry& m : kMethods) {
+    EXPECT_EQ(m.streams_loops, m.detector != Detector::kSeqSlam) << m.name;
+    EXPECT_EQ(m.margin == MarginKey::kSeqSlamExclusion, m.detector == Detector::kSeqSlam) << m.name;
+    EXPECT_EQ(m.two_sequence, m.mode == RunMode::kFull) << m.name;
+  }
+}
+
+}  // namespace
+}  // namespace loopgate
