@@ -25,8 +25,8 @@ NAME, cells may be empty; frame indices are dataset frame indices):
                        "average_precision", "recall_at_100", ...}} (a top-level "precision_recall"
                        is read too)
   descriptor.csv       "frame,v0,...,v3455" one DIRD descriptor (54 x 64 bytes)       (optional)
-  compare.json         {"full": summary, "gated": summary, "seqslam": summary} (any subset), with the
-                       run directories COMPARE_DIR/full, COMPARE_DIR/gated, COMPARE_DIR/seqslam.
+  compare.json         {METHOD: summary, ..., "recommended": METHOD} (any subset of the methods), with
+                       one run directory per method, COMPARE_DIR/METHOD.
   aggregate.csv        (`loopgate aggregate`) run,method,...,average_precision,...,wall_s,
                        describe_match_ms,...: one row per run and method, empty cells where a run has no value
 
@@ -41,10 +41,13 @@ Pictures:
            correction.png  with loop correction (trajectory_corrected.tum): ground truth, the odometry and
                            the corrected trajectory, each aligned as its ATE is (summary.json's
                            trajectory_accuracy[_corrected].T_gt_est), ATE RMSE in the legend
-  compare  pr.png          PR curves of every method, AP and R@P100 in the legend (paper Fig. 9/12)
+  compare  pr.png          PR curves of every method, AP and R@P100 in the legend (paper Fig. 9/12); a
+                           method without detections is listed as "no detection"; AP and R@P100 are n/a
+                           when the range holds no true loop (undefined, not 0)
            time_per_frame.png  describe+match(+decode) time per frame and cumulative, full vs gated,
                            medians in the legend (paper Fig. 8/11)
-           plane.png, trajectory.png  of the gated run
+           plane.png, trajectory.png  of the recommended method's run (compare.json "recommended":
+                           gated dird-seqslam when it ran), else of the method of highest defined AP
            correction.png  with loop correction (compare.json's "loop_correction"): ground truth, the
                            odometry and every method's corrected trajectory, ATE RMSE in the legend
   aggregate aggregate.png  per run (groups) and method (bars): average precision above; below the
@@ -527,40 +530,69 @@ def plot_descriptor(run_dir, path, written):
     save(fig, path, written)
 
 
-def plot_pr(summaries, path, written, source):
-    fig, ax = plt.subplots(figsize=(7, 6))
-    drawn = 0
+def pr_numbers(name, pr, source):
+    """(AP, R@P100) texts of a PR block: "n/a" when the range holds no true loop (positives 0), where
+    precision and recall are undefined rather than 0."""
+    positives = pr.get("positives")
+    if isinstance(positives, (int, float)) and positives <= 0:
+        return "n/a", "n/a"
+    try:
+        return f"{float(pr.get('average_precision', 0)):.3f}", f"{float(pr.get('recall_at_100', 0)):.3f}"
+    except (TypeError, ValueError):
+        raise InputError(f"{source}: '{name}'.precision_recall: expected numeric average_precision and "
+                         "recall_at_100") from None
+
+
+def pr_legend_entries(summaries, source):
+    """One legend entry per method with a PR block: (name, label, curve or None). A method without a curve
+    (no detection) stays in the legend, marked "no detection"."""
+    entries = []
     for name, summary in summaries.items():
         pr = precision_recall(summary)
+        if not pr:
+            note(f"{source}: '{name}' has no precision_recall (no ground truth): left out of pr.png")
+            continue
+        ap, r100 = pr_numbers(name, pr, source)
+        label = METHOD_LABELS.get(name, name)
         if not pr.get("curve"):
-            note(f"{source}: '{name}' has no precision-recall curve (no detection): left out of pr.png")
+            entries.append((name, f"{label}: no detection (AP {ap})", None))
             continue
         try:
             recall = [float(p["recall"]) for p in pr["curve"]]
             precision = [float(p["precision"]) for p in pr["curve"]]
-            ap, r100 = float(pr.get("average_precision", 0)), float(pr.get("recall_at_100", 0))
         except (KeyError, TypeError, ValueError):
             raise InputError(f"{source}: '{name}'.precision_recall: expected numeric curve points "
                              "(precision, recall), average_precision and recall_at_100") from None
-        label = f"{METHOD_LABELS.get(name, name)} (AP {ap:.3f}, R@P100 {r100:.3f})"
-        ax.plot([0.0] + recall, precision[:1] + precision, drawstyle="steps-pre", lw=1.5, label=label)
-        drawn += 1
-    if not drawn:
-        plt.close(fig)
+        entries.append((name, f"{label} (AP {ap}, R@P100 {r100})", (recall, precision)))
+    return entries
+
+
+def plot_pr(summaries, path, written, source):
+    entries = pr_legend_entries(summaries, source)
+    if not entries:
         note(f"{source}: no ground truth (no precision_recall), pr.png skipped")
         return
+    fig, ax = plt.subplots(figsize=(7, 6))
+    for name, label, curve in entries:
+        if curve is None:  # in the legend only: a grey cross, nothing on the axes
+            ax.plot([], [], linestyle="none", marker="x", color="0.5", label=label)
+            continue
+        recall, precision = curve
+        ax.plot([0.0] + recall, precision[:1] + precision, drawstyle="steps-pre", lw=1.5, label=label)
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
     ax.set_xlabel("recall")
     ax.set_ylabel("precision")
     ax.set_title("precision-recall")
-    if drawn > 4:  # many methods: the legend below the axes, where it covers no curve
-        fig.set_size_inches(7, 6 + 0.25 * ((drawn + 1) // 2))
+    if len(entries) > 4:  # many methods: the legend below the axes, where it covers no curve
+        fig.set_size_inches(7, 6 + 0.25 * ((len(entries) + 1) // 2))
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     else:
         ax.legend(loc="lower left", fontsize=9)
     ax.grid(alpha=0.3)
     save(fig, path, written)
+    for name, label, _ in entries:
+        print(f"pr.png: {label}", file=sys.stderr)
 
 
 def plot_time_per_frame(runs, path, written):
@@ -616,10 +648,32 @@ def cmd_run(run_dir, out):
     return written
 
 
+def shown_method(document, summaries, compare_dir):
+    """The method whose run trajectory.png and plane.png draw: compare.json's "recommended" (gated
+    dird-seqslam when it ran), else the method of highest defined AP, else the first; only methods with a
+    run folder. None when no method has one."""
+    with_dir = [name for name in summaries if (compare_dir / name).is_dir()]
+    recommended = document.get("recommended")
+    if recommended in with_dir:
+        return recommended
+
+    def defined_ap(name):
+        pr = precision_recall(summaries[name])
+        positives = pr.get("positives")
+        if not pr or (isinstance(positives, (int, float)) and positives <= 0):
+            return -1.0
+        try:
+            return float(pr.get("average_precision", -1.0))
+        except (TypeError, ValueError):
+            return -1.0
+    return max(with_dir, key=defined_ap) if with_dir else None  # max keeps the first of equal APs
+
+
 def cmd_compare(compare_dir, out):
     written = []
     source = compare_dir / "compare.json"
-    summaries = {name: value for name, value in read_json(source).items()  # other keys: not methods
+    document = read_json(source)
+    summaries = {name: value for name, value in document.items()  # other keys: not methods
                  if isinstance(value, dict) and (name in METHOD_LABELS or "precision_recall" in value)}
     if not summaries:
         raise InputError(f"{source}:1: expected method summaries (full, gated, seqslam)")
@@ -640,12 +694,16 @@ def cmd_compare(compare_dir, out):
         plot_time_per_frame(timed, out / "time_per_frame.png", written)
     else:
         note(f"{compare_dir}: no timing of full or gated, time_per_frame.png skipped")
-    if "gated" in runs:
-        title = f"{compare_dir.resolve().name}: gated DIRD"
-        plot_plane(runs["gated"], out / "plane.png", written, title)
-        plot_trajectory(runs["gated"], out / "trajectory.png", written, title)
+    shown = shown_method(document, summaries, compare_dir)
+    if shown is None:
+        note(f"{source}: no method has a run folder, plane.png and trajectory.png skipped")
     else:
-        note(f"{source}: no gated run, plane.png and trajectory.png skipped")
+        why = "recommended" if shown == document.get("recommended") else "best available"
+        title = f"{compare_dir.resolve().name}: {METHOD_LABELS.get(shown, shown)} ({why})"
+        run = runs.get(shown) or Run(compare_dir / shown)
+        plot_plane(run, out / "plane.png", written, title)
+        plot_trajectory(run, out / "trajectory.png", written, title)
+        print(f"plane.png, trajectory.png: {shown} ({why})", file=sys.stderr)
     odometry, corrected, gt_path = None, [], None
     for name, summary in summaries.items():
         if "loop_correction" not in summary:
@@ -661,6 +719,23 @@ def cmd_compare(compare_dir, out):
         plot_correction(gt_path, odometry, corrected, out / "correction.png", written,
                         f"{compare_dir.resolve().name}: loop correction")
     return written
+
+
+def bar_positions(runs_col, methods_col, group_width=0.8):
+    """(x of each table row's bar, bar width): run r's bars side by side, centred on x = r (its tick label),
+    one slot per method that run has (in the table's method order), so a run with fewer methods is centred
+    too."""
+    runs = list(dict.fromkeys(runs_col))
+    methods = list(dict.fromkeys(methods_col))
+    width = group_width / max(1, max(len(set(m for rr, m in zip(runs_col, methods_col) if rr == r))
+                                     for r in runs))
+    x = np.zeros(len(runs_col))
+    for r, run in enumerate(runs):
+        present = [m for m in methods if any(rr == run and mm == m for rr, mm in zip(runs_col, methods_col))]
+        for k, (rr, mm) in enumerate(zip(runs_col, methods_col)):
+            if rr == run:
+                x[k] = r + (present.index(mm) - (len(present) - 1) / 2) * width
+    return x, width
 
 
 def cmd_aggregate(agg_dir, out):
@@ -680,13 +755,13 @@ def cmd_aggregate(agg_dir, out):
     detect_s = table.numbers(detect_column, allow_empty=True) / 1000.0
     runs = list(dict.fromkeys(runs_col))
     methods = list(dict.fromkeys(methods_col))
-    width = 0.8 / len(methods)
+    x_of_row, width = bar_positions(runs_col, methods_col)
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(max(8.0, 1.2 + 0.35 * len(runs) * len(methods)), 8),
                                       sharex=True)
     colours = plt.get_cmap("tab10")
     for m, method in enumerate(methods):
         rows = [k for k, name in enumerate(methods_col) if name == method]
-        x = np.array([runs.index(runs_col[k]) for k in rows]) + (m - (len(methods) - 1) / 2) * width
+        x = x_of_row[rows]
         colour = colours(m % 10)
         top.bar(x, np.nan_to_num(ap[rows]), width, color=colour, label=METHOD_LABELS.get(method, method))
         for xk, value in zip(x, ap[rows]):

@@ -192,6 +192,29 @@ TEST_F(E2ePlot, CompareWritesPrTimePlaneAndTrajectory) {
   }
 }
 
+// Without a gated DIRD run, trajectory.png and plane.png show the recommended method; a method without
+// detections stays in the PR legend, and a range without a true loop gives AP n/a, not 0.
+TEST_F(E2ePlot, CompareDrawsRecommendedMethodAndListsEveryMethod) {
+  const fs::path dir = testing::make_temp_dir("plot-compare-recommended");
+  write_run(dir / "full", "full", "dird");
+  write_run(dir / "dird-seqslam-gated", "gated", "dird-seqslam");
+  std::ofstream(dir / "compare.json")
+      << R"({"full": {"mode": "full", "precision_recall": )" << pr_json(0.6, 0.2)
+      << R"(}, "dird-seqslam-gated": {"mode": "gated", "precision_recall": )" << pr_json(0.9, 0.8)
+      << R"(}, "seqslam": {"mode": "full", "precision_recall": {"average_precision": 0, "recall_at_100": 0,)"
+      << R"( "positives": 0}}, "recommended": "dird-seqslam-gated"})"
+      << "\n";
+  const Result r = plot("compare", dir, dir / "plots");
+  ASSERT_EQ(r.status, 0) << r.output;
+  for (const char* name : {"pr.png", "plane.png", "trajectory.png"}) expect_png(dir / "plots" / name);
+  EXPECT_NE(r.output.find("plane.png, trajectory.png: dird-seqslam-gated (recommended)"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("pr.png: SeqSLAM: no detection (AP n/a)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("pr.png: gated DIRD-SeqSLAM (AP 0.900, R@P100 0.800)"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("0.000"), std::string::npos) << r.output;
+}
+
 TEST_F(E2ePlot, MissingFileExits2NamingIt) {
   const fs::path run = testing::make_temp_dir("plot-missing");
   write_run(run, "gated", "dird");

@@ -328,6 +328,29 @@ TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
     EXPECT_NEAR(std::stod(tum_times[k]), std::stod(tracking_times[k]), 1e3) << k;  // TUM: seconds, 9 decimals
 }
 
+// --calibration FILE sets dataset.calibration: a missing file is an error naming the key and the file before
+// anything runs; a KITTI sequence, which has its own calib.txt, refuses a Kalibr chain and names it.
+TEST(E2eRun, CalibrationOptionIsCheckedAndNamed) {
+  const fs::path dataset = make_kitti_dataset(20);
+  const fs::path dir = testing::make_temp_dir("e2e-run-calibration");
+  const std::string base = "run --config " + std::string(LOOPGATE_SOURCE_DIR) +
+                           "/configs/kitti00-thumbs.yaml --dataset " + dataset.string() +
+                           " --set output.progress=off --calibration ";
+  int status = -1;
+  std::string output =
+      run(base + (dir / "missing.yaml").string() + " --out " + (dir / "out-missing").string(), &status);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(output.find("dataset.calibration"), std::string::npos) << output;
+  EXPECT_NE(output.find((dir / "missing.yaml").string()), std::string::npos) << output;
+  std::ofstream(dir / "camchain-imucam-lab.yaml") << "cam0:\n  camera_model: pinhole\n";
+  output = run(base + (dir / "camchain-imucam-lab.yaml").string() + " --out " + (dir / "out-kitti").string(),
+               &status);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(output.find((dir / "camchain-imucam-lab.yaml").string() + ": --calibration"), std::string::npos)
+      << output;
+  EXPECT_NE(output.find("is a KITTI sequence"), std::string::npos) << output;
+}
+
 // eval.truth_pairs_file (issue 14): the published (query, reference) pairs are the run's loop ground truth;
 // the key is printed at start and echoed in summary.json; a pair naming a frame the dataset does not have is
 // an error naming the file and line, before anything is written.

@@ -182,6 +182,59 @@ cam0:
   EXPECT_DOUBLE_EQ(d->imu_calibration()->gyro_noise_density, 0.00016);
 }
 
+// A Kalibr chain named by the user (--calibration, dataset.calibration) replaces the tree's, wherever it is;
+// the Kalibr IMU file is looked for beside it first.
+TEST(IoTumVi, CalibrationFileNamedByTheUserWins) {
+  const fs::path dir = testing::make_temp_dir("io-tumvi-calibration-file");
+  make_tumvi(dir);  // dso/camchain.yaml: fy 19.0; dso/imu_config.yaml: accel noise 0.0028
+  const fs::path elsewhere = testing::make_temp_dir("io-tumvi-calibration-file-lab");
+  std::string chain = kCamchain;
+  chain.replace(chain.find("19.0"), 4, "21.0");
+  write_file(elsewhere / "camchain-imucam-lab.yaml", chain);
+  write_file(elsewhere / "imu-lab.yaml",
+             "accelerometer_noise_density: 0.005\naccelerometer_random_walk: 0.00086\n"
+             "gyroscope_noise_density: 0.00016\ngyroscope_random_walk: 0.000022\nupdate_rate: 200.0\n");
+  OpenOptions options;
+  options.calibration_file = elsewhere / "camchain-imucam-lab.yaml";
+  const auto d = open_dataset(dir, options);
+  ASSERT_TRUE(d->camera().has_value());
+  EXPECT_DOUBLE_EQ(d->camera()->fy, 21.0);
+  EXPECT_TRUE(d->camera()->T_b_c.translation().isApprox(Eigen::Vector3d(0.07, 0.05, -0.04), 1e-12));
+  ASSERT_TRUE(d->imu_calibration().has_value());
+  EXPECT_DOUBLE_EQ(d->imu_calibration()->accel_noise_density, 0.005);
+  // Without an IMU file beside it, the tree's is used.
+  fs::remove(elsewhere / "imu-lab.yaml");
+  const auto tree_imu = open_dataset(dir, options);
+  ASSERT_TRUE(tree_imu->imu_calibration().has_value());
+  EXPECT_DOUBLE_EQ(tree_imu->imu_calibration()->accel_noise_density, 0.0028);
+}
+
+// A named calibration that is missing or unusable is an error naming it, in lenient mode too (it is not an
+// optional file of the tree); KITTI sequences and image folders do not take one.
+TEST(IoTumVi, CalibrationFileErrorsNameTheFile) {
+  const fs::path dir = testing::make_temp_dir("io-tumvi-calibration-file-bad");
+  make_tumvi(dir);
+  OpenOptions options;
+  options.strict = false;
+  options.calibration_file = dir / "no-such-camchain.yaml";
+  DataError e = catch_data_error([&] { open_dataset(dir, options); });
+  EXPECT_EQ(e.file(), options.calibration_file) << e.what();
+  EXPECT_NE(e.message().find("calibration file not found"), std::string::npos) << e.what();
+
+  options.calibration_file = dir / "kalibr_imucam_chain.yaml";
+  write_file(options.calibration_file, "cam1:\n  camera_model: pinhole\n");
+  e = catch_data_error([&] { open_dataset(dir, options); });
+  EXPECT_EQ(e.file(), options.calibration_file) << e.what();
+  EXPECT_NE(e.message().find("no section 'cam0'"), std::string::npos) << e.what();
+
+  const fs::path kitti = testing::make_temp_dir("io-tumvi-calibration-file-kitti");
+  write_file(kitti / "times.txt", "0.0\n0.1\n");
+  options.calibration_file = dir / "dso/camchain.yaml";
+  e = catch_data_error([&] { open_dataset(kitti, options); });
+  EXPECT_EQ(e.file(), options.calibration_file) << e.what();
+  EXPECT_NE(e.message().find("KITTI sequence"), std::string::npos) << e.what();
+}
+
 // EuRoC's own files win: state_groundtruth_estimate0 over mocap0, sensor.yaml over Kalibr.
 TEST(IoTumVi, EurocFilesWinOverTumViFiles) {
   const fs::path dir = testing::make_temp_dir("io-tumvi-both");

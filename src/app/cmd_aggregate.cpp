@@ -523,7 +523,7 @@ void add_aggregate_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--out", options->out_dir, "output folder (default: the first OUT/aggregate)");
   cmd->add_flag("--no-plots", options->no_plots, "do not call scripts/plot.py aggregate");
   cmd->add_option("--plot-script", options->plot_script,
-                  "path of plot.py (default: the source tree's scripts/plot.py)");
+                  "path of plot.py (default: scripts/plot.py of the installed or source tree)");
   cmd->callback([options, &exit_code] { exit_code = aggregate_command(*options); });
 }
 

@@ -56,6 +56,7 @@ struct CompareOptions {
   std::string out_dir;
   std::string methods = "full,gated,seqslam,seqslam-gated,std-full,std-gated,dird-seqslam,dird-seqslam-gated";
   std::string frames;
+  std::string calibration;
   int threads = 0;
   bool no_plots = false;
   bool force = false;
@@ -82,6 +83,8 @@ void remove_compare_outputs(const fs::path& out_dir) {
 void add_run_flags(const CompareOptions& options, std::vector<FlagValue>& flags) {
   if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  if (!options.calibration.empty())
+    flags.push_back({"dataset.calibration", options.calibration, "--calibration"});
 }
 
 // Before a compare writes anything: no output over an input (compare.json, each method's run
@@ -391,6 +394,9 @@ void add_compare_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--config", options->config_file, "YAML configuration (configs/*.yaml)")
       ->check(CLI::ExistingFile);
   cmd->add_option("--dataset", options->dataset, "dataset folder or ROS1 .bag file; overrides run.dataset");
+  cmd->add_option(
+      "--calibration", options->calibration,
+      "Kalibr camera-IMU chain for an EuRoC / TUM-VI tree or a bag; overrides dataset.calibration");
   cmd->add_option("--reference", options->reference,
                   "two-sequence compare (with --query): reference dataset folder, e.g. Nordland summer; the "
                   "methods default to " +
@@ -410,7 +416,7 @@ void add_compare_command(CLI::App& app, int& exit_code) {
   cmd->add_flag("--force", options->force,
                 "replace another compare's outputs in --out (without it such a folder is refused)");
   cmd->add_option("--plot-script", options->plot_script,
-                  "path of plot.py (default: the source tree's scripts/plot.py)");
+                  "path of plot.py (default: scripts/plot.py of the installed or source tree)");
   cmd->add_option("--set", options->overrides, "override any config key: section.key=value (repeatable)")
       ->allow_extra_args(false);
   cmd->callback([options, methods_option, &exit_code] {

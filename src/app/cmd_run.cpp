@@ -44,6 +44,7 @@ struct RunOptions {
   bool trace = false;
   bool force = false;
   std::string frames;
+  std::string calibration;
   std::vector<std::string> overrides;
 };
 
@@ -141,6 +142,8 @@ int run_command(const RunOptions& options) {
   if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
   if (options.trace) flags.push_back({"output.trace", "true", "--trace"});
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
+  if (!options.calibration.empty())
+    flags.push_back({"dataset.calibration", options.calibration, "--calibration"});
   PipelineConfig config =
       load_pipeline_config(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
@@ -201,6 +204,9 @@ void add_run_command(CLI::App& app, int& exit_code) {
       "--dataset", options->dataset,
       "dataset folder (EuRoC, KITTI or image folder) or ROS1 .bag file (section dataset); overrides "
       "run.dataset");
+  cmd->add_option("--calibration", options->calibration,
+                  "Kalibr camera-IMU chain (camchain-imucam-BAG.yaml, kalibr_imucam_chain.yaml) for an EuRoC "
+                  "/ TUM-VI tree or a bag, instead of the one found there; overrides dataset.calibration");
   cmd->add_option("--mode", options->mode,
                   "gated (default: the method only inside the pose gate's candidate areas), full (on every "
                   "frame) or odometry (no loop detection); overrides run.mode");

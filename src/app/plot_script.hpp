@@ -11,13 +11,16 @@
 #include <string>
 #include <vector>
 
+#include "io/share_dir.hpp"
+
 namespace loopgate::app {
 
-// --plot-script PATH, else $LOOPGATE_PLOT_SCRIPT, else the source tree's scripts/plot.py.
+// --plot-script PATH, else $LOOPGATE_PLOT_SCRIPT, else scripts/plot.py of the installed tree
+// (PREFIX/share/loopgate) or of the source tree (io::share_dir()).
 inline std::filesystem::path find_plot_script(const std::string& option) {
   if (!option.empty()) return option;
   if (const char* env = std::getenv("LOOPGATE_PLOT_SCRIPT")) return env;
-  return std::filesystem::path(LOOPGATE_SOURCE_DIR) / "scripts" / "plot.py";
+  return io::share_dir() / "scripts" / "plot.py";
 }
 
 inline std::string shell_quote(const std::string& text) {

@@ -96,7 +96,7 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
 
 const std::vector<std::string>& config_path_keys() {
   static const std::vector<std::string> keys = {"run.dataset", "odometry.file", "dataset.bag_asl_dir",
-                                                "eval.truth_pairs_file"};
+                                                "dataset.calibration", "eval.truth_pairs_file"};
   return keys;
 }
 

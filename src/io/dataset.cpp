@@ -323,11 +323,28 @@ std::unique_ptr<Dataset> open_dataset(const std::filesystem::path& dir, const Op
       fs::is_directory(dir / "imu0", ec)) {
     return open_euroc(dir, options);
   }
+  // KITTI sequences and image folders carry their calibration in their own form (calib.txt) or none.
+  const auto no_calibration_file = [&](const char* layout) {
+    if (!options.calibration_file.empty())
+      throw DataError(options.calibration_file,
+                      "--calibration / dataset.calibration: a Kalibr camera chain is read for EuRoC / TUM-VI "
+                      "trees and ROS1 bags; " +
+                          dir.string() + " is " + layout);
+  };
   for (const char* camera : {"image_0", "image_1", "image_2", "image_3"}) {
-    if (fs::is_directory(dir / camera, ec)) return open_kitti(dir, options);
+    if (fs::is_directory(dir / camera, ec)) {
+      no_calibration_file("a KITTI sequence (its calibration is calib.txt)");
+      return open_kitti(dir, options);
+    }
   }
-  if (!io_detail::list_image_files(dir).empty()) return open_image_folder(dir, options);
-  if (fs::is_regular_file(dir / "times.txt", ec)) return open_kitti(dir, options);
+  if (!io_detail::list_image_files(dir).empty()) {
+    no_calibration_file("an image folder (no camera model is used)");
+    return open_image_folder(dir, options);
+  }
+  if (fs::is_regular_file(dir / "times.txt", ec)) {
+    no_calibration_file("a KITTI sequence (its calibration is calib.txt)");
+    return open_kitti(dir, options);
+  }
   throw DataError(
       dir,
       "no dataset found: expected mav0/ or cam0/ (EuRoC), image_0/ .. image_3/ or times.txt (KITTI), "

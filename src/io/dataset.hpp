@@ -42,6 +42,10 @@ struct OpenOptions {
   std::string bag_image_topic = "/cam0/image_raw";
   std::string bag_imu_topic = "/imu0";
   std::filesystem::path bag_asl_dir;
+  // EuRoC / TUM-VI trees and ROS1 bags: a Kalibr camera-IMU chain (camchain-imucam-<bag>.yaml, OpenVINS'
+  // kalibr_imucam_chain.yaml) used for the camera instead of what the tree holds; its folder is searched
+  // first for the Kalibr IMU file (imu-<bag>.yaml, kalibr_imu_chain.yaml). Empty = find both in the tree.
+  std::filesystem::path calibration_file;
 };
 
 class Dataset {

@@ -116,13 +116,25 @@ void apply_sensor_T_BS(const fs::path& gt_dir, io_detail::IssueLog& log, std::ve
 
 namespace io_detail {
 
-void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera_index, IssueLog& log,
-                            LoadedDataset& d) {
+void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera_index,
+                            const fs::path& calibration_file, IssueLog& log, LoadedDataset& d) {
   std::error_code ec;
   const std::string cam_name = "cam" + std::to_string(camera_index);
   const fs::path cam_dir = mav / cam_name;
-  const std::vector<fs::path> kalibr = kalibr_dirs(dir, mav);
-  if (fs::exists(cam_dir / "sensor.yaml", ec)) {
+  std::vector<fs::path> kalibr = kalibr_dirs(dir, mav);
+  if (!calibration_file.empty()) {
+    // Named by the user: used whatever the tree holds, and an unusable file is an error, not a skip.
+    if (!fs::exists(calibration_file, ec))
+      throw DataError(calibration_file,
+                      "calibration file not found (--calibration / dataset.calibration: a Kalibr "
+                      "camchain-imucam*.yaml or OpenVINS kalibr_imucam_chain.yaml)");
+    require_regular_file(calibration_file);
+    d.camera_calibration = read_kalibr_camchain(calibration_file, camera_index);
+    d.calibration_size_source = calibration_file.filename().string() + " " + cam_name + ".resolution";
+    spdlog::info("{}: camera calibration from {} (--calibration)", dir.string(), calibration_file.string());
+    kalibr.insert(kalibr.begin(),
+                  calibration_file.parent_path().empty() ? fs::path(".") : calibration_file.parent_path());
+  } else if (fs::exists(cam_dir / "sensor.yaml", ec)) {
     d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
                                               [](const fs::path& f) { return read_euroc_camera_yaml(f); });
     if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
@@ -226,7 +238,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   // Calibration: the EuRoC sensor.yaml files, else Kalibr files (TUM-VI).
-  io_detail::read_euroc_calibration(dir, mav, options.camera_index, log, *d);
+  io_detail::read_euroc_calibration(dir, mav, options.camera_index, options.calibration_file, log, *d);
 
   // IMU.
   const fs::path imu_csv = mav / "imu0" / "data.csv";

@@ -87,11 +87,13 @@ cv::Mat to_grey_8bit(const cv::Mat& image, const std::filesystem::path& file, co
 // The calibration and the ground truth of an EuRoC ASL tree `dir` (its mav0/ is `mav`, or `dir` itself when
 // it holds cam0/ ...), as open_euroc reads them; what is absent stays unset. Calibration:
 // cam<camera_index>/sensor.yaml (camera_calibration, calibration_size_source) and imu0/sensor.yaml
-// (imu_calib), else Kalibr files in `dir` or its dso/ (TUM-VI). Ground truth (gt):
+// (imu_calib), else Kalibr files in `dir` or its dso/ (TUM-VI). A `calibration_file` (OpenOptions) replaces
+// the camera's and adds its folder first to the Kalibr search for the IMU's. Ground truth (gt):
 // state_groundtruth_estimate0/data.csv, else TUM-VI's mocap0/data.csv (each moved to the body frame by its
 // sensor.yaml T_BS), else a TUM file groundtruth_tum.txt beside or inside `mav`.
 void read_euroc_calibration(const std::filesystem::path& dir, const std::filesystem::path& mav,
-                            int camera_index, IssueLog& log, LoadedDataset& d);
+                            int camera_index, const std::filesystem::path& calibration_file, IssueLog& log,
+                            LoadedDataset& d);
 void read_euroc_ground_truth(const std::filesystem::path& dir, const std::filesystem::path& mav,
                              IssueLog& log, LoadedDataset& d);
 

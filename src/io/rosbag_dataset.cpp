@@ -326,13 +326,21 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
   // Calibration and ground truth: the bag has none; an EuRoC ASL folder gives them.
   if (const fs::path asl = asl_dir_for(bag_file, options); !asl.empty()) {
     const fs::path mav = fs::is_directory(asl / "mav0", ec) ? asl / "mav0" : asl;
-    io_detail::read_euroc_calibration(asl, mav, options.camera_index, log, *d);
+    io_detail::read_euroc_calibration(asl, mav, options.camera_index, options.calibration_file, log, *d);
     io_detail::read_euroc_ground_truth(asl, mav, log, *d);
     spdlog::info(
         "{}: calibration and ground truth from {} (camera calibration {}, IMU calibration {}, {} "
         "ground-truth poses)",
         bag_file.string(), mav.string(), d->camera_calibration ? "yes" : "no", d->imu_calib ? "yes" : "no",
         d->gt.size());
+  } else if (!options.calibration_file.empty()) {
+    // No ASL folder, but a Kalibr chain named by the user: the calibration from it (and the IMU file beside
+    // it), no ground truth.
+    const fs::path folder = options.calibration_file.parent_path().empty()
+                                ? fs::path(".")
+                                : options.calibration_file.parent_path();
+    io_detail::read_euroc_calibration(folder, folder, options.camera_index, options.calibration_file, log,
+                                      *d);
   } else {
     spdlog::info(
         "{}: no calibration or ground truth (a bag carries none): set dataset.bag_asl_dir to the sequence's "

@@ -87,6 +87,7 @@ OpenOptions PipelineConfig::open_options() const {
   options.bag_image_topic = dataset.bag_image_topic;
   options.bag_imu_topic = dataset.bag_imu_topic;
   options.bag_asl_dir = dataset.bag_asl_dir;
+  options.calibration_file = dataset.calibration;
   return options;
 }
 

@@ -109,12 +109,14 @@ struct RunConfig {
 // (sensor_msgs/Imu; empty = no IMU), EuRoC's by default, and the folder in EuRoC ASL layout that holds the
 // calibration and ground truth a bag does not carry (cam0/sensor.yaml, imu0/sensor.yaml,
 // state_groundtruth_estimate0/data.csv; empty = the folder beside the bag named like it without ".bag", when
-// there is one). A relative path is relative to the YAML file that names it, or to the working
-// directory when given on the command line.
+// there is one). calibration: a Kalibr camera-IMU chain file used for the camera instead of the one found in
+// an EuRoC / TUM-VI tree or a bag's ASL folder (empty = found there). A relative path is relative to the
+// YAML file that names it, or to the working directory when given on the command line.
 struct DatasetConfig {
   std::string bag_image_topic = "/cam0/image_raw";
   std::string bag_imu_topic = "/imu0";
   std::string bag_asl_dir;
+  std::string calibration;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is DatasetConfig or const
   // DatasetConfig).
@@ -123,6 +125,7 @@ struct DatasetConfig {
     v("bag_image_topic", self.bag_image_topic);
     v("bag_imu_topic", self.bag_imu_topic);
     v("bag_asl_dir", self.bag_asl_dir);
+    v("calibration", self.calibration);
   }
   void validate() const;
 };

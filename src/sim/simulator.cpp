@@ -17,6 +17,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
+#include "io/share_dir.hpp"
 #include "io/trajectory_io.hpp"
 #include "io/writers.hpp"
 #include "parallel/parallel_handoff.hpp"
@@ -189,7 +190,7 @@ void SimulationConfig::validate() const {
 // Presets: configs/sim/<name>.yaml
 
 std::filesystem::path preset_dir() {
-  return LOOPGATE_PRESET_DIR;
+  return io::share_dir() / "configs" / "sim";
 }
 
 std::vector<std::string> preset_names() {
