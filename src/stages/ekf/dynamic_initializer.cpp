@@ -1,0 +1,584 @@
+#include "stages/ekf/dynamic_initializer.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/core/eigen.hpp>
+
+#include "core/geometry.hpp"
+
+namespace loopgate {
+namespace {
+
+std::string fmt(const char* format, auto... args) {
+  char buf[256];
+  std::snprintf(buf, sizeof(buf), format, args...);
+  return buf;
+}
+
+// Pre-integrated IMU between two images, in the frame of the IMU at the first (b_k), for a gyro bias bg:
+// R_bk_bk1, the velocity and position increments of the specific force, and their Jacobians on bg.
+struct Preintegrated {
+  double dt_s = 0.0;
+  Eigen::Matrix3d dR = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d dv = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dp = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d J_R_bg = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d J_v_bg = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d J_p_bg = Eigen::Matrix3d::Zero();
+};
+
+// Integrates `samples` (time-ordered, the first at or before t_a when available) over [t_a, t_b]: between two
+// readings the mean of both, before the first and after the last the nearest reading held.
+Preintegrated preintegrate(const std::vector<ImuSample>& samples, Timestamp t_a, Timestamp t_b,
+                           const Eigen::Vector3d& bg) {
+  Preintegrated pi;
+  pi.dt_s = ns_to_s(t_b - t_a);
+  auto step = [&](const Eigen::Vector3d& w_raw, const Eigen::Vector3d& a, double dt) {
+    if (dt <= 0.0) return;
+    const Eigen::Vector3d w = w_raw - bg;
+    const Eigen::Matrix3d a_x = skew(a);
+    pi.dp += pi.dv * dt + 0.5 * pi.dR * a * dt * dt;
+    pi.J_p_bg += pi.J_v_bg * dt - 0.5 * pi.dR * a_x * pi.J_R_bg * dt * dt;
+    pi.dv += pi.dR * a * dt;
+    pi.J_v_bg -= pi.dR * a_x * pi.J_R_bg * dt;
+    const Eigen::Matrix3d dR_step = so3_exp(w * dt);
+    pi.J_R_bg = dR_step.transpose() * pi.J_R_bg - so3_right_jacobian(w * dt) * dt;
+    pi.dR = pi.dR * dR_step;
+  };
+  if (samples.empty()) return pi;
+  Timestamp t = t_a;
+  if (samples.front().t_ns > t_a) {
+    const Timestamp t_end = std::min(samples.front().t_ns, t_b);
+    step(samples.front().gyro_radps, samples.front().accel_mps2, ns_to_s(t_end - t));
+    t = t_end;
+  }
+  for (std::size_t i = 0; i + 1 < samples.size() && t < t_b; ++i) {
+    const ImuSample& s0 = samples[i];
+    const ImuSample& s1 = samples[i + 1];
+    const Timestamp lo = std::max(s0.t_ns, t);
+    const Timestamp hi = std::min(s1.t_ns, t_b);
+    if (hi <= lo) continue;
+    step(0.5 * (s0.gyro_radps + s1.gyro_radps), 0.5 * (s0.accel_mps2 + s1.accel_mps2), ns_to_s(hi - lo));
+    t = hi;
+  }
+  if (t < t_b) step(samples.back().gyro_radps, samples.back().accel_mps2, ns_to_s(t_b - t));
+  return pi;
+}
+
+// Linear multi-view triangulation of a point in c0 from normalised observations in cameras with poses
+// T_ck_c0. Returns false when the point is behind a camera or poorly constrained.
+bool triangulate(const std::vector<Eigen::Isometry3d>& T_ck_c0, const std::vector<Eigen::Vector2d>& xy,
+                 double max_reproj, Eigen::Vector3d* p_c0) {
+  const int n = static_cast<int>(xy.size());
+  Eigen::MatrixXd A(2 * n, 4);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Matrix<double, 3, 4> P = T_ck_c0[static_cast<std::size_t>(k)].matrix().topRows<3>();
+    A.row(2 * k) = xy[static_cast<std::size_t>(k)].x() * P.row(2) - P.row(0);
+    A.row(2 * k + 1) = xy[static_cast<std::size_t>(k)].y() * P.row(2) - P.row(1);
+  }
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
+  const Eigen::Vector4d h = svd.matrixV().col(3);
+  if (std::abs(h(3)) < 1e-12) return false;
+  *p_c0 = h.head<3>() / h(3);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d pc = T_ck_c0[static_cast<std::size_t>(k)] * *p_c0;
+    if (pc.z() <= 1e-6) return false;
+    if ((pc.head<2>() / pc.z() - xy[static_cast<std::size_t>(k)]).norm() > max_reproj) return false;
+  }
+  return true;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+Eigen::Vector2d project(const Eigen::Vector3d& p) {
+  return p.head<2>() / p.z();
+}
+
+}  // namespace
+
+DynamicInitializer::DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c)
+    : config_(config), T_i_c_(T_i_c) {
+  config_.validate();
+}
+
+void DynamicInitializer::reset() {
+  window_.clear();
+  last_sample_.reset();
+  frames_seen_ = 0;
+  status_ = "no image yet";
+}
+
+std::optional<InitialState> DynamicInitializer::add_frame(const InitFrame& frame) {
+  const std::size_t index = frames_seen_++;
+  // Time order of the images and of the IMU samples: a break empties the window (the alignment needs a
+  // continuous IMU record between its images).
+  if (!window_.empty() && frame.t_ns <= window_.back().t_ns) {
+    window_.clear();
+    last_sample_.reset();
+    status_ = fmt("image %zu: time %lld ns not after the previous image's; window restarted", index,
+                  static_cast<long long>(frame.t_ns));
+    return std::nullopt;
+  }
+  Frame f;
+  f.t_ns = frame.t_ns;
+  if (frame.observations != nullptr) {
+    for (const FeatureObservation& o : *frame.observations) {
+      if (o.xy.allFinite()) f.features.emplace(o.id, o.xy);
+    }
+  }
+  if (last_sample_) f.imu.push_back(*last_sample_);
+  for (const ImuSample& s : frame.imu) {
+    if (!s.gyro_radps.allFinite() || !s.accel_mps2.allFinite() ||
+        (!f.imu.empty() && s.t_ns <= f.imu.back().t_ns)) {
+      window_.clear();
+      last_sample_.reset();
+      status_ =
+          fmt("image %zu: IMU sample at %lld ns not finite or not after the previous one; window restarted",
+              index, static_cast<long long>(s.t_ns));
+      return std::nullopt;
+    }
+    f.imu.push_back(s);
+  }
+  if (!f.imu.empty()) last_sample_ = f.imu.back();
+  if (!window_.empty() && (f.imu.empty() || f.imu.front().t_ns > window_.back().t_ns ||
+                           f.imu.back().t_ns < f.t_ns - s_to_ns(0.05))) {
+    // No IMU reading covering the interval since the previous image (allowing 50 ms held at the end).
+    window_.clear();
+    window_.push_back(std::move(f));
+    status_ = fmt(
+        "image %zu: no IMU samples covering the interval since the previous image; window restarted", index);
+    return std::nullopt;
+  }
+  window_.push_back(std::move(f));
+  const Timestamp window_ns = s_to_ns(config_.dynamic_init_window_s);
+  while (window_.size() > 2 && window_.back().t_ns - window_[1].t_ns >= window_ns) window_.pop_front();
+  const double span_s = ns_to_s(window_.back().t_ns - window_.front().t_ns);
+  if (window_.back().features.empty()) {
+    status_ = fmt("image %zu: no features", index);
+    return std::nullopt;
+  }
+  if (span_s < 0.95 * config_.dynamic_init_window_s) {
+    status_ = fmt("collecting: %.2f s of %.2f s", span_s, config_.dynamic_init_window_s);
+    return std::nullopt;
+  }
+  std::optional<InitialState> result = try_align();
+  if (result) result->frame = index;
+  return result;
+}
+
+std::optional<InitialState> DynamicInitializer::try_align() {
+  const std::size_t n = window_.size();
+  const double focal = config_.dynamic_init_nominal_focal_px;
+  const double span_s = ns_to_s(window_.back().t_ns - window_.front().t_ns);
+  if (n < 3) {
+    status_ = fmt("only %zu images in %.2f s", n, span_s);
+    return std::nullopt;
+  }
+
+  // ---- pre-integration with a zero gyro bias ----
+  Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+  std::vector<Preintegrated> pre(n);
+  auto integrate_all = [&]() {
+    for (std::size_t k = 1; k < n; ++k) {
+      pre[k] = preintegrate(window_[k].imu, window_[k - 1].t_ns, window_[k].t_ns, bg);
+    }
+  };
+  integrate_all();
+
+  // ---- SfM pair: the oldest image and the one with the largest rotation-compensated parallax ----
+  const Eigen::Matrix3d R_b_c = T_i_c_.linear();
+  const Eigen::Vector3d p_b_c = T_i_c_.translation();
+  const Frame& f0 = window_.front();
+  auto parallax_px = [&](const Frame& fk, const Eigen::Matrix3d& R_ck_c0, std::vector<std::uint64_t>* ids) {
+    std::vector<double> d;
+    for (const auto& [id, x0] : f0.features) {
+      const auto it = fk.features.find(id);
+      if (it == fk.features.end()) continue;
+      const Eigen::Vector3d r = R_ck_c0 * Eigen::Vector3d(x0.x(), x0.y(), 1.0);
+      if (r.z() <= 1e-6) continue;
+      d.push_back((project(r) - it->second).norm() * focal);
+      if (ids != nullptr) ids->push_back(id);
+    }
+    return std::make_pair(median(d), d.size());
+  };
+  // The rotation that best maps the bearings of image 0 onto those of image k (Kabsch): the parallax left
+  // after it is what translation makes, free of the gyro bias.
+  auto rotation_fit = [&](const Frame& fk) {
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    for (const auto& [id, x0] : f0.features) {
+      const auto it = fk.features.find(id);
+      if (it == fk.features.end()) continue;
+      M += x0.homogeneous().normalized() * it->second.homogeneous().normalized().transpose();
+    }
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd3(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd3.matrixV() * svd3.matrixU().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+    return Eigen::Matrix3d(svd3.matrixV() * D * svd3.matrixU().transpose());
+  };
+  std::size_t best = 0;
+  double best_parallax = -1.0;
+  std::size_t best_common = 0;
+  std::size_t max_common = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto [par, common] = parallax_px(window_[k], rotation_fit(window_[k]), nullptr);
+    max_common = std::max(max_common, common);
+    if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
+    if (par > best_parallax) {
+      best_parallax = par;
+      best = k;
+      best_common = common;
+    }
+  }
+  if (best == 0) {
+    status_ = fmt("features: at most %zu seen in the oldest image and another of the window < %d", max_common,
+                  config_.dynamic_init_min_features);
+    return std::nullopt;
+  }
+  if (best_parallax < config_.dynamic_init_min_parallax_px) {
+    status_ = fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images 0-%zu over %.2f s)",
+                  best_parallax, config_.dynamic_init_min_parallax_px, best_common, best, span_s);
+    return std::nullopt;
+  }
+
+  // ---- IMU excitation: the accelerometer's variation over the window ----
+  Eigen::Vector3d acc_mean = Eigen::Vector3d::Zero();
+  std::size_t acc_count = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    for (const ImuSample& s : window_[k].imu) {
+      acc_mean += s.accel_mps2;
+      ++acc_count;
+    }
+  }
+  acc_mean /= static_cast<double>(std::max<std::size_t>(acc_count, 1));
+  double acc_var = 0.0;
+  for (std::size_t k = 1; k < n; ++k) {
+    for (const ImuSample& s : window_[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
+  }
+  const double acc_std = std::sqrt(acc_var / static_cast<double>(std::max<std::size_t>(acc_count, 1)));
+  if (acc_std < config_.dynamic_init_min_accel_std_mps2) {
+    status_ = fmt("IMU excitation: accelerometer std %.3f m/s^2 < %.3f m/s^2 over %.2f s", acc_std,
+                  config_.dynamic_init_min_accel_std_mps2, span_s);
+    return std::nullopt;
+  }
+
+  // ---- essential matrix and relative pose of the pair ----
+  std::vector<std::uint64_t> pair_ids;
+  std::vector<cv::Point2d> pts0;
+  std::vector<cv::Point2d> pts1;
+  for (const auto& [id, x0] : f0.features) {
+    const auto it = window_[best].features.find(id);
+    if (it == window_[best].features.end()) continue;
+    pair_ids.push_back(id);
+    pts0.emplace_back(x0.x(), x0.y());
+    pts1.emplace_back(it->second.x(), it->second.y());
+  }
+  const double thr = config_.ransac_threshold_px / focal;
+  cv::Mat inlier_mask;
+  const cv::Mat E =
+      cv::findEssentialMat(pts0, pts1, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999, thr, 1000, inlier_mask);
+  if (E.rows != 3 || E.cols != 3) {
+    status_ = fmt("essential matrix: no solution between images 0 and %zu (%zu features)", best, pts0.size());
+    return std::nullopt;
+  }
+  cv::Mat R_cv;
+  cv::Mat t_cv;
+  const int good = cv::recoverPose(E, pts0, pts1, cv::Mat::eye(3, 3, CV_64F), R_cv, t_cv, inlier_mask);
+  if (good < config_.dynamic_init_min_features / 2) {
+    status_ = fmt("relative pose: %d inliers in front of both cameras < %d (images 0-%zu)", good,
+                  config_.dynamic_init_min_features / 2, best);
+    return std::nullopt;
+  }
+  Eigen::Matrix3d R_1_0;
+  Eigen::Vector3d t_1_0;
+  cv::cv2eigen(R_cv, R_1_0);
+  cv::cv2eigen(t_cv, t_1_0);
+  const double vision_parallax = parallax_px(window_[best], R_1_0, nullptr).first;
+  if (vision_parallax < config_.dynamic_init_min_parallax_px) {
+    status_ = fmt("parallax %.1f px < %.1f px (vision-compensated, images 0-%zu over %.2f s)",
+                  vision_parallax, config_.dynamic_init_min_parallax_px, best, span_s);
+    return std::nullopt;
+  }
+
+  // ---- structure: triangulate the pair's inliers, PnP the others, then all tracks and all poses again ----
+  const double max_reproj = 3.0 * config_.ransac_threshold_px / focal + 2.0 / focal;
+  std::vector<Eigen::Isometry3d> T_ck_c0(n, Eigen::Isometry3d::Identity());
+  Eigen::Isometry3d T1 = Eigen::Isometry3d::Identity();
+  T1.linear() = R_1_0;
+  T1.translation() = t_1_0;
+  T_ck_c0[best] = T1;
+  std::unordered_map<std::uint64_t, Eigen::Vector3d> points;
+  for (std::size_t i = 0; i < pair_ids.size(); ++i) {
+    if (inlier_mask.at<unsigned char>(static_cast<int>(i)) == 0) continue;
+    Eigen::Vector3d p;
+    if (triangulate({T_ck_c0[0], T1}, {f0.features.at(pair_ids[i]), window_[best].features.at(pair_ids[i])},
+                    max_reproj, &p)) {
+      points[pair_ids[i]] = p;
+    }
+  }
+  // PnP of image k from `guess`; false (T untouched) when it fails.
+  auto pnp = [&](std::size_t k, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) -> bool {
+    std::vector<cv::Point3d> obj;
+    std::vector<cv::Point2d> img;
+    for (const auto& [id, x] : window_[k].features) {
+      const auto it = points.find(id);
+      if (it == points.end()) continue;
+      obj.emplace_back(it->second.x(), it->second.y(), it->second.z());
+      img.emplace_back(x.x(), x.y());
+    }
+    if (obj.size() < 10) return false;
+    cv::Mat R_guess;
+    cv::Mat rvec;
+    cv::Mat tvec;
+    cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
+    cv::Rodrigues(R_guess, rvec);
+    cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
+    cv::Mat inliers;
+    if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
+                            static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
+        inliers.rows < 8) {
+      return false;
+    }
+    cv::Mat R_est;
+    cv::Rodrigues(rvec, R_est);
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    cv::cv2eigen(R_est, R);
+    cv::cv2eigen(tvec, t);
+    T_out->setIdentity();
+    T_out->linear() = R;
+    T_out->translation() = t;
+    return true;
+  };
+  // Outwards from the pair, each image starting from its neighbour's pose.
+  // Tracks of image k not triangulated yet, from their observations in the (posed) images before k.
+  auto triangulate_new = [&](std::size_t k) {
+    for (const auto& [id, x] : window_[k].features) {
+      if (points.contains(id)) continue;
+      std::vector<Eigen::Isometry3d> poses;
+      std::vector<Eigen::Vector2d> xy;
+      for (std::size_t j = 0; j < k; ++j) {
+        const auto it = window_[j].features.find(id);
+        if (it == window_[j].features.end()) continue;
+        poses.push_back(T_ck_c0[j]);
+        xy.push_back(it->second);
+      }
+      if (xy.size() < 3) continue;
+      // At least 1 degree between the first and the last ray (in c0): a point triangulated from less is
+      // mostly noise in depth.
+      const Eigen::Vector3d r0 = poses.front().linear().transpose() * xy.front().homogeneous();
+      const Eigen::Vector3d r1 = poses.back().linear().transpose() * xy.back().homogeneous();
+      if (r0.normalized().cross(r1.normalized()).norm() < 0.017) continue;
+      Eigen::Vector3d p;
+      if (triangulate(poses, xy, max_reproj, &p)) points[id] = p;
+    }
+  };
+  for (std::size_t k = 1; k < n; ++k) {
+    if (k == best) continue;
+    if (k > best) triangulate_new(k);
+    if (!pnp(k, T_ck_c0[k - 1], &T_ck_c0[k])) {
+      status_ = fmt("PnP failed for image %zu of %zu (%zu triangulated points; pair 0-%zu)", k, n,
+                    points.size(), best);
+      return std::nullopt;
+    }
+  }
+  // Refinement by alternation (resection-intersection, a poor man's bundle adjustment): every track seen at
+  // least three times, then every pose but the first (the gauge), a few times.
+  for (int pass = 0; pass < 5; ++pass) {
+    std::unordered_map<std::uint64_t, std::pair<std::vector<Eigen::Isometry3d>, std::vector<Eigen::Vector2d>>>
+        tracks;
+    for (std::size_t k = 0; k < n; ++k) {
+      for (const auto& [id, x] : window_[k].features) {
+        tracks[id].first.push_back(T_ck_c0[k]);
+        tracks[id].second.push_back(x);
+      }
+    }
+    points.clear();
+    for (const auto& [id, obs] : tracks) {
+      if (obs.second.size() < 3) continue;
+      Eigen::Vector3d p;
+      if (triangulate(obs.first, obs.second, 2.0 * max_reproj, &p)) points[id] = p;
+    }
+    for (std::size_t k = 1; k < n; ++k) {
+      if (!pnp(k, T_ck_c0[k], &T_ck_c0[k])) {
+        status_ = fmt("PnP (refinement) failed for image %zu of %zu (%zu points)", k, n, points.size());
+        return std::nullopt;
+      }
+    }
+  }
+  // Up-to-scale unit: the translation between the first and the last camera.
+  std::vector<Eigen::Matrix3d> R_c0_bk(n);
+  std::vector<Eigen::Vector3d> p_c0_ck(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Isometry3d T_c0_ck = T_ck_c0[k].inverse();
+    R_c0_bk[k] = T_c0_ck.linear() * R_b_c.transpose();
+    p_c0_ck[k] = T_c0_ck.translation();
+  }
+  const double unit = (p_c0_ck[n - 1] - p_c0_ck[0]).norm();
+  if (unit < 1e-9) {
+    status_ = "structure: no translation between the first and last images";
+    return std::nullopt;
+  }
+  for (Eigen::Vector3d& p : p_c0_ck) p /= unit;
+
+  // ---- gyro bias: rotations of vision against the pre-integrated gyro ----
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d g_vec = Eigen::Vector3d::Zero();
+  for (std::size_t k = 1; k < n; ++k) {
+    const Eigen::Matrix3d R_vis = R_c0_bk[k - 1].transpose() * R_c0_bk[k];
+    const Eigen::Vector3d r = so3_log(pre[k].dR.transpose() * R_vis);
+    H += pre[k].J_R_bg.transpose() * pre[k].J_R_bg;
+    g_vec += pre[k].J_R_bg.transpose() * r;
+  }
+  const Eigen::LDLT<Eigen::Matrix3d> H_ldlt(H);
+  bg = H_ldlt.solve(g_vec);
+  if (!bg.allFinite()) {
+    status_ = "gyro bias: singular system";
+    return std::nullopt;
+  }
+  integrate_all();
+  double rot_res2 = 0.0;
+  for (std::size_t k = 1; k < n; ++k) {
+    rot_res2 += so3_log(pre[k].dR.transpose() * R_c0_bk[k - 1].transpose() * R_c0_bk[k]).squaredNorm();
+  }
+  const double rot_rms = std::sqrt(rot_res2 / (3.0 * static_cast<double>(n - 1)));
+  const Eigen::Matrix3d bg_cov = rot_rms * rot_rms * H.inverse();
+
+  // ---- linear alignment: x = [v_0 .. v_{n-1} (c0, m/s), g_c0 (m/s^2), s (m per unit)] ----
+  // p_bk = s p_ck - R_k p_b_c;  p_{k+1} = p_k + v_k dt + g dt^2 / 2 + R_k dp;  v_{k+1} = v_k + g dt + R_k dv.
+  const int nv = static_cast<int>(3 * n);
+  auto build = [&](int dim_g, const Eigen::Matrix<double, 3, Eigen::Dynamic>& g_basis,
+                   const Eigen::Vector3d& g_fixed, Eigen::MatrixXd* A, Eigen::VectorXd* b) {
+    const int rows = static_cast<int>(6 * (n - 1));
+    const int cols = nv + dim_g + 1;
+    A->setZero(rows, cols);
+    b->setZero(rows);
+    for (std::size_t k = 0; k + 1 < n; ++k) {
+      const int r = static_cast<int>(6 * k);
+      const int ck = static_cast<int>(3 * k);
+      const double dt = pre[k + 1].dt_s;
+      const Eigen::Matrix3d& Rk = R_c0_bk[k];
+      // position: v_k dt + (g dt^2 / 2) - s (p_c{k+1} - p_ck) = -R_k dp + (R_k - R_{k+1}) p_b_c
+      A->block<3, 3>(r, ck) = Eigen::Matrix3d::Identity() * dt;
+      A->block(r, nv, 3, dim_g) = 0.5 * dt * dt * g_basis;
+      A->block<3, 1>(r, nv + dim_g) = -(p_c0_ck[k + 1] - p_c0_ck[k]);
+      b->segment<3>(r) = -Rk * pre[k + 1].dp + (Rk - R_c0_bk[k + 1]) * p_b_c - 0.5 * dt * dt * g_fixed;
+      // velocity: v_{k+1} - v_k - g dt = R_k dv
+      A->block<3, 3>(r + 3, ck) = -Eigen::Matrix3d::Identity();
+      A->block<3, 3>(r + 3, ck + 3) = Eigen::Matrix3d::Identity();
+      A->block(r + 3, nv, 3, dim_g) = -dt * g_basis;
+      b->segment<3>(r + 3) = Rk * pre[k + 1].dv + dt * g_fixed;
+    }
+  };
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b;
+  build(3, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), &A, &b);
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(A);
+  const double cond = svd.singularValues()(0) / std::max(svd.singularValues().tail<1>()(0), 1e-300);
+  if (!(cond <= config_.dynamic_init_max_condition)) {
+    status_ = fmt("alignment condition number %.3g > %.3g", cond, config_.dynamic_init_max_condition);
+    return std::nullopt;
+  }
+  Eigen::VectorXd x = A.colPivHouseholderQr().solve(b);
+  Eigen::Vector3d g = x.segment<3>(nv);
+  double s = x(nv + 3);
+  const double g_norm = g.norm();
+  const double G = config_.gravity_mps2;
+  if (!(s > config_.dynamic_init_min_scale && s < config_.dynamic_init_max_scale)) {
+    status_ = fmt("scale %.4g not positive/plausible (allowed %.3g .. %.3g m per unit)", s,
+                  config_.dynamic_init_min_scale, config_.dynamic_init_max_scale);
+    return std::nullopt;
+  }
+  if (!(std::abs(g_norm - G) <= config_.dynamic_init_max_gravity_error_mps2)) {
+    status_ = fmt("gravity norm %.3f vs %.3f m/s^2 (tolerance %.2f)", g_norm, G,
+                  config_.dynamic_init_max_gravity_error_mps2);
+    return std::nullopt;
+  }
+
+  // ---- gravity on its sphere: g = G g_hat + B w, B a tangent basis, re-linearised a few times ----
+  Eigen::MatrixXd cov;
+  double rms = 0.0;
+  for (int it = 0; it < 4; ++it) {
+    const Eigen::Vector3d g_hat = g.normalized();
+    const Eigen::Vector3d helper =
+        std::abs(g_hat.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    Eigen::Matrix<double, 3, Eigen::Dynamic> B(3, 2);
+    B.col(0) = g_hat.cross(helper).normalized();
+    B.col(1) = g_hat.cross(B.col(0));
+    build(2, B, G * g_hat, &A, &b);
+    x = A.colPivHouseholderQr().solve(b);
+    g = (G * g_hat + B * x.segment<2>(nv)).normalized() * G;
+    s = x(nv + 2);
+    rms = std::sqrt((A * x - b).squaredNorm() / static_cast<double>(b.size()));
+    if (it == 3) {
+      const double dof = std::max(1.0, static_cast<double>(A.rows() - A.cols()));
+      cov = ((A * x - b).squaredNorm() / dof) * (A.transpose() * A).inverse();
+    }
+  }
+  const double translation_m = s * (p_c0_ck[n - 1] - p_c0_ck[0]).norm();
+  if (!(s > config_.dynamic_init_min_scale && s < config_.dynamic_init_max_scale)) {
+    status_ = fmt("scale %.4g not positive/plausible after gravity refinement", s);
+    return std::nullopt;
+  }
+  if (translation_m < config_.dynamic_init_min_translation_m) {
+    status_ = fmt("translation %.3f m < %.3f m over %.2f s", translation_m,
+                  config_.dynamic_init_min_translation_m, span_s);
+    return std::nullopt;
+  }
+  if (!(rms <= config_.dynamic_init_max_residual)) {
+    status_ = fmt("alignment residual RMS %.4f > %.4f", rms, config_.dynamic_init_max_residual);
+    return std::nullopt;
+  }
+
+  // ---- the state at the last image, in a world frame with +z up and the IMU's yaw zero ----
+  const Eigen::Matrix3d R_w_c0 =
+      Eigen::Quaterniond::FromTwoVectors(g.normalized(), -Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Matrix3d R_w_b = R_w_c0 * R_c0_bk[n - 1];
+  const double yaw = std::atan2(R_w_b(1, 0), R_w_b(0, 0));
+  const Eigen::Matrix3d R_z = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Matrix3d R_w = R_z * R_w_c0;  // c0 -> the output world
+  const int vl = static_cast<int>(3 * (n - 1));
+
+  InitialState out;
+  out.method = InitMethod::kDynamic;
+  out.state.t_ns = window_.back().t_ns;
+  out.state.q_w_i = Eigen::Quaterniond(R_w * R_c0_bk[n - 1]).normalized();
+  out.state.p_w_m.setZero();
+  out.state.v_w_mps = R_w * x.segment<3>(vl);
+  out.state.gyro_bias_radps = bg;
+  out.state.accel_bias_mps2.setZero();
+  if (!window_.back().imu.empty()) out.state.omega_i_radps = window_.back().imu.back().gyro_radps - bg;
+  // Covariances: those of the least squares (scaled by their residuals), floored by the config.
+  const Eigen::Matrix2d cov_w = cov.block<2, 2>(nv, nv);
+  const double sigma_tilt =
+      std::max(config_.dynamic_init_min_sigma_tilt_rad, std::sqrt(std::max(cov_w.trace() / 2.0, 0.0)) / G);
+  out.rot_cov_world = Eigen::Vector3d(sigma_tilt * sigma_tilt, sigma_tilt * sigma_tilt,
+                                      config_.init_sigma_yaw_rad * config_.init_sigma_yaw_rad)
+                          .asDiagonal();
+  const double min_v2 = config_.dynamic_init_min_sigma_vel_mps * config_.dynamic_init_min_sigma_vel_mps;
+  out.vel_cov_m2ps2 = R_w * cov.block<3, 3>(vl, vl) * R_w.transpose() + Eigen::Matrix3d::Identity() * min_v2;
+  const double min_bg2 =
+      config_.dynamic_init_min_sigma_gyro_bias_radps * config_.dynamic_init_min_sigma_gyro_bias_radps;
+  out.gyro_bias_cov = bg_cov + Eigen::Matrix3d::Identity() * min_bg2;
+  out.scale = s;
+  out.window_s = span_s;
+  out.detail = fmt(
+      "dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, scale %.3f m (translation %.2f m), "
+      "|g| %.3f before refinement, residual %.4f, cond %.3g, gyro bias (%.4f %.4f %.4f) rad/s, accel std "
+      "%.2f m/s^2",
+      n, span_s, best, vision_parallax, s, translation_m, g_norm, rms, cond, bg.x(), bg.y(), bg.z(), acc_std);
+  status_ = out.detail;
+  return out;
+}
+
+}  // namespace loopgate
