@@ -96,7 +96,7 @@ Data simulate(const Scenario& sc) {
         const Eigen::Vector3d p = T_c_w * landmarks[i];
         if (p.z() < 0.5) continue;
         const Eigen::Vector2d xy = p.head<2>() / p.z();
-        if (std::abs(xy.x()) > 0.6 || std::abs(xy.y()) > 0.45) continue;
+        if (std::abs(xy.x()) > 0.82 || std::abs(xy.y()) > 0.52) continue;  // EuRoC-like field of view
         FeatureObservation o;
         o.id = i;
         o.xy = xy + sc.pixel_noise_px / kFocalPx * Eigen::Vector2d(n01(rng), n01(rng));
