@@ -1,9 +1,8 @@
-// The floor of loop correction on a route (issue 13): a finished run's odometry in the pose graph the loop
+// The floor of loop correction on a route (pipeline/loop_oracle.hpp, which every run with ground truth and a
+// pose graph reports in summary.json's loop_oracle): a finished run's odometry in the pose graph the loop
 // closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance - at every
-// ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). No verifier can give
-// better edges or more of them, so the ATE printed is the best any loop closure reaches on this odometry and
-// route with this graph; a target below it needs better odometry (or a Sim(3) graph), not better loops.
-// Prints figures; not a timed benchmark.
+// ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). The ATE printed is
+// over the graph's nodes. Prints figures; not a timed benchmark.
 //
 // The odometry edges are the run's own: the nodes and odometry edges of RUN_DIR/pose_graph.g2o (written by a
 // run with verify.enabled: the odometry's covariances scaled as that run scaled them; its loop edges are
@@ -31,9 +30,8 @@
 #include "io/dataset.hpp"
 #include "io/g2o_file.hpp"
 #include "io/trajectory_io.hpp"
+#include "pipeline/loop_oracle.hpp"
 #include "pipeline/run_metrics.hpp"
-#include "stages/ekf/vio_ekf.hpp"
-#include "stages/posegraph/pose_graph.hpp"
 
 namespace {
 
@@ -72,35 +70,36 @@ double rmse(const nlohmann::json& accuracy) {
 int run(const Options& o) {
   const auto dataset = open_dataset(o.dataset);
   if (!dataset->has_ground_truth()) throw DataError(o.dataset, "the oracle needs ground truth");
-  PoseGraphConfig config;
-  if (!o.robust) {
-    // The perfect loops are known to be right: no robust loss, none switched off (a graph whose odometry
-    // edges are overconfident would otherwise reject the truth and report a floor that is not one).
-    config.loss = "none";
-    config.outlier_chi2 = std::numeric_limits<double>::infinity();
-  }
-  PoseGraph graph(config);
-  std::map<std::size_t, std::size_t> node_of;  // frame -> node
+  OracleOptions options;
+  options.every = o.every;
+  options.sigma_position_m = o.sigma_position_m;
+  options.sigma_rotation_rad = o.sigma_rotation_rad;
+  options.robust = o.robust;
+  OracleGraph graph;
   const fs::path graph_file = o.run_dir / "pose_graph.g2o";
   std::string edges_from;
   if (!o.model && fs::exists(graph_file)) {
     G2oGraph run_graph = read_g2o(graph_file);
     std::sort(run_graph.vertices.begin(), run_graph.vertices.end(),
               [](const G2oVertex& a, const G2oVertex& b) { return a.id < b.id; });
+    std::map<std::int64_t, std::size_t> node_of;
     for (const G2oVertex& v : run_graph.vertices) {
       if (v.id < 0 || static_cast<std::size_t>(v.id) >= dataset->frame_count())
         throw DataError(graph_file, fmt::format("vertex {} is not a frame of the dataset", v.id));
-      node_of[static_cast<std::size_t>(v.id)] = graph.add_node(v.T_w_b);
+      node_of[v.id] = graph.frames.size();
+      graph.frames.push_back(static_cast<std::size_t>(v.id));
+      graph.T_w_b.push_back(v.T_w_b);
     }
     std::size_t dropped = 0;
     for (const G2oEdge& e : run_graph.edges) {
-      const std::size_t a = node_of.at(static_cast<std::size_t>(e.a));
-      const std::size_t b = node_of.at(static_cast<std::size_t>(e.b));
-      if (b != a + 1) {
+      const auto a = node_of.find(e.a), b = node_of.find(e.b);
+      if (a == node_of.end() || b == node_of.end())
+        throw DataError(graph_file, fmt::format("edge {} -> {} joins an unknown vertex", e.a, e.b));
+      if (b->second != a->second + 1) {
         ++dropped;
         continue;
       }
-      graph.add_edge(a, b, EdgeKind::kOdometry, e.T_a_b, e.information.inverse());
+      graph.odometry.push_back({a->second, b->second, e.T_a_b, e.information.inverse()});
     }
     edges_from =
         fmt::format("the run's odometry edges ({}; its {} loop edges dropped)", graph_file.string(), dropped);
@@ -111,51 +110,34 @@ int run(const Options& o) {
     for (const StampedPose& pose : odometry) {
       const auto it = frame_of.lower_bound(pose.t_ns - 1000);  // TUM keeps 1 ns; allow its rounding
       if (it == frame_of.end() || it->first > pose.t_ns + 1000) continue;
-      node_of[it->second] = graph.add_node(pose.T_w_b);
+      if (!graph.frames.empty() && it->second <= graph.frames.back()) continue;
+      graph.frames.push_back(it->second);
+      graph.T_w_b.push_back(pose.T_w_b);
     }
-    for (std::size_t n = 1; n < graph.node_count(); ++n) {
-      const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
-      graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, config.model_cov(T_a_b));
+    for (std::size_t n = 1; n < graph.frames.size(); ++n) {
+      const Eigen::Isometry3d T_a_b = graph.T_w_b[n - 1].inverse() * graph.T_w_b[n];
+      graph.odometry.push_back({n - 1, n, T_a_b, options.graph.model_cov(T_a_b)});
     }
     edges_from = "the fixed model's odometry edges (trajectory.tum)";
   }
-  if (node_of.size() < 2) throw DataError(o.run_dir, "fewer than 2 poses at frame times");
-  Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
-  cov.diagonal() << Eigen::Vector3d::Constant(o.sigma_position_m * o.sigma_position_m),
-      Eigen::Vector3d::Constant(o.sigma_rotation_rad * o.sigma_rotation_rad);
-  const auto gt_pose = [&](std::size_t frame) {
-    const auto state = ground_truth_state_at(dataset->ground_truth(), dataset->frame_t_ns(frame));
-    if (!state) throw DataError(o.dataset, fmt::format("no ground truth at frame {}", frame));
-    return state->T_w_b;
-  };
+  if (graph.frames.size() < 2) throw DataError(o.run_dir, "fewer than 2 poses at frame times");
   const std::vector<std::pair<std::size_t, std::size_t>> pairs =
       read_truth_loops(o.run_dir / "truth_loops.csv");
-  std::size_t loops = 0;
-  long long last_i = -1'000'000;
-  for (const auto& [i, j] : pairs) {
-    if (static_cast<long long>(i) - last_i < o.every || !node_of.count(i) || !node_of.count(j)) continue;
-    last_i = static_cast<long long>(i);
-    graph.add_edge(node_of[j], node_of[i], EdgeKind::kLoop, gt_pose(j).inverse() * gt_pose(i), cov);
-    ++loops;
+  const OracleResult oracle = solve_loop_oracle(graph, pairs, *dataset, options);
+  std::vector<StampedPose> before, corrected;
+  for (std::size_t n = 0; n < graph.frames.size(); ++n) {
+    before.push_back({dataset->frame_t_ns(graph.frames[n]), graph.T_w_b[n]});
+    corrected.push_back({dataset->frame_t_ns(graph.frames[n]), oracle.T_w_b[n]});
   }
-  const SolveReport report = graph.optimize(true, 0.0);
-  std::vector<StampedPose> corrected;
-  std::size_t n = 0;
-  for (const auto& [frame, node] : node_of) {
-    (void)node;
-    corrected.push_back({dataset->frame_t_ns(frame), graph.pose(n++)});
-  }
-  std::vector<StampedPose> before;
-  for (std::size_t k = 0; k < graph.node_count(); ++k)
-    before.push_back({corrected[k].t_ns, graph.initial_pose(k)});
   std::printf("odometry edges: %s\n", edges_from.c_str());
   std::printf(
       "%s: %zu nodes, %zu perfect loop edges (one per %d query frames of %zu ground-truth pairs; %zu "
       "switched "
       "off), %d iterations\nATE odometry %.3f m -> oracle-corrected %.3f m (posyaw alignment, as "
       "summary.json)\n",
-      o.run_dir.c_str(), graph.node_count(), loops, o.every, pairs.size(), report.outliers, report.iterations,
-      rmse(trajectory_accuracy_json(before, *dataset)), rmse(trajectory_accuracy_json(corrected, *dataset)));
+      o.run_dir.c_str(), graph.frames.size(), oracle.loops, o.every, pairs.size(), oracle.outliers,
+      oracle.iterations, rmse(trajectory_accuracy_json(before, *dataset)),
+      rmse(trajectory_accuracy_json(corrected, *dataset)));
   return 0;
 }
 

@@ -2,7 +2,7 @@
 # What loop closure (verification + pose graph) costs a whole run: `loopgate run --rate max` N times (default 5)
 # with the config as it is and with verify.enabled=false posegraph.enabled=false, the two interleaved so that a
 # change of the machine's speed hits both; prints every run's real-time factor and the medians and their ratio.
-# Real-time factors from different days do not compare (docs/architecture.md § Loop closures); the ratio does.
+# Real-time factors from different days do not compare (docs/results.md); the ratio does.
 # Usage: bench/verify_cost.sh CONFIG DATASET [N] [BUILD_DIR] [--set KEY=VALUE ...]
 #   e.g. bench/verify_cost.sh configs/euroc-mh05.yaml /work/data/mh05 5 build/release --set odometry.source=ekf
 set -eu

@@ -9,7 +9,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-out/demo}
 scripts/setup.sh
-scripts/build.sh release
+scripts/build.sh release loopgate  # the tool only: the tests are built by scripts/test.sh
 if [ -f "$out/simulation.json" ]; then
   echo "demo: $out already rendered (delete it to render again)" >&2
 else

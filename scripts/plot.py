@@ -764,7 +764,7 @@ def cmd_scaling(bench_dir, out):
     bottom.legend(loc="upper left", fontsize=8)
     for ax in (top, bottom):
         ax.grid(alpha=0.3, which="both")
-    save(fig, out / "scaling.png", written, dpi=90)  # small enough for the README (docs/img)
+    save(fig, out / "scaling.png", written, dpi=90)  # small enough for the docs (docs/img)
     return written
 
 

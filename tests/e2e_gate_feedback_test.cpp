@@ -36,13 +36,13 @@ fs::path simulate_drive() {
 
 // configs/demo.yaml gated with verification, loops forced between frames ~5 m apart (gap 4, margin 4,
 // min_score 0), and a short lag: L = max_in_flight 2 + row horizon 5 + sequence length 5 - 1 = 11 frames.
-// Loops that short tell the graph nothing the odometry does not know (verify.min_sigma_gain would skip them):
-// every one is verified here.
+// Loops that short tell the graph nothing the odometry does not know (verify.min_information_gain would skip
+// them): every one is verified here.
 std::string forced_args(const fs::path& sim, const fs::path& out, int threads) {
   return "run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " + sim.string() +
          " --out " + out.string() + " --mode gated --threads " + std::to_string(threads) +
          " --set match.margin=4 --set dird_seqslam.min_score=0 --set output.progress=off --set "
-         "verify.enabled=true --set verify.min_sigma_gain=0 --set gate.gap_frames=4 "
+         "verify.enabled=true --set verify.min_information_gain=0 --set gate.gap_frames=4 "
          "--set run.max_in_flight=2 --set match.sequence_length=5 --set gate.area_margin_query_frames=5 "
          "--set gate.area_max_hole_frames=2 --set gate.row_horizon_frames=5 ";
 }

@@ -229,6 +229,53 @@ TEST(E2eHostile, ASecondRunIntoTheSameFolderFailsAtOnce) {
   EXPECT_EQ(status, 0);
 }
 
+// One writer per folder, nested folders too: `run --out O/full` while `compare --out O` runs is refused (it
+// mixed a 300-row frames.csv with an 800-frame summary, both exiting 0).
+TEST(E2eHostile, ARunInsideARunningComparesFolderIsRefused) {
+  const fs::path dataset = make_kitti(100);
+  const fs::path out = testing::make_temp_dir("hostile-nested");
+  Child compare({kBinary, "compare", "--config", kConfig, "--dataset", dataset.string(), "--out",
+                 out.string(), "--methods", "full", "--set", "run.rate=1.0", "--set", "match.margin=4",
+                 "--set", "output.progress=on"});
+  ASSERT_TRUE(compare.wait_for_output("[run] ")) << compare.output();
+  int status = -1;
+  const std::string output = run(run_args(dataset, out / "full") + " --frames 0:20", &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("which another loopgate command is writing (pid " + std::to_string(compare.pid())),
+            std::string::npos)
+      << output;
+  compare.send(SIGINT);
+  compare.wait();
+}
+
+// A compare into a run's folder is refused without --force, like a run into a run's; a run --force into a
+// compare's folder removes its compare.json (aggregate reported the old compare).
+TEST(E2eHostile, RunAndCompareOutputsDoNotMix) {
+  const fs::path dataset = make_kitti(40);
+  const fs::path out = testing::make_temp_dir("hostile-mix");
+  int status = -1;
+  std::string output = run(run_args(dataset, out), &status);
+  ASSERT_EQ(status, 0) << output;
+  output = run("compare --config " + kConfig + " --dataset " + dataset.string() + " --out " + out.string() +
+                   " --methods full --set match.margin=4",
+               &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("already holds another run's outputs (frames.csv"), std::string::npos) << output;
+  output = run("compare --config " + kConfig + " --dataset " + dataset.string() + " --out " + out.string() +
+                   " --methods full --set match.margin=4 --force",
+               &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_TRUE(fs::exists(out / "compare.json"));
+  EXPECT_FALSE(fs::exists(out / "frames.csv"));  // the run's outputs went with --force
+  output = run(run_args(dataset, out), &status);
+  EXPECT_EQ(status, 1) << output;
+  EXPECT_NE(output.find("compare.json"), std::string::npos) << output;
+  output = run(run_args(dataset, out) + " --force", &status);
+  ASSERT_EQ(status, 0) << output;
+  EXPECT_FALSE(fs::exists(out / "compare.json"));
+  EXPECT_TRUE(fs::exists(out / "summary.json"));
+}
+
 TEST(E2eHostile, OutputsNeverOverwriteInputs) {
   const fs::path dataset = make_kitti(30);
   const fs::path out = testing::make_temp_dir("hostile-overlap");

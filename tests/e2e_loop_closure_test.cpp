@@ -43,7 +43,7 @@ fs::path simulate(const std::string& name, const std::string& extra) {
 
 // configs/demo.yaml with verify.enabled=true (the demo config has it off) in full mode with loops forced
 // between frames ~5 m apart. Such loops tell the pose graph nothing the odometry does not know, so the
-// loop closer would skip them (verify.min_sigma_gain, tested below): here every one is verified.
+// loop closer would skip them (verify.min_information_gain, tested below): here every one is verified.
 fs::path run_forced(const fs::path& sim, int threads, const std::string& extra = "") {
   const fs::path out = testing::make_temp_dir("e2e-closure-out-" + std::to_string(threads));
   int status = -1;
@@ -51,7 +51,7 @@ fs::path run_forced(const fs::path& sim, int threads, const std::string& extra =
       run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
               sim.string() + " --out " + out.string() + " --mode full --threads " + std::to_string(threads) +
               " --set match.margin=4 --set dird_seqslam.min_score=0 --set output.progress=off --set "
-              "verify.enabled=true --set verify.min_sigma_gain=0 " +
+              "verify.enabled=true --set verify.min_information_gain=0 " +
               extra,
           &status);
   EXPECT_EQ(status, 0) << output;
@@ -69,7 +69,7 @@ fs::path compare_forced(const fs::path& sim, const std::string& name, const std:
                     sim.string() + " --out " + out.string() +
                     " --methods dird-seqslam --no-plots --threads 2 --set match.margin=4 --set "
                     "dird_seqslam.min_score=0 --set output.progress=off --set verify.enabled=true --set "
-                    "verify.min_sigma_gain=0 " +
+                    "verify.min_information_gain=0 " +
                     extra,
                 &status);
   EXPECT_EQ(status, 0) << *output;
@@ -320,27 +320,63 @@ TEST(E2eLoopClosure, ThumbnailImagesSkipVerificationWithAReason) {
               summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
 }
 
-// With the default verify.min_sigma_gain (1) a loop is verified only when the odometry's position sigma grew
-// from j to i by a loop edge's sigma: the forced loops, a few frames apart, are all skipped with that reason,
-// nothing is decoded for them, and the corrected trajectory is the odometry's.
+// With the default verify.min_information_gain (0.1) a loop is verified only when its edge would shrink the
+// odometry's own uncertainty of T_j_i (its step covariances composed from j to i) by 10%: the forced loops,
+// a few frames apart, are all skipped with that reason, counted under its key, nothing is decoded for them,
+// and the corrected trajectory is the odometry's.
 TEST(E2eLoopClosure, LoopsTheOdometryAlreadyKnowsAreNotVerified) {
   const fs::path sim = simulate("e2e-closure-known", "");
-  const fs::path out = run_forced(sim, 2, "--set verify.min_sigma_gain=1");
+  const fs::path out = run_forced(sim, 2, "--set verify.min_information_gain=0.1");
   const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
   ASSERT_GT(summary["loops"].get<int>(), 0);
   EXPECT_EQ(summary["loops_verified"].get<int>(), 0);
   EXPECT_EQ(summary["loops_rejected_geometry"].get<int>(), 0);
   EXPECT_EQ(summary["loops_skipped_geometry"].get<int>(), summary["loops"].get<int>());
+  EXPECT_EQ(summary["loop_closure"]["skipped_by_reason"]["small_information_gain"].get<int>(),
+            summary["loops"].get<int>());
   EXPECT_EQ(summary["loop_closure"]["verify"]["count"].get<int>(), 0);
   const auto rows = read_csv(out / "loop_edges.csv");
   ASSERT_FALSE(rows.empty());
   for (const auto& row : rows) {
     EXPECT_EQ(row[3], "skipped");
-    EXPECT_NE(row[7].find("skipped: odometry sigma grew 0."), std::string::npos) << row[7];
-    EXPECT_NE(row[7].find(" m from j to i < 0.300 m (a loop edge's)"), std::string::npos) << row[7];
+    EXPECT_NE(row[7].find("skipped: information gain 0."), std::string::npos) << row[7];
+    EXPECT_NE(row[7].find(" < 0.1 (the odometry's sigma from j to i "), std::string::npos) << row[7];
   }
   EXPECT_NEAR(summary["trajectory_accuracy_corrected"]["rmse_m"].get<double>(),
               summary["trajectory_accuracy"]["rmse_m"].get<double>(), 1e-6);
+}
+
+// A final pose-graph solve that fails (odometry covariances scaled to overflow) corrects nothing: the run
+// fails with the reason in problems and a non-zero exit, trajectory_corrected.tum and pose_graph.g2o are not
+// written and are listed as missing, nothing claims a correction, and the other outputs are all there.
+TEST(E2eLoopClosure, AFailedSolveIsAFailedRun) {
+  const fs::path sim = simulate("e2e-closure-failed-solve", "");
+  const fs::path out = testing::make_temp_dir("e2e-closure-failed-solve-out");
+  int status = -1;
+  const std::string output =
+      run("run --config " + std::string(LOOPGATE_SOURCE_DIR) + "/configs/demo.yaml --dataset " +
+              sim.string() + " --out " + out.string() +
+              " --mode full --threads 2 --set match.margin=4 --set dird_seqslam.min_score=0 --set "
+              "output.progress=off --set verify.enabled=true --set verify.min_information_gain=0 --set "
+              "posegraph.odometry_cov_scale=1e300",
+          &status);
+  EXPECT_NE(status, 0) << output;
+  EXPECT_NE(output.find("the final solve failed"), std::string::npos) << output;
+  const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
+  EXPECT_TRUE(summary["failed"].get<bool>());
+  ASSERT_GT(summary["loops_verified"].get<int>(), 0);  // there was something to correct
+  ASSERT_EQ(summary["problems"].size(), 1u) << summary["problems"].dump();
+  EXPECT_NE(summary["problems"][0].get<std::string>().find("pose graph: the final solve failed"),
+            std::string::npos);
+  EXPECT_FALSE(summary["trajectory_accuracy_corrected"]["available"].get<bool>());
+  EXPECT_FALSE(summary["trajectory_accuracy_corrected"].contains("poses"));
+  EXPECT_FALSE(fs::exists(out / "trajectory_corrected.tum"));
+  EXPECT_FALSE(fs::exists(out / "pose_graph.g2o"));
+  const std::string missing = summary["outputs_missing"].dump();
+  EXPECT_NE(missing.find("trajectory_corrected.tum"), std::string::npos) << missing;
+  EXPECT_NE(missing.find("pose_graph.g2o"), std::string::npos) << missing;
+  for (const char* name : {"frames.csv", "loops.csv", "loop_edges.csv", "trajectory.tum", "timing.csv"})
+    EXPECT_TRUE(fs::exists(out / name)) << name;
 }
 
 // posegraph.odometry_cov model: the fixed sigma model instead; another correction, as deterministic.

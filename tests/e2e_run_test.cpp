@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <spdlog/fmt/fmt.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -298,7 +299,7 @@ TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
 
   const fs::path out = testing::make_temp_dir("e2e-run-ekf-out");
   output = run("--log-level warn run --dataset " + sim.string() + " --mode odometry --out " + out.string() +
-                   " --set odometry.source=ekf --set output.progress=off",
+                   " --set odometry.source=ekf --set ekf.init_mode=ground_truth --set output.progress=off",
                &status);
   ASSERT_EQ(status, 0) << output;
   std::vector<std::string> header;
@@ -351,8 +352,12 @@ TEST(E2eRun, TruthPairsFileIsTheGroundTruth) {
   int status = -1;
   std::string output = run(base + (dir / "gt.csv").string() + " --out " + (dir / "out").string(), &status);
   ASSERT_EQ(status, 0) << output;
-  EXPECT_NE(output.find("eval.truth_pairs_file = '" + (dir / "gt.csv").string() + "'"), std::string::npos)
-      << output;
+  // The effective configuration is in the run folder (config.yaml), not on the console.
+  EXPECT_NE(
+      read_file(dir / "out" / "config.yaml").find("truth_pairs_file: \"" + (dir / "gt.csv").string() + "\""),
+      std::string::npos)
+      << read_file(dir / "out" / "config.yaml");
+  EXPECT_EQ(output.find("eval.truth_pairs_file = "), std::string::npos) << output;
   const auto summary = nlohmann::json::parse(read_file(dir / "out" / "summary.json"));
   EXPECT_EQ(summary["config"]["eval"]["truth_pairs_file"], (dir / "gt.csv").string());
   const auto& evaluation = summary["evaluation"];
@@ -381,6 +386,97 @@ TEST(E2eRun, TruthPairsFileIsTheGroundTruth) {
             std::string::npos)
       << output;
   EXPECT_FALSE(fs::exists(dir / "bad" / "frames.csv"));
+}
+
+// The lines a run prints on stdout (stderr, where the logs and the stage table go, left out).
+std::vector<std::string> stdout_lines(const std::string& args, int* status) {
+  std::string output;
+  *status =
+      testing::run_command("(" + testing::loopgate_binary().string() + " " + args + " 2>/dev/null)", &output);
+  std::vector<std::string> lines;
+  std::istringstream in(output);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+std::string joined(const std::vector<std::string>& lines) {
+  std::string text;
+  for (const auto& line : lines) text += line + "\n";
+  return text;
+}
+
+// At its end `run` prints a short result block on stdout: frames and real-time factor, loops true/false,
+// AP / R@1 / R@100P (n/a where no true loop exists), ATE, problems, the output folder; the configuration goes
+// to OUT/config.yaml (loadable again as --config) and to --log-level debug, not to the console.
+TEST(E2eRun, ConsoleShowsTheResultBlockNotTheConfiguration) {
+  const fs::path dataset = make_kitti_dataset(60);
+  for (int i = 40; i < 60; ++i) {  // frames 40..59 revisit 0..19 (the same pixels and poses)
+    char from[32], to[32];
+    std::snprintf(from, sizeof(from), "%06d.png", i - 40);
+    std::snprintf(to, sizeof(to), "%06d.png", i);
+    fs::copy_file(dataset / "image_0" / from, dataset / "image_0" / to, fs::copy_options::overwrite_existing);
+  }
+  {
+    std::ifstream in(dataset / "poses.txt");
+    std::vector<std::string> rows;
+    for (std::string row; std::getline(in, row);) rows.push_back(row);
+    std::ofstream out(dataset / "poses.txt");
+    for (int i = 0; i < 60; ++i) out << rows[static_cast<std::size_t>(i < 40 ? i : i - 40)] << "\n";
+  }
+  const fs::path dir = testing::make_temp_dir("e2e-run-result");
+  const std::string args = "run --config " + std::string(LOOPGATE_SOURCE_DIR) +
+                           "/configs/kitti00-thumbs.yaml --mode full --set match.margin=20 "
+                           "--set output.progress=off --set eval.truth_gap_frames=10 --dataset " +
+                           dataset.string();
+  int status = -1;
+  const auto lines = stdout_lines(args + " --out " + (dir / "a").string(), &status);
+  ASSERT_EQ(status, 0) << joined(lines);
+  ASSERT_GE(lines.size(), 6u) << joined(lines);
+  EXPECT_LE(lines.size(), 12u) << joined(lines);
+  const auto summary = nlohmann::json::parse(read_file(dir / "a" / "summary.json"));
+  const std::string text = joined(lines);
+  EXPECT_NE(text.find("frames     60 of 60 processed"), std::string::npos) << text;
+  EXPECT_NE(text.find("real-time factor"), std::string::npos) << text;
+  const auto& truth = summary["evaluation"]["loop_truth"];
+  EXPECT_GT(truth["loops_true"].get<int>(), 0) << summary["evaluation"].dump();
+  EXPECT_NE(text.find(fmt::format("loops      {}: {} true, {} false", summary["loops"].get<int>(),
+                                  truth["loops_true"].get<int>(), truth["loops_false"].get<int>())),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find(fmt::format(
+                "AP {:.3f}", summary["evaluation"]["precision_recall"]["average_precision"].get<double>())),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("R@100P"), std::string::npos) << text;
+  EXPECT_NE(text.find("ATE        odometry"), std::string::npos) << text;
+  EXPECT_NE(text.find("problems   none"), std::string::npos) << text;
+  EXPECT_NE(text.find("outputs    " + (dir / "a").string()), std::string::npos) << text;
+  // No configuration echo on the console at the default log level, even on stderr.
+  std::string everything;
+  ASSERT_EQ(
+      testing::run_command(
+          testing::loopgate_binary().string() + " " + args + " --out " + (dir / "b").string(), &everything),
+      0);
+  EXPECT_EQ(everything.find("posegraph.max_iterations"), std::string::npos) << everything;
+  EXPECT_EQ(everything.find("configuration:"), std::string::npos) << everything;
+  // ... but in config.yaml, which runs again to the same loops, and at --log-level debug.
+  const std::string config = read_file(dir / "a" / "config.yaml");
+  EXPECT_NE(config.find("posegraph:"), std::string::npos) << config;
+  EXPECT_NE(config.find("  margin: 20"), std::string::npos) << config;
+  ASSERT_EQ(testing::run_command(testing::loopgate_binary().string() + " --log-level debug run --config " +
+                                     (dir / "a" / "config.yaml").string() + " --out " + (dir / "c").string(),
+                                 &everything),
+            0)
+      << everything;
+  EXPECT_NE(everything.find("posegraph.max_iterations = "), std::string::npos) << everything;
+  const auto again = nlohmann::json::parse(read_file(dir / "c" / "summary.json"));
+  EXPECT_EQ(again["loops"], summary["loops"]);
+  EXPECT_EQ(again["config"], summary["config"]);
+
+  // Without a true loop in the range, AP and recall are n/a, not 0.
+  const auto none = stdout_lines(args + " --frames 0:30 --out " + (dir / "d").string(), &status);
+  ASSERT_EQ(status, 0) << joined(none);
+  EXPECT_NE(joined(none).find("AP n/a, R@1 n/a, R@100P n/a"), std::string::npos) << joined(none);
 }
 
 TEST(E2eRun, KittiThumbsEveryFrameOnceInOrder) {

@@ -114,7 +114,7 @@ TEST(E2eTumVi, MocapAndKalibrRunWithGroundTruthAndTheEkf) {
 
   const std::string args = " --config " + std::string(LOOPGATE_SOURCE_DIR) +
                            "/configs/demo.yaml --set match.margin=20 --set odometry.source=ekf"
-                           " --set output.progress=off";
+                           " --set ekf.init_mode=ground_truth --set output.progress=off";
   output =
       run("run --dataset " + (root / "tumvi").string() + " --out " + (root / "out-tumvi").string() + args,
           &status);

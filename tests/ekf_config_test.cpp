@@ -16,8 +16,17 @@ TEST(EkfConfig, DefaultsAreValid) {
   EXPECT_EQ(config.window_size, 11);
   EXPECT_EQ(config.max_features, 150);
   EXPECT_DOUBLE_EQ(config.chi2_quantile, 0.95);
-  EXPECT_EQ(config.init_mode, "ground_truth");
+  EXPECT_EQ(config.init_mode, EkfInitMode::kAuto);  // from the sensors, not from ground truth
   EXPECT_EQ(config.klt_check_pyramid_levels, 0);
+}
+
+TEST(EkfConfig, InitModeWordsIncludeTheOldStandstill) {
+  EXPECT_EQ(enum_choices(EkfInitMode::kAuto), "auto|static|dynamic|ground_truth|standstill");
+  EXPECT_EQ(enum_name(EkfInitMode::kStatic), "static");  // standstill reads as static, prints as static
+  int standstill = 0;
+  for (const auto& n : enum_names(EkfInitMode::kAuto))
+    if (n.name == "standstill") standstill += n.value == EkfInitMode::kStatic ? 1 : 100;
+  EXPECT_EQ(standstill, 1);
 }
 
 TEST(EkfConfig, VisitorSeesEveryKeyOnce) {
@@ -33,6 +42,9 @@ TEST(EkfConfig, VisitorSeesEveryKeyOnce) {
   EXPECT_TRUE(keys.contains("init_mode"));
   EXPECT_TRUE(keys.contains("chi2_quantile"));
   EXPECT_TRUE(keys.contains("gyro_noise_density"));
+  EXPECT_TRUE(keys.contains("max_init_s"));
+  EXPECT_TRUE(keys.contains("min_tracked_share"));
+  EXPECT_TRUE(keys.contains("static_window_s"));
 }
 
 TEST(EkfConfig, BadValuesNameTheKey) {
@@ -45,10 +57,14 @@ TEST(EkfConfig, BadValuesNameTheKey) {
     return std::string();
   };
   EkfConfig config;
-  config.init_mode = "magic";
-  const std::string m = message_of(config);
-  EXPECT_NE(m.find("ekf.init_mode"), std::string::npos);
-  EXPECT_NE(m.find("standstill"), std::string::npos);
+  config.static_lowpass_s = 0.6;  // two moving averages of it do not fit the 1 s window
+  EXPECT_NE(message_of(config).find("ekf.static_lowpass_s"), std::string::npos);
+  config = EkfConfig{};
+  config.min_tracked_share = 1.5;
+  EXPECT_NE(message_of(config).find("ekf.min_tracked_share"), std::string::npos);
+  config = EkfConfig{};
+  config.max_init_s = 0.0;
+  EXPECT_NE(message_of(config).find("ekf.max_init_s"), std::string::npos);
 
   config = EkfConfig{};
   config.window_size = 1;

@@ -82,26 +82,34 @@ TEST(EkfVio, EffectiveNoiseUsesOverridesAndRejectsZero) {
   }
 }
 
-TEST(EkfVio, StandstillInitialisationFindsGravity) {
+TEST(EkfVio, StaticInitialisationFindsGravity) {
   EkfConfig config;
-  config.init_mode = "standstill";
+  config.init_mode = EkfInitMode::kStatic;
   VioEkf vio(config, test_camera(), test_imu());
   const Eigen::Matrix3d R_tilt =
       (Eigen::AngleAxisd(0.7, Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(0.1, Eigen::Vector3d::UnitX()) *
        Eigen::AngleAxisd(-0.2, Eigen::Vector3d::UnitY()))
           .toRotationMatrix();
-  const std::vector<ImuSample> imu = static_imu(0, 3'000'000'000, R_tilt);
+  const std::vector<ImuSample> imu = static_imu(0, 4'000'000'000, R_tilt);
+  // Still features (the static initialiser needs to see that the image does not move), none for
+  // lost_max_frames images from frame 25 on.
+  std::vector<FeatureObservation> still;
+  for (int i = 0; i < 50; ++i)
+    still.push_back(FeatureObservation{static_cast<std::uint64_t>(i),
+                                       Eigen::Vector2d(0.01 * (i % 10) - 0.05, 0.02 * (i / 10) - 0.05)});
   const std::vector<FeatureObservation> none;
+  const int gap_begin = 25;
+  const int gap_end = gap_begin + config.lost_max_frames;
   OdometryStatus status = OdometryStatus::kInitialising;
   int first_tracking = -1;
   int first_lost = -1;
   int reinitialised = -1;
-  for (int k = 0; k <= 60; ++k) {
+  for (int k = 0; k <= 75; ++k) {
     EkfFrameInput in;
     in.t_ns = static_cast<Timestamp>(k) * 50'000'000;
     const auto begin = static_cast<std::size_t>(k > 0 ? (k - 1) * 10 : 0);
     in.imu = std::span<const ImuSample>(imu.data() + begin, static_cast<std::size_t>(k > 0 ? 11 : 1));
-    in.observations = &none;
+    in.observations = (k >= gap_begin && k < gap_end) ? &none : &still;
     const EkfFrameOutput out = vio.process(in);
     status = out.pose.status;
     if (status == OdometryStatus::kTracking && first_tracking < 0) first_tracking = k;
@@ -109,8 +117,9 @@ TEST(EkfVio, StandstillInitialisationFindsGravity) {
     if (status == OdometryStatus::kTracking && first_lost >= 0 && reinitialised < 0) reinitialised = k;
     if (k < 20) {
       EXPECT_EQ(status, OdometryStatus::kInitialising) << "frame " << k;
+      EXPECT_NE(out.reason.find("static"), std::string::npos) << out.reason;
     }
-    if (k == 25) {
+    if (k == 22) {
       // Roll and pitch match the tilt (yaw is set to zero): gravity directions agree.
       const Eigen::Vector3d up_est = out.pose.T_w_b.rotation().transpose() * Eigen::Vector3d::UnitZ();
       const Eigen::Vector3d up_true = R_tilt.transpose() * Eigen::Vector3d::UnitZ();
@@ -118,15 +127,19 @@ TEST(EkfVio, StandstillInitialisationFindsGravity) {
       EXPECT_LT(out.pose.T_w_b.translation().norm(), 1e-6);
     }
   }
-  EXPECT_EQ(first_tracking, 20);  // after standstill_duration_s = 1 s of IMU at 20 Hz
+  EXPECT_EQ(first_tracking, 20);  // after static_window_s = 1 s of IMU at 20 Hz
+  ASSERT_TRUE(vio.initial_state().has_value());
+  EXPECT_EQ(vio.initial_state()->method, InitMethod::kStatic);
   // Without features the track is declared lost after lost_max_frames, then re-initialised from a new
-  // standstill window: the run goes on.
-  EXPECT_EQ(first_lost, 20 + config.lost_max_frames - 1);
+  // still window: the run goes on.
+  EXPECT_EQ(first_lost, gap_end - 1);
   EXPECT_EQ(reinitialised, first_lost + 20);
+  EXPECT_EQ(vio.starts(), 2u);
 }
 
 TEST(EkfVio, DivergenceIsReportedAndRecovered) {
   EkfConfig config;
+  config.init_mode = EkfInitMode::kGroundTruth;  // the test hands the filter its ground truth
   VioEkf vio(config, test_camera(), test_imu());
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   std::vector<ImuSample> imu = static_imu(0, 2'000'000'000, R);
@@ -170,6 +183,7 @@ TEST(EkfVio, DivergenceIsReportedAndRecovered) {
 // image still gets a pose at its own time.
 TEST(EkfVio, CloneEveryNFramesClonesEverySecondImage) {
   EkfConfig config;
+  config.init_mode = EkfInitMode::kGroundTruth;  // the test hands the filter its ground truth
   config.clone_every_n_frames = 2;
   VioEkf vio(config, test_camera(), test_imu());
   const std::vector<ImuSample> imu = static_imu(0, 1'000'000'000, Eigen::Matrix3d::Identity());
@@ -207,6 +221,7 @@ TEST(EkfVio, RunsOnRealEurocMicro) {
   ASSERT_TRUE(dataset->camera().has_value());
   ASSERT_TRUE(dataset->imu_calibration().has_value());
   EkfConfig config;
+  config.init_mode = EkfInitMode::kGroundTruth;  // the test hands the filter its ground truth
   VioEkf vio(config, *dataset->camera(), *dataset->imu_calibration());
   const std::size_t frames = dataset->frame_count();
   double max_error = 0.0;

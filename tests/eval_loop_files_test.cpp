@@ -74,6 +74,25 @@ TEST(EvalLoopFiles, TruthPairsInThePublishedForms) {
   EXPECT_EQ(symmetric.rows, 3u);
 }
 
+// A UTF-8 byte-order mark before a header-less file: its first pair is a pair, not a header.
+TEST(EvalLoopFiles, ByteOrderMarkBeforeTheFirstPairIsNotAHeader) {
+  const auto pairs = read_truth_pairs(write_file("bom.csv",
+                                                 "\xEF\xBB\xBF"
+                                                 "40,0\n41,1\n"));
+  const std::vector<std::pair<std::size_t, std::size_t>> expected{{40, 0}, {41, 1}};
+  EXPECT_EQ(pairs.pairs, expected);
+  EXPECT_EQ(pairs.rows, 2u);
+  const auto with_header = read_truth_pairs(write_file("bomh.csv",
+                                                       "\xEF\xBB\xBF"
+                                                       "query,match\n40,0\n"));
+  EXPECT_EQ(with_header.rows, 1u);
+  const auto loops = read_loop_pairs(write_file("bomp.csv",
+                                                "\xEF\xBB\xBF"
+                                                "589,18\n"));
+  ASSERT_EQ(loops.size(), 1u);
+  EXPECT_EQ(loops[0], std::make_pair(std::size_t{589}, std::size_t{18}));
+}
+
 TEST(EvalLoopFiles, BadTruthPairsNameFileAndLine) {
   const auto expect_error = [](const std::string& text, std::size_t line, const std::string& message,
                                std::optional<std::size_t> frames = std::nullopt) {

@@ -2,6 +2,8 @@
 // output is an input, and one command at a time writes into an output folder.
 #include <gtest/gtest.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <fstream>
 
@@ -59,6 +61,45 @@ TEST(IoFileGuard, AnOutputThatIsAnInputIsRefused) {
   EXPECT_TRUE(path_inside(dir / "out", dir / "out"));
   EXPECT_FALSE(path_inside(dir / "outer" / "b.csv", dir / "out"));
   EXPECT_FALSE(path_inside(dir, dir / "out"));
+}
+
+// One writer per folder, nested folders too: while another process holds OUT (a compare), OUT/full (its
+// method folder) is refused to a second command; the process holding OUT may lock OUT/full itself.
+TEST(IoFileGuard, AFolderInsideAnotherCommandsFolderIsRefused) {
+  const fs::path out = testing::make_temp_dir("guard-nested") / "out";
+  int ready[2], release[2];
+  ASSERT_EQ(::pipe(ready), 0);
+  ASSERT_EQ(::pipe(release), 0);
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    int code = 0;
+    try {
+      const OutputLock lock(out, "loopgate compare");
+      const OutputLock method(out / "full", "loopgate compare, method full");  // its own: allowed
+      char c = 1;
+      code = ::write(ready[1], &c, 1) == 1 ? 0 : 2;
+      (void)::read(release[0], &c, 1);
+    } catch (...) {
+      code = 1;
+    }
+    ::_exit(code);
+  }
+  char c = 0;
+  ASSERT_EQ(::read(ready[0], &c, 1), 1);
+  for (const fs::path& inner : {out / "full", out / "gated" / "deeper"}) {
+    const std::string error = error_of([&] { OutputLock nested(inner, "loopgate run"); });
+    EXPECT_NE(error.find("which another loopgate command is writing (pid " + std::to_string(child) +
+                         ": loopgate compare)"),
+              std::string::npos)
+        << error;
+  }
+  c = 1;
+  ASSERT_EQ(::write(release[1], &c, 1), 1);
+  int status = 0;
+  ::waitpid(child, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0);
+  EXPECT_NO_THROW(OutputLock after(out / "full", "loopgate run"));  // released with the process
 }
 
 TEST(IoFileGuard, OneCommandAtATimeInAnOutputFolder) {

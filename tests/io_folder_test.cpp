@@ -1,6 +1,7 @@
 // Image-folder reader: natural order, optional times.txt, colour to grey, damaged files, Nordland.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 
@@ -139,6 +140,19 @@ TEST(IoFolder, NanosecondFileNamesAreTheFrameTimes) {
   const auto rate = open_image_folder(dir, options);
   ASSERT_EQ(rate->frame_count(), 8u);
   EXPECT_EQ(rate->frame_t_ns(1), 250'000'000);
+
+  // 19 digits with leading zeros are zero-padded frame numbers, not times (they timed the frames 1 ns apart,
+  // a real-time factor of 0.00): frames at folder_rate_hz.
+  const fs::path padded = testing::make_temp_dir("folder-padded");
+  for (int i = 1; i <= 4; ++i) {
+    char name[32];
+    std::snprintf(name, sizeof(name), "%019d.png", i);
+    cv::imwrite((padded / name).string(), grey(i));
+  }
+  const auto numbered = open_image_folder(padded, options);
+  ASSERT_EQ(numbered->frame_count(), 4u);
+  EXPECT_EQ(numbered->frame_t_ns(1) - numbered->frame_t_ns(0), 250'000'000);
+  EXPECT_TRUE(numbered->issues().empty());
 }
 
 TEST(IoFolder, DamagedImagesAndEmptyFolder) {

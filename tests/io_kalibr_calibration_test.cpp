@@ -106,10 +106,10 @@ TEST(IoKalibrCalibration, CamchainErrorsNameFileAndLine) {
                "cam0.camera_model: 'omni', expected pinhole");
 
   std::string no_extrinsics = kCamchain;
-  no_extrinsics.replace(no_extrinsics.find("  T_cam_imu:"), 11, "  T_imu_cam:");
+  no_extrinsics.replace(no_extrinsics.find("  T_cam_imu:"), 11, "  T_cam_cam:");
   const fs::path no_T = write_file(dir, "no_T.yaml", no_extrinsics);
   expect_error(catch_data_error([&] { read_kalibr_camchain(no_T, 0); }), no_T, 1,
-               "cam0: missing key 'T_cam_imu'");
+               "cam0: no T_cam_imu (Kalibr) or T_imu_cam (OpenVINS)");
 
   std::string bad_row = kCamchain;
   bad_row.replace(bad_row.find("[0.0, 0.0, 0.0, 1.0]"), 20, "[0.0, 0.0, 0.5, 1.0]");

@@ -1,11 +1,14 @@
 // KITTI odometry reader: generated sequences (normal layout, poses/NN.txt, the official tree, a subset
 // folder without times.txt, damaged parts) and the shared kitti/00 thumbs, frames and metadata.
 #include <gtest/gtest.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
 
 #include <cstdio>
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <sstream>
 
 #include "core/error.hpp"
 #include "io/dataset.hpp"
@@ -279,6 +282,16 @@ TEST(IoKitti, ColourCameras) {
   OpenOptions bad;
   bad.camera_index = 4;
   EXPECT_THROW(open_kitti(seq, bad), ConfigError);
+
+  // The default camera 0 on this colour-only tree: the warning names the folder and the key to set.
+  std::ostringstream log;
+  const auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(log);
+  spdlog::default_logger()->sinks().push_back(sink);
+  const auto grey_default = open_dataset(seq);
+  spdlog::default_logger()->sinks().pop_back();
+  EXPECT_FALSE(grey_default->has_images());
+  EXPECT_NE(log.str().find("but image_2/ is there: set run.camera_index=2 to read it"), std::string::npos)
+      << log.str();
 }
 
 // Pose files with 13 columns, a time in seconds first: each pose is timed by itself (the rows need not be one

@@ -11,6 +11,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <thread>
+#include <utility>
 
 #include "bag_test_writer.hpp"
 #include "core/error.hpp"
@@ -531,6 +532,124 @@ TEST(IoRosbag, AFileThatIsNotABag) {
     EXPECT_NE(std::string(e.what()).find("expected a dataset directory or a ROS1 .bag file"),
               std::string::npos);
   }
+}
+
+// The records of a bag file in order (format 2.0: "#ROSBAG V2.0\n", then [header length][header][data
+// length][data]), each with its op and where its header and data start.
+struct RawRecord {
+  std::size_t pos = 0;
+  std::uint8_t op = 0;
+  std::size_t data_pos = 0;
+  std::uint32_t data_bytes = 0;
+};
+
+std::uint32_t le32(const std::string& b, std::size_t at) {
+  std::uint32_t v = 0;
+  for (int i = 3; i >= 0; --i) v = (v << 8) | static_cast<unsigned char>(b[at + static_cast<std::size_t>(i)]);
+  return v;
+}
+
+void put_le32(std::string& b, std::size_t at, std::uint32_t v) {
+  for (std::size_t i = 0; i < 4; ++i) b[at + i] = static_cast<char>((v >> (8 * i)) & 0xFF);
+}
+
+std::vector<RawRecord> raw_records(const std::string& bytes) {
+  std::vector<RawRecord> records;
+  std::size_t pos = 13;
+  while (pos + 4 <= bytes.size()) {
+    RawRecord r;
+    r.pos = pos;
+    const std::uint32_t header = le32(bytes, pos);
+    const std::string fields = bytes.substr(pos + 4, header);
+    const std::size_t op_at = fields.find(std::string("op=", 3));
+    r.op = op_at == std::string::npos ? 0 : static_cast<std::uint8_t>(fields[op_at + 3]);
+    r.data_bytes = le32(bytes, pos + 4 + header);
+    r.data_pos = pos + 8 + header;
+    records.push_back(r);
+    pos = r.data_pos + r.data_bytes;
+  }
+  return records;
+}
+
+// Opens `bag` and reads every frame: any outcome but a crash is a pass here; returns the open error (empty
+// when it opened).
+std::string open_and_read_all(const fs::path& bag) {
+  try {
+    const auto d = open_dataset(bag, OpenOptions{});
+    for (std::size_t f = 0; f < d->frame_count(); ++f) {
+      try {
+        (void)d->load_image(f);
+      } catch (const DataError&) {
+      }
+    }
+  } catch (const DataError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// A corrupt index (an IndexData record, op 0x04) must give an error naming the bag, never a crash in
+// librosbag: an entry offset far past its chunk, one pointing inside a message, the record's header length,
+// and its entry count; for uncompressed, bz2 and lz4 chunks.
+TEST(IoRosbag, CorruptIndexRecordsAreErrorsNotCrashes) {
+  LOOPGATE_REQUIRE_ROSBAG();
+  for (const std::string compression : {"none", "bz2", "lz4"}) {
+    SCOPED_TRACE(compression);
+    const fs::path dir = testing::make_temp_dir("rosbag-corrupt-index");
+    const fs::path good = write_euroc_bag(dir, 6, compression);
+    const std::string bytes = testing::read_file(good);
+    std::vector<RawRecord> index;
+    for (const RawRecord& r : raw_records(bytes))
+      if (r.op == 0x04 && r.data_bytes >= 12) index.push_back(r);
+    ASSERT_FALSE(index.empty());
+    const RawRecord& r = index.front();
+    struct Mutation {
+      std::string name;
+      std::size_t at;
+      std::uint32_t value;
+    };
+    const std::vector<Mutation> mutations = {
+        {"offset 0x80000000", r.data_pos + 8, 0x80000000u},
+        {"offset inside a message", r.data_pos + 8, le32(bytes, r.data_pos + 8) + 37},
+        {"header length", r.pos, le32(bytes, r.pos) + 0x10000000u},
+        {"data length", r.data_pos - 4, 0xFFFFFFF0u},
+        {"offset just below the end", r.data_pos + 8, 0x7FFFFFFFu}};
+    for (const Mutation& m : mutations) {
+      SCOPED_TRACE(m.name);
+      std::string bad = bytes;
+      put_le32(bad, m.at, m.value);
+      const fs::path file = dir / "bad.bag";
+      std::ofstream(file, std::ios::binary) << bad;
+      const std::string error = open_and_read_all(file);
+      EXPECT_NE(error.find(file.string() + ": cannot read it as a ROS1 bag: "), std::string::npos) << error;
+    }
+  }
+}
+
+// Every byte of an index record and of a chunk-info record inverted in turn in turn: opening and
+// reading never crashes (an error or a bag read as it is).
+TEST(IoRosbag, EveryIndexByteChangedNeverCrashes) {
+  LOOPGATE_REQUIRE_ROSBAG();
+  const fs::path dir = testing::make_temp_dir("rosbag-index-bytes");
+  const fs::path good = write_euroc_bag(dir, 3);
+  const std::string bytes = testing::read_file(good);
+  const fs::path file = dir / "bad.bag";
+  std::size_t tried = 0;
+  bool index_seen = false, chunk_info_seen = false;  // the first record of each kind
+  for (const RawRecord& r : raw_records(bytes)) {
+    if (r.op == 0x04 ? std::exchange(index_seen, true) : r.op != 0x06 || std::exchange(chunk_info_seen, true))
+      continue;
+    for (std::size_t at = r.pos; at < r.data_pos + r.data_bytes; ++at) {
+      {
+        std::string bad = bytes;
+        bad[at] = static_cast<char>(~static_cast<unsigned char>(bad[at]));
+        std::ofstream(file, std::ios::binary | std::ios::trunc) << bad;
+        (void)open_and_read_all(file);
+        ++tried;
+      }
+    }
+  }
+  EXPECT_GT(tried, 100u);
 }
 
 // The only test that runs without bag support: a .bag then gets an error that says how to get it.

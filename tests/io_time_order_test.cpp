@@ -81,6 +81,38 @@ TEST(IoTimeOrder, AnOutlierBelowItsNeighboursIsDroppedToo) {
       << d->issues()[0].to_string();
 }
 
+// A stamp that breaks the series at either end of a table (a leading 0 before times near 10^6 s, a trailing
+// typo 10^5 s on) is in order, yet dropped by the rule that drops it in the middle: far from its neighbours.
+TEST(IoTimeOrder, AStampThatBreaksTheSeriesAtEitherEndIsDroppedToo) {
+  const fs::path dir = make_kitti("time-leading-zero", 40);
+  std::string times = "0.0\n";
+  for (int i = 1; i < 40; ++i) times += std::to_string(1e6 + 0.1 * i) + "\n";
+  write_file(dir / "times.txt", times);
+  const auto d = open_kitti(dir, lenient());
+  EXPECT_EQ(d->frame_count(), 39u);
+  ASSERT_EQ(d->issues().size(), 1u);
+  EXPECT_EQ(d->issues()[0].line, 1u);
+  EXPECT_NE(d->issues()[0].message.find("time 0.000000000 s is 1000000.100000000 s from line 2"),
+            std::string::npos)
+      << d->issues()[0].to_string();
+  EXPECT_NE(d->issues()[0].message.find("breaks the series"), std::string::npos);
+  EXPECT_EQ(d->frame_t_ns(0), 1'000'000'100'000'000);
+  try {
+    open_kitti(dir);
+    FAIL() << "no DataError";
+  } catch (const DataError& e) {
+    EXPECT_EQ(e.line(), 1u) << e.what();
+  }
+
+  const auto trailing = open_kitti(make_kitti("time-trailing", 50, 49, "100000.0"), lenient());
+  EXPECT_EQ(trailing->frame_count(), 49u);
+  ASSERT_EQ(trailing->issues().size(), 1u);
+  EXPECT_EQ(trailing->issues()[0].line, 50u);
+
+  // A regular series starting at 0 (the simulator's) keeps every row.
+  EXPECT_TRUE(open_kitti(make_kitti("time-from-zero", 30), lenient())->issues().empty());
+}
+
 TEST(IoTimeOrder, AFileMostlyBadFailsLoudlyEvenWhenLenient) {
   const fs::path dir = make_kitti("time-mostly-bad", 20);
   std::string times;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <random>
+#include <sstream>
 
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
@@ -106,6 +107,11 @@ TEST(IoTrajectory, TumBadInput) {
   write_file(dir / "back.txt", "2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n");
   expect_data_error([&] { read_tum(dir / "back.txt"); }, "back.txt", 2,
                     "timestamp 1.000000000 s is before line 1 (2.000000000 s)");
+  // Nanosecond stamps in a file of seconds: the error says so and shows the time in seconds.
+  write_file(dir / "ns.txt", "1403636579763555584 0 0 0 0 0 0 1\n");
+  expect_data_error([&] { read_tum(dir / "ns.txt"); }, "ns.txt", 1,
+                    "it looks like a time in nanoseconds (19 digits): this file takes seconds, e.g. "
+                    "1403636579.763555584");
   write_file(dir / "quat.txt", "1.0 0 0 0 0 0 0 0\n");
   expect_data_error([&] { read_tum(dir / "quat.txt"); }, "quat.txt", 1, "unit quaternion");
 }
@@ -211,6 +217,27 @@ TEST(IoTrajectory, EurocCameraCsvRoundTrip) {
   write_file(dir / "nofile.csv", "#t,f\n100,\n");
   expect_data_error([&] { read_euroc_camera_csv(dir / "nofile.csv"); }, "nofile.csv", 2,
                     "expected an image file");
+}
+
+// A resolution beyond any camera (1e12 px) was accepted and read as -2147483648 px: refused with its bound.
+TEST(IoTrajectory, HugeResolutionIsRefusedWithItsBound) {
+  const fs::path dir = testing::make_temp_dir("io-yaml-size");
+  CameraCalibration camera;
+  camera.width_px = 752;
+  camera.height_px = 480;
+  camera.fx = camera.fy = 458.0;
+  camera.cx = 367.0;
+  camera.cy = 248.0;
+  camera.distortion_model = DistortionModel::kRadTan;
+  camera.distortion = {0, 0, 0, 0};
+  write_euroc_camera_yaml(dir / "sensor.yaml", camera);
+  std::istringstream in(testing::read_file(dir / "sensor.yaml"));
+  std::string line, text;
+  while (std::getline(in, line))
+    text += (line.find("resolution") != std::string::npos ? "resolution: [1e12, 32]" : line) + "\n";
+  write_file(dir / "sensor.yaml", text);
+  expect_data_error([&] { read_euroc_camera_yaml(dir / "sensor.yaml"); }, "sensor.yaml", 0,
+                    "resolution: [1000000000000, 32] px, expected sides of at most 100000 px");
 }
 
 TEST(IoTrajectory, EurocYamlRoundTrip) {

@@ -130,6 +130,58 @@ TEST(IoTumVi, KalibrFilesAtTheRootUnderKalibrNames) {
   EXPECT_DOUBLE_EQ(d->imu_calibration()->accel_noise_density, 0.0028);
 }
 
+// Kalibr names its outputs after the bag it calibrated from (camchain-imucam-<bag>.yaml, imu-<bag>.yaml).
+TEST(IoTumVi, KalibrOutputsNamedAfterTheirBag) {
+  const fs::path dir = testing::make_temp_dir("io-tumvi-kalibr-bag");
+  make_tumvi(dir);
+  fs::rename(dir / "dso/camchain.yaml", dir / "camchain-imucam-calib_2024.yaml");
+  fs::rename(dir / "dso/imu_config.yaml", dir / "imu-calib_2024.yaml");
+  const auto d = open_euroc(dir);
+  ASSERT_TRUE(d->camera().has_value());
+  EXPECT_DOUBLE_EQ(d->camera()->fy, 19.0);
+  EXPECT_TRUE(d->camera()->T_b_c.translation().isApprox(Eigen::Vector3d(0.07, 0.05, -0.04), 1e-12));
+  ASSERT_TRUE(d->imu_calibration().has_value());
+  EXPECT_DOUBLE_EQ(d->imu_calibration()->accel_noise_density, 0.0028);
+}
+
+// OpenVINS ships kalibr_imucam_chain.yaml (with T_imu_cam, the inverse of Kalibr's T_cam_imu, and an OpenCV
+// "%YAML:1.0" first line) and kalibr_imu_chain.yaml (an imu0 section).
+TEST(IoTumVi, OpenVinsChainWithTImuCamIsInverted) {
+  const fs::path dir = testing::make_temp_dir("io-tumvi-openvins");
+  make_tumvi(dir);
+  fs::remove(dir / "dso/camchain.yaml");
+  fs::remove(dir / "dso/imu_config.yaml");
+  write_file(dir / "kalibr_imucam_chain.yaml", R"(%YAML:1.0
+
+cam0:
+  T_imu_cam:
+  - [0.0, 0.0, 1.0, 0.07]
+  - [-1.0, 0.0, 0.0, 0.05]
+  - [0.0, -1.0, 0.0, -0.04]
+  - [0.0, 0.0, 0.0, 1.0]
+  cam_overlaps: []
+  camera_model: pinhole
+  distortion_coeffs: [0.0034, 0.0007, -0.0021, 0.0002]
+  distortion_model: equidistant
+  intrinsics: [19.1, 19.0, 15.5, 11.5]
+  resolution: [32, 24]
+  rostopic: /cam0/image_raw
+)");
+  write_file(dir / "kalibr_imu_chain.yaml",
+             "%YAML:1.0\n\nimu0:\n  T_i_b:\n  - [1.0, 0.0, 0.0, 0.0]\n  - [0.0, 1.0, 0.0, 0.0]\n"
+             "  - [0.0, 0.0, 1.0, 0.0]\n  - [0.0, 0.0, 0.0, 1.0]\n  accelerometer_noise_density: 0.0028\n"
+             "  accelerometer_random_walk: 0.00086\n  gyroscope_noise_density: 0.00016\n"
+             "  gyroscope_random_walk: 0.000022\n  rostopic: /imu0\n  update_rate: 200.0\n");
+  const auto d = open_euroc(dir);
+  ASSERT_TRUE(d->camera().has_value());
+  // The same camera as the T_cam_imu of kCamchain: T_imu_cam is taken as it is, not inverted twice.
+  EXPECT_TRUE(d->camera()->T_b_c.translation().isApprox(Eigen::Vector3d(0.07, 0.05, -0.04), 1e-12))
+      << d->camera()->T_b_c.translation().transpose();
+  EXPECT_TRUE(d->camera()->T_b_c.linear().col(2).isApprox(Eigen::Vector3d(1.0, 0.0, 0.0), 1e-12));
+  ASSERT_TRUE(d->imu_calibration().has_value());
+  EXPECT_DOUBLE_EQ(d->imu_calibration()->gyro_noise_density, 0.00016);
+}
+
 // EuRoC's own files win: state_groundtruth_estimate0 over mocap0, sensor.yaml over Kalibr.
 TEST(IoTumVi, EurocFilesWinOverTumViFiles) {
   const fs::path dir = testing::make_temp_dir("io-tumvi-both");

@@ -10,6 +10,7 @@
 
 #include "core/error.hpp"
 #include "io/config.hpp"
+#include "test_support.hpp"
 
 namespace loopgate {
 namespace {
@@ -222,6 +223,41 @@ TEST(PipelineConfig, EchoHasEverySection) {
     EXPECT_TRUE(json.contains(section)) << section;
   EXPECT_EQ(json["run"]["rate"].get<std::string>(), "max");
   EXPECT_EQ(json["odometry"]["seed"].get<std::int64_t>(), 1);
+}
+
+// A relative path in a YAML config is relative to that file's folder, whatever the working directory; one
+// given on the command line (--set, --dataset) stays relative to the working directory. A path that names
+// nothing is an error naming the key, the config file and line, and the resolved path.
+TEST(PipelineConfig, PathsInAConfigAreRelativeToIt) {
+  const std::filesystem::path dir = testing::make_temp_dir("config-paths");
+  std::filesystem::create_directories(dir / "elsewhere" / "data" / "x");
+  std::ofstream(dir / "elsewhere" / "data" / "pairs.csv") << "query_index0,match_index0\n";
+  std::ofstream(dir / "elsewhere" / "mine.yaml") << "run:\n  dataset: data/x\neval:\n"
+                                                    "  truth_pairs_file: data/pairs.csv\n";
+  const auto config =
+      load_config<PipelineConfig>(dir / "elsewhere" / "mine.yaml", {}, {}, ConfigPaths::kMustExist);
+  EXPECT_EQ(config.run.dataset, (dir / "elsewhere" / "data" / "x").string());
+  EXPECT_EQ(config.eval.truth_pairs_file, (dir / "elsewhere" / "data" / "pairs.csv").string());
+  // The command line's paths are the working directory's.
+  const auto flagged =
+      load_config<PipelineConfig>(dir / "elsewhere" / "mine.yaml", {"eval.truth_pairs_file=p.csv"},
+                                  {{"run.dataset", "data/y", "--dataset"}}, ConfigPaths::kMustExist);
+  EXPECT_EQ(flagged.run.dataset, "data/y");
+  EXPECT_EQ(flagged.eval.truth_pairs_file, "p.csv");
+
+  std::ofstream(dir / "elsewhere" / "missing.yaml") << "# a comment\nrun:\n  dataset: data/absent\n";
+  std::string error;
+  try {
+    load_config<PipelineConfig>(dir / "elsewhere" / "missing.yaml", {}, {}, ConfigPaths::kMustExist);
+  } catch (const ConfigError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(error.find("run.dataset: 'data/absent'"), std::string::npos) << error;
+  EXPECT_NE(error.find((dir / "elsewhere" / "missing.yaml").string() + ":3"), std::string::npos) << error;
+  EXPECT_NE(error.find((dir / "elsewhere" / "data" / "absent").string()), std::string::npos) << error;
+  // Read for its values only, the config loads with the path resolved.
+  EXPECT_EQ(load_config<PipelineConfig>(dir / "elsewhere" / "missing.yaml").run.dataset,
+            (dir / "elsewhere" / "data" / "absent").string());
 }
 
 }  // namespace

@@ -53,6 +53,58 @@ TEST(PipelineRunChecks, NoOdometryNamesTheSourceAndWhatItExpected) {
   EXPECT_TRUE(run_problems(in).empty());
 }
 
+// A source that starts from the data (the ekf): started within ekf.max_init_s and tracking at least
+// ekf.min_tracked_share of the frames since, or a problem with the numbers.
+RunCheckInput ekf_run() {
+  RunCheckInput in = healthy();
+  in.odometry_source = "ekf";
+  in.max_init_s = 10.0;
+  in.min_tracked_share = 0.8;
+  OdometryStart start;
+  start.started = true;
+  start.method = "static";
+  start.frame = 20;
+  start.after_first_s = 1.0;
+  start.frames_seen = 300;
+  start.frames_since_start = 280;
+  start.frames_tracking = 280;
+  start.starts = 1;
+  start.data_s = 15.0;
+  in.start = start;
+  in.frames_with_pose = 280;
+  return in;
+}
+
+TEST(PipelineRunChecks, OdometryThatStartsFromTheDataMustStartInTimeAndTrack) {
+  EXPECT_TRUE(run_problems(ekf_run()).empty());
+
+  RunCheckInput never = ekf_run();
+  never.start->started = false;
+  never.start->status = "static: not still (accelerometer moving): low-passed accelerometer spread 0.3 m/s2";
+  never.frames_with_pose = 0;
+  auto problems = run_problems(never);
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_EQ(problems[0],
+            "no odometry: odometry.source ekf never started: still initialising after 15.00 s of data from "
+            "the first frame (300 frames; ekf.max_init_s = 10 s): static: not still (accelerometer moving): "
+            "low-passed accelerometer spread 0.3 m/s2");
+
+  RunCheckInput late = ekf_run();
+  late.start->after_first_s = 12.5;
+  problems = run_problems(late);
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_EQ(problems[0].rfind("odometry started late: ", 0), 0u) << problems[0];
+  EXPECT_NE(problems[0].find("12.50 s"), std::string::npos) << problems[0];
+
+  RunCheckInput few = ekf_run();
+  few.start->frames_tracking = 200;  // 71.4% < 80%
+  problems = run_problems(few);
+  ASSERT_EQ(problems.size(), 1u);
+  EXPECT_EQ(problems[0],
+            "odometry tracked too few frames: odometry.source ekf tracked 200 of the 280 frames from its "
+            "start on (71.4%; 1 start(s)); expected at least ekf.min_tracked_share = 80.0%");
+}
+
 TEST(PipelineRunChecks, NoImageNamesTheDatasetAndTheFirstError) {
   RunCheckInput in = healthy();
   in.frames_decoded = 0;

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/stop_request.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "pipeline/two_sequence.hpp"
@@ -485,6 +487,30 @@ TEST(PipelineTwoSequence, StopRequestWritesOutputsForTheQueryFramesDescribed) {
     EXPECT_TRUE(read_csv(empty_out / "frames.csv").empty());
     EXPECT_TRUE(nlohmann::json::parse(read_file(empty_out / "summary.json"))["interrupted"].get<bool>());
   }
+}
+
+// A second stop signal while the query is described: the passes after it (run on pool threads) abort with
+// Interrupted, which reaches the caller (the command reports it) instead of ending the process through
+// std::terminate from a pool thread.
+TEST(PipelineTwoSequence, SecondStopSignalAbortsWithInterruptedOnEveryMethod) {
+  for (const Detector method : {Detector::kDird, Detector::kSeqSlam, Detector::kDirdSeqSlam}) {
+    SCOPED_TRACE(std::string(enum_name(method)));
+    stop_request::reset();
+    const RevisitDataset reference(kPeriod, 1, 0);
+    RevisitDataset query(kPeriod, 1, 12345);
+    query.on_load = [&](std::size_t frame) {
+      if (frame == 60) {
+        stop_request::record(SIGTERM);
+        stop_request::record(SIGTERM);
+      }
+    };
+    PipelineConfig config = method == Detector::kSeqSlam ? seqslam_config() : dird_config();
+    config.run.method = method;
+    config.eval.aligned_tolerance_frames = 1;
+    const auto out = testing::make_temp_dir("two-seq-abort");
+    EXPECT_THROW(run_two_sequences(config, reference, query, out, &stop_request::stop_flag()), Interrupted);
+  }
+  stop_request::reset();
 }
 
 TEST(PipelineTwoSequence, NordlandSummerWinterDirdVsSeqSlam) {

@@ -74,6 +74,36 @@ PoseGraph graph_of(const Drive& d, const PoseGraphConfig& config, std::size_t pe
   return graph;
 }
 
+Eigen::Matrix<double, 6, 6> diagonal_cov(double sigma_position_m, double sigma_rotation_rad) {
+  Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+  cov.diagonal() << Eigen::Vector3d::Constant(sigma_position_m * sigma_position_m),
+      Eigen::Vector3d::Constant(sigma_rotation_rad * sigma_rotation_rad);
+  return cov;
+}
+
+// The skip rule's measure (verify.min_information_gain): a loop after a long drive, whose odometry is
+// uncertain in one direction (1 m along track, 0.05 m across) against an edge of 0.3 m, shrinks the largest
+// position variance by 1 - (1 * 0.09 / 1.09) / 1 = 0.917: kept at the default 0.5. After hovering, the
+// odometry knows the relative pose to 0.05 m: the edge adds 1 - (0.0025 * 0.09 / 0.0925) / 0.0025 = 0.027:
+// skipped. Equal certainty gives exactly 0.5, the default's boundary.
+TEST(PoseGraph, LoopInformationGainKeepsALoopAfterDriftAndSkipsOneAfterHovering) {
+  const Eigen::Matrix<double, 6, 6> edge = diagonal_cov(0.3, 0.02);
+  Eigen::Matrix<double, 6, 6> drive = diagonal_cov(0.05, 0.01);
+  drive(0, 0) = 1.0;
+  EXPECT_NEAR(loop_information_gain(drive, edge), 1.0 - 0.09 / 1.09, 1e-9);
+  EXPECT_GE(loop_information_gain(drive, edge), 0.1);
+  const Eigen::Matrix<double, 6, 6> hover = diagonal_cov(0.05, 0.001);
+  EXPECT_NEAR(loop_information_gain(hover, edge), 1.0 - 0.09 / 0.0925, 1e-9);
+  EXPECT_LT(loop_information_gain(hover, edge), 0.1);
+  EXPECT_NEAR(loop_information_gain(edge, edge), 0.5, 1e-9);
+  // A loop the old rule (the growth of the scalar sigma against the edge's, 0.3 m) skipped: the odometry's
+  // relative pose over the loop is 0.2 m uncertain (composed steps): the edge still removes 31% of it.
+  EXPECT_NEAR(loop_information_gain(diagonal_cov(0.2, 0.01), edge), 1.0 - 0.09 / 0.13, 1e-9);
+  EXPECT_GT(loop_information_gain(diagonal_cov(0.2, 0.01), edge), 0.1);
+  // Nothing known better than exactly: no gain, and no NaN for a zero covariance.
+  EXPECT_EQ(loop_information_gain(Eigen::Matrix<double, 6, 6>::Zero(), edge), 0.0);
+}
+
 TEST(PoseGraph, ConsistentSquareReachesTheTruth) {
   // Four poses on a 10 m square; exact odometry and loop edges, drifted initial poses: the optimum is the
   // truth.

@@ -138,6 +138,32 @@ TEST(GeometricVerifier, CachedFeaturesGiveTheSameResultAndItIsOffByDefault) {
 // The matcher gives exactly the matches of OpenCV's brute-force knn matcher with the ratio test, on random
 // descriptors with planted near copies (unique best matches), exact copies of one train row (a tie for the
 // best: no match), ORB's 32-byte rows and a width that is not a multiple of 8 bytes.
+// The reasons the verifier and the loop closer give, each under its stable key (summary.json's
+// loop_closure.rejected_by_reason and skipped_by_reason).
+TEST(GeometricVerifier, ReasonKeys) {
+  EXPECT_EQ(verify_reason_key("verified"), "verified");
+  EXPECT_EQ(verify_reason_key("verified by tracking (41 tracked; from j's neighbour 0.12 m apart)"),
+            "verified_by_tracking");
+  EXPECT_EQ(verify_reason_key("geometry: 12 matches with 3-D points < 15 (80 points triangulated)"),
+            "too_few_features");
+  EXPECT_EQ(verify_reason_key("geometry: 12 inliers < 15"), "too_few_inliers");
+  EXPECT_EQ(verify_reason_key("geometry: 12 inliers < 15; tracked: 3 of 80 points tracked"), "illumination");
+  EXPECT_EQ(verify_reason_key("geometry: 41.30 m from the odometry's frame i, 23.1 sigma > 4.03"),
+            "odometry_disagreement");
+  EXPECT_EQ(verify_reason_key("geometry: image too small for features (64x32 < 80 px)"), "image_too_small");
+  EXPECT_EQ(verify_reason_key("geometry: baseline 0.010 m < 0.05 m between j and its neighbour"),
+            "short_baseline");
+  EXPECT_EQ(verify_reason_key("geometry: no odometry pose for frame 12 or its neighbour"),
+            "no_odometry_pose");
+  EXPECT_EQ(verify_reason_key("geometry: relative translation 41.0 m > 30 m"), "translation_too_large");
+  EXPECT_EQ(verify_reason_key("skipped: information gain 0.03 < 0.1 (the odometry's sigma from j to i 0.050 "
+                              "m, a loop edge's 0.300 m)"),
+            "small_information_gain");
+  EXPECT_EQ(verify_reason_key("skipped: near (120, 12) verified"), "skip_window");
+  EXPECT_EQ(verify_reason_key("skipped: 1 loop(s) of frame 120 already verified"), "max_per_query");
+  EXPECT_EQ(verify_reason_key("something new"), "other");
+}
+
 TEST(GeometricVerifier, RatioMatchIsOpenCvsKnnMatchWithTheRatioTest) {
   std::mt19937 rng(7);
   for (const int cols : {32, 13}) {

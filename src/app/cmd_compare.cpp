@@ -22,6 +22,7 @@
 #include "app/commands.hpp"
 #include "app/compare_methods.hpp"
 #include "app/plot_script.hpp"
+#include "app/result_block.hpp"
 #include "app/stop_signals.hpp"
 #include "app/summary_fields.hpp"
 #include "core/error.hpp"
@@ -89,8 +90,13 @@ void claim_output_folder(const CompareOptions& options, const PipelineConfig& ba
   for (const std::string& method : methods)
     refuse_outputs_over_inputs(base, out_dir / method, {options.config_file});
   lock.emplace(out_dir, command);
-  refuse_previous_outputs(out_dir, compare_output_names(), options.force, "compare");
+  // A single run's outputs in the folder count too: aggregate would read them beside the compare's.
+  std::vector<std::string> previous = compare_output_names();
+  previous.insert(previous.end(), run_output_file_names().begin(), run_output_file_names().end());
+  refuse_previous_outputs(out_dir, previous, options.force, "compare");
   remove_compare_outputs(out_dir);
+  std::error_code ec;
+  for (const std::string& name : run_output_file_names()) fs::remove(out_dir / name, ec);
 }
 
 std::string method_names() {
@@ -205,6 +211,14 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
   const auto ms = [](double (*part)(const TimeParts&)) {
     return [part](const json& s) { return fmt::format("{:.1f}", part(time_parts(s))); };
   };
+  // Precision and recall are undefined (n/a, not 0) when the range holds no true loop.
+  const auto pr = [&at](const char* key) {
+    return [cell = at({"evaluation", "precision_recall", key}, 3)](const json& s) {
+      const json* positives = find_path(s, {"evaluation", "precision_recall", "positives"});
+      if (positives && positives->is_number() && positives->get<double>() <= 0) return std::string("n/a");
+      return cell(s);
+    };
+  };
   const Row wall = {"wall time (s)", at({"wall_s"}, 2)};
   const Row rss = {"peak RSS (MiB)", at({"peak_rss_mb"}, 0)};
   const std::vector<Row> quality = {
@@ -213,11 +227,11 @@ std::string table(const std::vector<std::string>& methods, const std::map<std::s
       {"loops false", at({"evaluation", "loop_truth", "loops_false"})},
       {"loops without travel", at({"evaluation", "loop_truth", "loops_without_travel"})},
       {"positive query frames", at({"evaluation", "precision_recall", "positives"})},
-      {"average precision", at({"evaluation", "precision_recall", "average_precision"}, 3)},
-      {"recall at 1 (top match)", at({"evaluation", "precision_recall", "recall_at_1"}, 3)},
-      {"recall at 100% precision", at({"evaluation", "precision_recall", "recall_at_100"}, 3)},
-      {"recall at 99% precision", at({"evaluation", "precision_recall", "recall_at_99"}, 3)},
-      {"recall at 95% precision", at({"evaluation", "precision_recall", "recall_at_95"}, 3)},
+      {"average precision", pr("average_precision")},
+      {"recall at 1 (top match)", pr("recall_at_1")},
+      {"recall at 100% precision", pr("recall_at_100")},
+      {"recall at 99% precision", pr("recall_at_99")},
+      {"recall at 95% precision", pr("recall_at_95")},
   };
   // With verify.enabled: the loop correction after each run (outside its timing).
   const bool corrected = std::any_of(methods.begin(), methods.end(), [&](const std::string& m) {
@@ -336,7 +350,8 @@ int compare_two_sequences(const CompareOptions& options) {
   }
   std::vector<FlagValue> flags;
   add_run_flags(options, flags);
-  const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
+  const PipelineConfig base =
+      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
@@ -354,6 +369,7 @@ int compare_two_sequences(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const TwoSequenceResult result =
         run_two_sequences(config, *reference, *query, out_dir / method, signals.flag());
     summaries[method] = result.summary;
@@ -387,13 +403,21 @@ int compare_command(const CompareOptions& options) {
   std::vector<FlagValue> flags;
   if (!options.dataset.empty()) flags.push_back({"run.dataset", options.dataset, "--dataset"});
   add_run_flags(options, flags);
-  const PipelineConfig base = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
+  const PipelineConfig base =
+      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   if (base.run.dataset.empty()) throw ConfigError("run.dataset: no dataset (pass --dataset DIR)");
   log_config_lines(config_to_lines(base));
   const OpenOptions open_options = base.open_options();
   const fs::path out_dir = options.out_dir;
   std::optional<OutputLock> lock;
   claim_output_folder(options, base, methods, lock, "loopgate compare");
+  try {
+    write_config_yaml(out_dir / "config.yaml", config_to_json(base),
+                      "effective base configuration of `loopgate compare` (each method's own in "
+                      "<method>/summary.json)");
+  } catch (const std::exception& e) {
+    spdlog::warn("{}", e.what());
+  }
   const StopSignals signals;  // SIGINT, SIGTERM, SIGHUP: the current method drains, compare.json is written
   const auto dataset = open_dataset(base.run.dataset, open_options);
   // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
@@ -422,6 +446,7 @@ int compare_command(const CompareOptions& options) {
   for (const std::string& method : methods) {
     const PipelineConfig config = method_config(base, method);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
+    const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const RunResult result =
         run_pipeline(config, *dataset, out_dir / method, signals.flag(), base.verify.enabled);
     std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);
@@ -472,16 +497,27 @@ int compare_command(const CompareOptions& options) {
     });
     if (const json* cov = find_path(g, {"evaluation", "gate_coverage", "covered_fraction"}))
       comparison["gated_true_loop_frames_in_candidate_areas"] = *cov;
+    // The paper's ratio is over a drive with loops; over a range without a true loop the ratio says nothing
+    // about the paper's.
+    const json* positives = find_path(g, {"evaluation", "precision_recall", "positives"});
+    const bool loops_in_range = !positives || !positives->is_number() || positives->get<double>() > 0;
+    const std::string paper =
+        loops_in_range
+            ? fmt::format(
+                  ": the paper's {:.2f}x (KITTI 00, {:.1f} s -> {:.1f} s, its Fig. 8 \"total time of "
+                  "loop-closure detection\": feature extraction + similarity) compares with this one",
+                  kPaperFullMs / kPaperGatedMs, kPaperFullMs / 1000.0, kPaperGatedMs / 1000.0)
+            : std::string(" (no true loop in the range: not comparable with the paper's ratio)");
+    if (!loops_in_range) comparison.erase("paper_ratio_compares_with");
     ratios = fmt::format(
         "full / gated, thread CPU time: decode {:.2f}x, describe {:.2f}x, match {:.2f}x, total {:.2f}x\n"
-        "  describe + match {:.2f}x: the paper's {:.2f}x (KITTI 00, {:.1f} s -> {:.1f} s, its Fig. 8 \"total "
-        "time of loop-closure detection\": feature extraction + similarity) compares with this one\n"
+        "  describe + match {:.2f}x{}\n"
         "  decode + describe + match {:.2f}x (the paper does not say whether its time includes reading the "
         "images); wall {:.2f}x; descriptors {:.2f}x, similarities {:.1f}x\n",
         ratio(ft.decode_ms, gt.decode_ms), ratio(ft.describe_ms, gt.describe_ms),
         ratio(ft.match_ms, gt.match_ms), ratio(ft.total_ms, gt.total_ms),
-        ratio(ft.describe_and_match_ms(), gt.describe_and_match_ms()), kPaperFullMs / kPaperGatedMs,
-        kPaperFullMs / 1000.0, kPaperGatedMs / 1000.0, ratio(ft.with_decode_ms(), gt.with_decode_ms()),
+        ratio(ft.describe_and_match_ms(), gt.describe_and_match_ms()), paper,
+        ratio(ft.with_decode_ms(), gt.with_decode_ms()),
         comparison["full_over_gated_wall_time"].get<double>(),
         comparison["full_over_gated_descriptors"].get<double>(),
         comparison["full_over_gated_similarities"].get<double>());
@@ -518,6 +554,7 @@ int compare_command(const CompareOptions& options) {
   }
   compare["comparison"] = comparison;
   compare["methods"] = ran;
+  compare["recommended"] = recommended_method(ran);
   compare["provenance"] = provenance_json(config_to_json(base));
   write_json_file(out_dir / "compare.json", compare);
 
@@ -544,8 +581,8 @@ int compare_command(const CompareOptions& options) {
   }
 
   if (!options.no_plots && !ran.empty()) write_plots(options, out_dir);
-  std::printf("outputs in %s (compare.json, %s/)\n", out_dir.c_str(),
-              fmt::format("{}", fmt::join(ran, "/, ")).c_str());
+  for (const std::string& line : compare_result_lines(ran, summaries, out_dir.string()))
+    std::printf("%s\n", line.c_str());
   std::fflush(stdout);
   if (failed) return kExitFailure;
   if (signals.stopped()) return signals.exit_code();

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "app/commands.hpp"
+#include "app/result_block.hpp"
 #include "app/stop_signals.hpp"
 #include "core/error.hpp"
 #include "io/config.hpp"
@@ -60,6 +61,31 @@ void log_missing_outputs(const std::vector<std::string>& missing, const std::vec
   for (const std::string& error : errors) spdlog::error("  {}", error);
 }
 
+// A previous run's outputs, or a compare's compare.json, refused without --force; with it, compare.json goes
+// too (aggregate would otherwise report the old compare beside this run's outputs).
+void refuse_previous_run_or_compare(const RunOptions& options) {
+  std::vector<std::string> previous = run_output_file_names();
+  previous.emplace_back("compare.json");
+  refuse_previous_outputs(options.out_dir, previous, options.force, "run");
+  std::error_code ec;
+  std::filesystem::remove(std::filesystem::path(options.out_dir) / "compare.json", ec);
+}
+
+// OUT/config.yaml: the effective configuration (YAML, --set and flags applied), loadable again as --config.
+// A failure to write it is a warning: summary.json echoes the configuration as well.
+void write_run_config(const PipelineConfig& config, const RunOptions& options) {
+  const std::filesystem::path file = std::filesystem::path(options.out_dir) / "config.yaml";
+  try {
+    write_config_yaml(file, config_to_json(config),
+                      "effective configuration of `loopgate run`" +
+                          (options.config_file.empty() ? std::string(" (built-in defaults)")
+                                                       : " from " + options.config_file) +
+                          " with the command-line overrides applied");
+  } catch (const std::exception& e) {
+    spdlog::warn("{}", e.what());
+  }
+}
+
 // --reference DIR --query DIR: dird.md §5, appearance only (no odometry).
 int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   if (options.reference.empty() || options.query.empty()) {
@@ -71,7 +97,8 @@ int run_two_sequence_command(const RunOptions& options, PipelineConfig config) {
   log_config_lines(config_to_lines(config));
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run --reference --query");
-  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
+  refuse_previous_run_or_compare(options);
+  write_run_config(config, options);
   const OpenOptions open_options = config.open_options();
   const StopSignals signals;
   const auto reference = open_dataset(options.reference, open_options);
@@ -106,7 +133,8 @@ int run_command(const RunOptions& options) {
   if (options.threads > 0) flags.push_back({"run.threads", std::to_string(options.threads), "--threads"});
   if (options.trace) flags.push_back({"output.trace", "true", "--trace"});
   if (!options.frames.empty()) flags.push_back({"run.frames", options.frames, "--frames"});
-  PipelineConfig config = load_config<PipelineConfig>(options.config_file, options.overrides, flags);
+  PipelineConfig config =
+      load_config<PipelineConfig>(options.config_file, options.overrides, flags, ConfigPaths::kMustExist);
   if (!options.reference.empty() || !options.query.empty()) return run_two_sequence_command(options, config);
   if (config.run.dataset.empty())
     throw ConfigError("run.dataset: no dataset (pass --dataset DIR or --dataset FILE.bag)");
@@ -114,7 +142,8 @@ int run_command(const RunOptions& options) {
   // Before anything is written: no output over an input, and one command at a time in the folder.
   refuse_outputs_over_inputs(config, options.out_dir, {options.config_file});
   const OutputLock lock(options.out_dir, "loopgate run");
-  refuse_previous_outputs(options.out_dir, run_output_file_names(), options.force, "run");
+  refuse_previous_run_or_compare(options);
+  write_run_config(config, options);
 
   // From here a stop signal (SIGINT, SIGTERM, SIGHUP) drains the run and writes every output.
   const StopSignals signals;
@@ -134,12 +163,13 @@ int run_command(const RunOptions& options) {
   }
 
   std::fputs(result.profile_table.c_str(), stderr);
-  std::printf(
-      "%zu of %zu frames processed (%zu dropped, %zu deadline misses; %zu ok, %zu warning, %zu error) in "
-      "%.2f s: real-time factor %.2f; outputs in %s\n",
+  std::fflush(stderr);
+  spdlog::info(
+      "{} of {} frames processed ({} dropped, {} deadline misses; {} ok, {} warning, {} error) in {:.2f} s",
       result.frames_processed, result.frames_in, result.frames_dropped, result.deadline_misses,
-      result.frames_ok, result.frames_warning, result.frames_error, result.wall_s, result.realtime_factor,
-      options.out_dir.c_str());
+      result.frames_ok, result.frames_warning, result.frames_error, result.wall_s);
+  for (const std::string& line : run_result_lines(result.summary, options.out_dir))
+    std::printf("%s\n", line.c_str());
   std::fflush(stdout);
   log_missing_outputs(result.missing_outputs, result.output_errors, options.out_dir);
   if (result.failed) return kExitFailure;

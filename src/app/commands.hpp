@@ -18,5 +18,6 @@ void add_calibrate_command(CLI::App& app, int& exit_code);
 void add_run_command(CLI::App& app, int& exit_code);
 void add_compare_command(CLI::App& app, int& exit_code);
 void add_aggregate_command(CLI::App& app, int& exit_code);
+void add_config_reference_command(CLI::App& app, int& exit_code);
 
 }  // namespace loopgate::app

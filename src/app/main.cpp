@@ -34,6 +34,7 @@ int main(int argc, char** argv) {
   loopgate::app::add_run_command(app, exit_code);
   loopgate::app::add_compare_command(app, exit_code);
   loopgate::app::add_aggregate_command(app, exit_code);
+  loopgate::app::add_config_reference_command(app, exit_code);
 
   try {
     app.parse(argc, argv);

@@ -13,6 +13,8 @@
 #include <set>
 #include <utility>
 
+#include "bag/bag_structure.hpp"
+
 namespace loopgate::bag {
 namespace {
 
@@ -171,6 +173,7 @@ struct BagReader::Impl {
 };
 
 BagReader::BagReader(const std::string& file) : file_(file), impl_(std::make_unique<Impl>()) {
+  check_bag_structure(file);  // librosbag trusts the offsets of the index: checked first
   try {
     impl_->bag.open(file, rosbag::bagmode::Read);
     rosbag::View all(impl_->bag);

@@ -517,7 +517,7 @@ void track(const std::vector<cv::Mat>& previous, const std::vector<cv::Mat>& nex
       // determinant and the smaller eigenvalue of a nearly flat window (dark, noisy images) are no longer
       // rounded to their thresholds as often, and such windows are kept where OpenCV drops them (the
       // night-loop preset's EKF odometry ATE, 32 draws of ekf.klt_epsilon: median 0.749 m with a double
-      // solve, 0.632 m in float, 0.641 m with OpenCV's KLT; docs/architecture.md § Choices).
+      // solve, 0.632 m in float, 0.641 m with OpenCV's KLT; docs/decisions.md).
       const float a11 = static_cast<float>(t.a11) * kSumScale;
       const float a12 = static_cast<float>(t.a12) * kSumScale;
       const float a22 = static_cast<float>(t.a22) * kSumScale;

@@ -1,5 +1,5 @@
-// Pyramidal Lucas-Kanade tracking (the ekf tracker's and the verifier's fallback), loopgate's own since
-// 2026-11-28 (docs/architecture.md § Choices, "The tracker's KLT and corner response"):
+// Pyramidal Lucas-Kanade tracking (the ekf tracker's and the verifier's fallback), loopgate's own
+// (docs/decisions.md, "The tracker's KLT and corner response"):
 // - build_klt_pyramid(): cv::buildOpticalFlowPyramid's pyramid byte for byte (derivatives on, borders
 //   BORDER_REFLECT_101 for the images and BORDER_CONSTANT for the derivatives), in less time: the Scharr
 //   derivatives of each level are computed 16 pixels at a time (AVX2, where the CPU has it) straight into

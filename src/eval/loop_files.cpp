@@ -15,6 +15,12 @@ namespace loopgate {
 
 namespace {
 
+// A UTF-8 byte-order mark (Windows editors write one) before the first line is no part of its text: without
+// this, a header-less file's first row would start with a non-digit and be taken for a header.
+void strip_bom(std::string& line, std::size_t line_no) {
+  if (line_no == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);
+}
+
 // Reads rows of exactly `columns` comma-separated numbers ("nan" allowed); calls row(values, line_no).
 template <class RowFn>
 void read_numeric_csv(const std::filesystem::path& file, std::size_t columns, RowFn&& row) {
@@ -29,6 +35,7 @@ void read_numeric_csv(const std::filesystem::path& file, std::size_t columns, Ro
   std::vector<double> values;
   while (std::getline(in, line)) {
     ++line_no;
+    strip_bom(line, line_no);
     if (!line.empty() && line.back() == '\r') line.pop_back();
     const auto first = line.find_first_not_of(" \t");
     if (first == std::string::npos || line[first] == '#') continue;
@@ -92,6 +99,7 @@ TruthPairs read_truth_pairs(const std::filesystem::path& file, std::optional<std
   bool first_row = true;
   while (std::getline(in, line)) {
     ++line_no;
+    strip_bom(line, line_no);
     if (!line.empty() && line.back() == '\r') line.pop_back();
     const auto begin = line.find_first_not_of(" \t");
     if (begin == std::string::npos || line[begin] == '#') continue;

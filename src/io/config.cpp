@@ -94,6 +94,12 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
 
 }  // namespace
 
+const std::vector<std::string>& config_path_keys() {
+  static const std::vector<std::string> keys = {"run.dataset", "odometry.file", "dataset.bag_asl_dir",
+                                                "eval.truth_pairs_file"};
+  return keys;
+}
+
 RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw ConfigError(file.string() + ": configuration file not found");
@@ -106,7 +112,39 @@ RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
   if (!in) throw ConfigError(file.string() + ": cannot read the configuration file");
   std::stringstream buffer;
   buffer << in.rdbuf();
-  return parse_yaml(buffer.str(), file.string());
+  RawConfig raw = parse_yaml(buffer.str(), file.string());
+  // Paths in a YAML file are relative to the file's folder, so a config works from any working directory.
+  const std::filesystem::path folder = std::filesystem::absolute(file, ec).parent_path();
+  for (const std::string& name : config_path_keys()) {
+    const std::size_t dot = name.find('.');
+    const auto section = raw.sections_.find(name.substr(0, dot));
+    if (section == raw.sections_.end()) continue;
+    const auto value = section->second.find(name.substr(dot + 1));
+    if (value == section->second.end() || value->second.text.empty()) continue;
+    const std::filesystem::path written(value->second.text);
+    if (written.is_absolute()) continue;
+    value->second.written = value->second.text;
+    value->second.text = (folder / written).lexically_normal().string();
+  }
+  return raw;
+}
+
+void RawConfig::require_resolved_paths_exist() const {
+  for (const std::string& name : config_path_keys()) {
+    const std::size_t dot = name.find('.');
+    const auto section = sections_.find(name.substr(0, dot));
+    if (section == sections_.end()) continue;
+    const auto value = section->second.find(name.substr(dot + 1));
+    if (value == section->second.end() || value->second.written.empty()) continue;
+    std::error_code ec;
+    if (std::filesystem::exists(value->second.text, ec)) continue;
+    throw ConfigError(name + ": '" + value->second.written + "' (" + value->second.origin +
+                      ") names nothing: relative to the configuration file's folder it is " +
+                      value->second.text +
+                      " (a path in a YAML config is relative to that file; give an absolute path, or pass "
+                      "it with --set " +
+                      name + "=PATH or --dataset, which are relative to the working directory)");
+  }
 }
 
 RawConfig RawConfig::from_yaml_string(const std::string& text, const std::string& origin) {
@@ -115,7 +153,7 @@ RawConfig RawConfig::from_yaml_string(const std::string& text, const std::string
 
 void RawConfig::set(const std::string& section, const std::string& key, const std::string& value,
                     const std::string& origin) {
-  sections_[section][key] = RawConfigValue{value, origin};
+  sections_[section][key] = RawConfigValue{value, origin, {}};
 }
 
 void RawConfig::apply_override(const std::string& assignment) {
@@ -225,8 +263,41 @@ std::string format_value(const std::string& value) {
 }  // namespace config_detail
 
 void log_config_lines(const std::vector<std::string>& lines) {
-  spdlog::info("configuration:");
-  for (const auto& line : lines) spdlog::info("  {}", line);
+  spdlog::debug("configuration:");
+  for (const auto& line : lines) spdlog::debug("  {}", line);
+}
+
+std::string config_yaml_text(const nlohmann::json& sections, const std::string& header) {
+  std::string text;
+  std::istringstream lines(header);
+  for (std::string line; std::getline(lines, line);) text += "# " + line + "\n";
+  const auto& path_keys = config_path_keys();
+  for (const auto& [section, fields] : sections.items()) {
+    text += section + ":\n";
+    for (const auto& [key, value] : fields.items()) {
+      // Paths absolute: the file is read again from its own folder, where a relative path would move.
+      const bool path = std::find(path_keys.begin(), path_keys.end(), section + "." + key) != path_keys.end();
+      if (path && value.is_string() && !value.get<std::string>().empty()) {
+        std::error_code ec;
+        const std::filesystem::path absolute = std::filesystem::absolute(value.get<std::string>(), ec);
+        text += "  " + key + ": " + nlohmann::json(absolute.lexically_normal().string()).dump() + "\n";
+      } else {
+        text += "  " + key + ": " + value.dump() + "\n";
+      }
+    }
+  }
+  return text;
+}
+
+void write_config_yaml(const std::filesystem::path& file, const nlohmann::json& sections,
+                       const std::string& header) {
+  const std::string text = config_yaml_text(sections, header);
+  std::ofstream out(file, std::ios::binary | std::ios::trunc);
+  out << text;
+  out.flush();
+  if (!out)
+    throw std::runtime_error(file.string() +
+                             ": cannot write the configuration (disk full or no permission?)");
 }
 
 }  // namespace loopgate

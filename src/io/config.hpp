@@ -36,7 +36,14 @@ namespace loopgate {
 struct RawConfigValue {
   std::string text;
   std::string origin;
+  // A path key (config_path_keys()) read from a YAML file with a relative value: the value as written; `text`
+  // then holds it resolved beside that file. Empty for values from the command line (--set, --dataset),
+  // which stay relative to the working directory.
+  std::string written;
 };
+
+// The keys that hold a file or folder path: in a YAML file a relative one is relative to the file's folder.
+const std::vector<std::string>& config_path_keys();
 
 // Raw values by section and key, before they are given types.
 class RawConfig {
@@ -52,6 +59,10 @@ class RawConfig {
            const std::string& origin);
 
   const std::map<std::string, std::map<std::string, RawConfigValue>>& sections() const { return sections_; }
+
+  // Throws ConfigError for a path key resolved beside its YAML file (RawConfigValue::written) that names
+  // nothing there: the key, the file and line, the value as written and the resolved path.
+  void require_resolved_paths_exist() const;
 
  private:
   std::map<std::string, std::map<std::string, RawConfigValue>> sections_;
@@ -181,16 +192,21 @@ struct FlagValue {
   std::string flag;  // "--mode"
 };
 
+// Whether load_config() requires the paths a YAML file names (config_path_keys()) to exist: the commands that
+// use them do (an error naming the key, file and line); reading a shipped config for its values does not.
+enum class ConfigPaths { kAsWritten, kMustExist };
+
 // Loads `file` (when not empty), applies the --set overrides in order, then the flags, validates (once).
 template <class Config>
 Config load_config(const std::filesystem::path& file, const std::vector<std::string>& overrides = {},
-                   const std::vector<FlagValue>& flags = {}) {
+                   const std::vector<FlagValue>& flags = {}, ConfigPaths paths = ConfigPaths::kAsWritten) {
   RawConfig raw = file.empty() ? RawConfig{} : RawConfig::from_yaml_file(file);
   for (const auto& assignment : overrides) raw.apply_override(assignment);
   for (const FlagValue& f : flags) {
     const std::size_t dot = f.key.find('.');
     raw.set(f.key.substr(0, dot), f.key.substr(dot + 1), f.value, f.flag);
   }
+  if (paths == ConfigPaths::kMustExist) raw.require_resolved_paths_exist();
   Config config;
   apply_config(raw, config);
   return config;
@@ -223,7 +239,16 @@ std::vector<std::string> config_to_lines(const Config& config) {
   return lines;
 }
 
-// Logs the configuration through spdlog (info), one line per parameter.
+// Logs the configuration through spdlog at debug level (`--log-level debug`), one line per parameter; the
+// console shows the result instead, the run folder keeps the configuration (write_config_yaml).
 void log_config_lines(const std::vector<std::string>& lines);
+
+// YAML text of config_to_json(): one mapping per section, each value in flow style, loadable as --config.
+std::string config_yaml_text(const nlohmann::json& sections, const std::string& header);
+
+// Writes config_yaml_text() to `file` (the effective configuration of a run, beside its outputs). A failure
+// is an IoError naming the file.
+void write_config_yaml(const std::filesystem::path& file, const nlohmann::json& sections,
+                       const std::string& header);
 
 }  // namespace loopgate

@@ -113,7 +113,15 @@ Timestamp Row::seconds_ns(std::size_t column, std::string_view name) const {
   const std::string_view field = fields.at(column);
   Timestamp t_ns = 0;
   if (!parse_seconds_ns(field, t_ns)) {
-    throw RowError{column_label(column, name) + ": expected a finite time in seconds, got " + quoted(field)};
+    // 16 digits and more without a dot: a time in nanoseconds (EuRoC's, a bag's) given to a file in seconds.
+    const bool nanoseconds =
+        field.size() >= 16 && field.find_first_not_of("0123456789") == std::string_view::npos;
+    throw RowError{column_label(column, name) + ": expected a finite time in seconds, got " + quoted(field) +
+                   (nanoseconds ? "; it looks like a time in nanoseconds (" + std::to_string(field.size()) +
+                                      " digits): this file takes seconds, e.g. " +
+                                      std::string(field.substr(0, field.size() - 9)) + "." +
+                                      std::string(field.substr(field.size() - 9))
+                                : std::string())};
   }
   return t_ns;
 }

@@ -12,8 +12,11 @@
 // else a TUM file "groundtruth_tum.txt" beside mav0/ (as in the shared V1_01_easy_micro excerpt) or inside
 // it. Calibration without cam<k>/sensor.yaml or imu0/sensor.yaml: Kalibr files (kalibr_calibration.hpp) in
 // the tree's root (the folder holding mav0/) or its dso/ folder, as TUM-VI ships them: camchain-imucam.yaml
-// or camchain.yaml for the camera, imu.yaml or imu_config.yaml for the IMU.
+// (Kalibr's own name camchain-imucam-<bag>.yaml, OpenVINS' kalibr_imucam_chain.yaml) or camchain.yaml for the
+// camera, imu.yaml (imu-<bag>.yaml, OpenVINS' kalibr_imu_chain.yaml) or imu_config.yaml for the IMU.
 #include <spdlog/spdlog.h>
+
+#include <algorithm>
 
 #include "core/error.hpp"
 #include "io/csv_formats.hpp"
@@ -57,9 +60,28 @@ std::optional<fs::path> first_file(const std::vector<fs::path>& dirs,
   std::error_code ec;
   for (const fs::path& dir : dirs) {
     for (const char* name : names) {
-      const fs::path file = dir / name;
-      if (fs::exists(file, ec)) require_regular_file(file);  // a FIFO would block open() forever
-      if (fs::is_regular_file(file, ec)) return file;
+      const std::string pattern = name;
+      const std::size_t star = pattern.find('*');
+      std::vector<fs::path> candidates;
+      if (star == std::string::npos) {
+        candidates.push_back(dir / name);
+      } else if (fs::is_directory(dir, ec)) {
+        // "camchain-imucam*.yaml": Kalibr names its outputs after the bag (camchain-imucam-<bag>.yaml).
+        const std::string head = pattern.substr(0, star), tail = pattern.substr(star + 1);
+        for (const auto& entry : fs::directory_iterator(dir, ec)) {
+          const std::string file = entry.path().filename().string();
+          if (file.size() >= head.size() + tail.size() && file.starts_with(head) && file.ends_with(tail))
+            candidates.push_back(entry.path());
+        }
+        std::sort(candidates.begin(), candidates.end());
+        if (candidates.size() > 1)
+          spdlog::warn("{}: {} files match {}: {} is used", dir.string(), candidates.size(), pattern,
+                       candidates.front().filename().string());
+      }
+      for (const fs::path& file : candidates) {
+        if (fs::exists(file, ec)) require_regular_file(file);  // a FIFO would block open() forever
+        if (fs::is_regular_file(file, ec)) return file;
+      }
     }
   }
   return std::nullopt;
@@ -104,7 +126,9 @@ void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera
     d.camera_calibration = read_optional_yaml(cam_dir / "sensor.yaml", log,
                                               [](const fs::path& f) { return read_euroc_camera_yaml(f); });
     if (d.camera_calibration) d.calibration_size_source = cam_name + "/sensor.yaml resolution";
-  } else if (const auto chain = first_file(kalibr, {"camchain-imucam.yaml", "camchain.yaml"})) {
+  } else if (const auto chain =
+                 first_file(kalibr, {"camchain-imucam.yaml", "camchain-imucam*.yaml",
+                                     "kalibr_imucam_chain.yaml", "camchain.yaml", "camchain-*.yaml"})) {
     d.camera_calibration = read_optional_yaml(
         *chain, log, [&](const fs::path& f) { return read_kalibr_camchain(f, camera_index); });
     if (d.camera_calibration) {
@@ -116,7 +140,8 @@ void read_euroc_calibration(const fs::path& dir, const fs::path& mav, int camera
   if (fs::exists(mav / "imu0" / "sensor.yaml", ec)) {
     d.imu_calib = read_optional_yaml(mav / "imu0" / "sensor.yaml", log,
                                      [](const fs::path& f) { return read_euroc_imu_yaml(f); });
-  } else if (const auto imu_yaml = first_file(kalibr, {"imu.yaml", "imu_config.yaml"})) {
+  } else if (const auto imu_yaml =
+                 first_file(kalibr, {"imu.yaml", "imu-*.yaml", "kalibr_imu_chain.yaml", "imu_config.yaml"})) {
     d.imu_calib = read_optional_yaml(*imu_yaml, log, [](const fs::path& f) { return read_kalibr_imu(f); });
     if (d.imu_calib) {
       spdlog::info("{}: no imu0/sensor.yaml: IMU calibration from Kalibr {}", dir.string(),

@@ -72,7 +72,45 @@ void refuse_outputs_over_inputs(const std::vector<NamedPath>& outputs, const std
   }
 }
 
+namespace {
+
+// The note of the command that holds the lock file `file` when another process holds it; empty when the file
+// is absent, unlocked, or held by this process (a compare locks its folder, then each method folder in it).
+std::string held_by_another_process(const fs::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return "";
+  char buffer[256] = {};
+  const ssize_t n = ::pread(fd, buffer, sizeof(buffer) - 1, 0);
+  std::string who = n > 0 ? std::string(buffer, static_cast<std::size_t>(n)) : std::string();
+  while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+  const bool ours = who.rfind("pid " + std::to_string(::getpid()) + ":", 0) == 0;
+  bool held = false;
+  if (!ours && ::flock(fd, LOCK_SH | LOCK_NB) != 0) {
+    held = errno == EWOULDBLOCK;
+  } else if (!ours) {
+    ::flock(fd, LOCK_UN);
+  }
+  ::close(fd);
+  return held ? (who.empty() ? std::string("another process") : who) : std::string();
+}
+
+}  // namespace
+
 OutputLock::OutputLock(const fs::path& dir, const std::string& holder) : file_(dir / kFileName) {
+  // One writer per folder, nested folders too: a folder inside one that another command holds (a compare's
+  // method folder, OUT/full) belongs to that command.
+  {
+    std::error_code abs_ec;
+    const fs::path absolute = fs::weakly_canonical(fs::absolute(dir, abs_ec), abs_ec);
+    for (fs::path up = absolute.parent_path(); !up.empty() && up != up.parent_path(); up = up.parent_path()) {
+      const std::string who = held_by_another_process(up / kFileName);
+      if (!who.empty()) {
+        throw DataError(dir, "the output folder is inside " + up.string() +
+                                 ", which another loopgate command is writing (" + who +
+                                 "): wait for it to finish or choose another --out");
+      }
+    }
+  }
   std::error_code ec;
   fs::create_directories(dir, ec);
   if (ec) throw DataError(dir, "cannot create the output folder: " + ec.message());

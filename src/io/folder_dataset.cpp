@@ -24,10 +24,12 @@ namespace {
 
 constexpr std::size_t kNsNameDigits = 19;  // nanoseconds since 1970: 19 digits from 2001 to 2286
 
-// The time of an image named by 19 digits of nanoseconds, else nullopt.
+// The time of an image named by 19 digits of nanoseconds, else nullopt. A leading 0 makes the name a
+// zero-padded frame number, not a time (it would time the frames 1 ns apart, in 1970).
 std::optional<Timestamp> ns_name(const std::filesystem::path& file) {
   const std::string stem = file.stem().string();
-  if (stem.size() != kNsNameDigits || stem.find_first_not_of("0123456789") != std::string::npos) {
+  if (stem.size() != kNsNameDigits || stem.front() == '0' ||
+      stem.find_first_not_of("0123456789") != std::string::npos) {
     return std::nullopt;
   }
   Timestamp t_ns = 0;

@@ -101,9 +101,19 @@ CameraCalibration read_kalibr_camchain(const fs::path& yaml_file, int camera_ind
                                             "distortion_coeffs", camera);
   }
   io_detail::yaml_resolution(yaml_file, require(yaml_file, *cam, "resolution"), camera);
-  const Eigen::Isometry3d T_c_i =
-      kalibr_transform(yaml_file, require(yaml_file, *cam, "T_cam_imu"), name + ".T_cam_imu");
-  camera.T_b_c = T_c_i.inverse();
+  // Kalibr writes T_cam_imu; OpenVINS' kalibr_imucam_chain.yaml writes its inverse, T_imu_cam.
+  if (const YAML::Node T_i_c_node = cam->node["T_imu_cam"]; T_i_c_node && !cam->node["T_cam_imu"]) {
+    camera.T_b_c = kalibr_transform(yaml_file, T_i_c_node, name + ".T_imu_cam");
+  } else if (!cam->node["T_cam_imu"]) {
+    throw DataError(yaml_file, cam->line,
+                    name +
+                        ": no T_cam_imu (Kalibr) or T_imu_cam (OpenVINS): the camera-IMU transform is "
+                        "missing");
+  } else {
+    const Eigen::Isometry3d T_c_i =
+        kalibr_transform(yaml_file, require(yaml_file, *cam, "T_cam_imu"), name + ".T_cam_imu");
+    camera.T_b_c = T_c_i.inverse();
+  }
   if (const YAML::Node shift = cam->node["timeshift_cam_imu"]) {
     const double shift_s = io_detail::yaml_number(yaml_file, shift, name + ".timeshift_cam_imu");
     if (shift_s != 0) {

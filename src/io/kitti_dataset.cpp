@@ -143,7 +143,19 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
           "(its image 000123.png is frame 123 in frames.csv and loops.csv), which shows the gap",
           times_file.string(), rejected_count, rejected, rejected_count > 10 ? ", ..." : "");
     }
-    if (!d->images_present) {
+    // Another camera's folder here: the user most likely wants that camera (KITTI's colour download has only
+    // image_2/ and image_3/).
+    std::string other;
+    for (int k = 0; k <= 3 && other.empty() && !d->images_present; ++k) {
+      const fs::path candidate = image_dir.parent_path() / ("image_" + std::to_string(k));
+      if (k != options.camera_index && fs::is_directory(candidate, ec)) other = std::to_string(k);
+    }
+    if (!d->images_present && !other.empty()) {
+      spdlog::warn(
+          "{}: no images in {}, but image_{}/ is there: set run.camera_index={} to read it (frames have "
+          "timestamps only)",
+          dir.string(), image_dir.string(), other, other);
+    } else if (!d->images_present) {
       spdlog::info("{}: no images in {}: frames have timestamps only", dir.string(), image_dir.string());
     } else if (missing > 0) {
       spdlog::warn("{}: {} of {} frames have no image file (those frames fail to load)", image_dir.string(),

@@ -184,10 +184,12 @@ class TopicProblems {
   std::vector<io_detail::TimedRow<T> > keep_increasing(std::vector<io_detail::TimedRow<T> > rows) {
     return io_detail::keep_increasing_rows(
         std::move(rows), "header.stamp", false, "message",
-        [&](const io_detail::TimedRow<T>& row, const std::string& message) {
-          add(row.line, message +
-                            ", expected strictly increasing times: this message is out of order with the "
-                            "messages around it");
+        [&](const io_detail::TimedRow<T>& row, const std::string& message, bool out_of_order) {
+          add(row.line, out_of_order
+                            ? message +
+                                  ", expected strictly increasing times: this message is out of order "
+                                  "with the messages around it"
+                            : message);
         });
   }
   // Reports them as one table of `messages` rows (io_detail::IssueLog::end_table).

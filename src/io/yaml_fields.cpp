@@ -1,5 +1,7 @@
 #include "io/yaml_fields.hpp"
 
+#include <spdlog/fmt/fmt.h>
+
 #include <charconv>
 #include <cmath>
 #include <string_view>
@@ -115,6 +117,13 @@ void yaml_resolution(const std::filesystem::path& file, const YAML::Node& node, 
   const std::vector<double> size = yaml_numbers(file, node, "resolution [width, height]", 2);
   if (size[0] < 1 || size[1] < 1 || size[0] != std::floor(size[0]) || size[1] != std::floor(size[1])) {
     throw DataError(file, yaml_line(node), "resolution: expected two positive integers [width, height]");
+  }
+  // A bound before the cast to int (beyond it the cast is undefined: 1e12 read as -2147483648).
+  constexpr double kMaxSidePx = 100000;
+  if (size[0] > kMaxSidePx || size[1] > kMaxSidePx) {
+    throw DataError(file, yaml_line(node),
+                    fmt::format("resolution: [{}, {}] px, expected sides of at most {} px", size[0], size[1],
+                                kMaxSidePx));
   }
   camera.width_px = static_cast<int>(size[0]);
   camera.height_px = static_cast<int>(size[1]);

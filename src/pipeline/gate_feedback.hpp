@@ -1,4 +1,4 @@
-// The channel of gate.feedback (issue 13, docs/architecture.md § Gate feedback): the loop closer's verified
+// The channel of gate.feedback (docs/gating.md § Gate feedback): the loop closer's verified
 // loops and the sink's "detections final through frame w" to the pose gate, which re-anchors frame i through
 // the latest verified loop whose query frame is <= frame(i - L) (stages/gate/reanchor.hpp).
 //

@@ -3,6 +3,7 @@
 #include <spdlog/fmt/fmt.h>
 #include <spdlog/spdlog.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -14,6 +15,7 @@
 #include "io/g2o_file.hpp"
 #include "io/writers.hpp"
 #include "parallel/parallel_handoff.hpp"
+#include "pipeline/loop_oracle.hpp"
 #include "pipeline/loops_writer.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/pipeline_config.hpp"
@@ -236,16 +238,84 @@ bool LoopCloser::in_skip_window(const Detection& earlier, bool verified, const D
   return window > 0 && near(earlier.query, later.query) && near(earlier.reference, later.reference);
 }
 
-std::string LoopCloser::skip_reason(const Detection& loop) const {
-  // A loop the odometry already knows: its position uncertainty grew less between j and i than a loop edge's
-  // own (standing still, hovering, the frames just before a query). Such an edge corrects nothing.
-  if (verify_config_.min_sigma_gain > 0 && pose_of(loop.query) && pose_of(loop.reference)) {
-    const double s_i = sigma_m_[loop.query - first_], s_j = sigma_m_[loop.reference - first_];
-    const double gain_m = std::sqrt(std::max(0.0, s_i * s_i - s_j * s_j));
-    const double need_m = verify_config_.min_sigma_gain * verify_config_.sigma_position_m;
-    if (gain_m < need_m)
-      return fmt::format("skipped: odometry sigma grew {:.3f} m from j to i < {:.3f} m (a loop edge's)",
-                         gain_m, need_m);
+void LoopCloser::extend_chain(std::size_t span) {
+  span = std::min(span, poses_.size());
+  if (chain_id_.size() >= span) return;
+  std::size_t k = chain_id_.size();
+  chain_id_.resize(span, -1);
+  chain_cov_.resize(span, PoseCov::Zero());
+  chain_T_.resize(span, Eigen::Isometry3d::Identity());
+  for (; k < span; ++k) {
+    if (!poses_[k]) continue;
+    if (!chain_previous_ || !has_step_cov_[k]) {
+      chain_id_[k] = ++chains_;
+    } else {
+      const std::size_t p = *chain_previous_;
+      const Eigen::Isometry3d T_p_k = poses_[p]->inverse() * *poses_[k];
+      chain_id_[k] = chain_id_[p];
+      chain_T_[k] = chain_T_[p] * T_p_k;
+      chain_cov_[k] = compose_pose_cov(chain_T_[p], chain_cov_[p], T_p_k, step_cov_[k]);
+    }
+    chain_previous_ = k;
+  }
+}
+
+double LoopCloser::scale_now() const {
+  if (step_cov_.empty()) return 1.0;
+  if (graph_config_.odometry_cov_scale > 0) return graph_config_.odometry_cov_scale;
+  return odometry_cov_scale_from_loops(innovations_, 3, 1e6);
+}
+
+PoseCov LoopCloser::relative_odometry_cov(std::size_t j, std::size_t i) {
+  const Eigen::Isometry3d T_j_i = pose_of(j)->inverse() * *pose_of(i);
+  if (step_cov_.empty()) return graph_config_.model_cov(T_j_i);
+  const std::size_t a = j - first_, b = i - first_;
+  extend_chain(std::max(a, b) + 1);
+  if (chain_id_[a] < 0 || chain_id_[a] != chain_id_[b]) return graph_config_.model_cov(T_j_i);
+  const PoseCov cov = step_pose_cov(chain_T_[a], chain_cov_[a], chain_T_[b], chain_cov_[b]);
+  const double nodes = std::max(1.0, std::floor(static_cast<double>(b > a ? b - a : a - b) /
+                                                static_cast<double>(graph_config_.node_every_frames)));
+  return scale_now() * cov + nodes * graph_config_.with_floors(PoseCov::Zero());
+}
+
+void LoopCloser::add_innovation(const LoopResult& r) {
+  if (step_cov_.empty() || !r.result.verified || !pose_of(r.loop.query) || !pose_of(r.loop.reference)) return;
+  const std::size_t i = r.loop.query - first_, j = r.loop.reference - first_;
+  if (j >= i) return;
+  extend_chain(i + 1);
+  if (chain_id_[i] < 0 || chain_id_[i] != chain_id_[j]) return;
+  LoopInnovation innovation;
+  const Eigen::Isometry3d T_j_i = chain_T_[j].inverse() * chain_T_[i];
+  innovation.error.head<3>() = r.result.T_j_i.translation() - T_j_i.translation();
+  innovation.error.tail<3>() = so3_log(T_j_i.rotation().transpose() * r.result.T_j_i.rotation());
+  innovation.odometry_cov = step_pose_cov(chain_T_[j], chain_cov_[j], chain_T_[i], chain_cov_[i]);
+  innovation.loop_cov = r.result.cov;
+  innovations_.push_back(innovation);
+}
+
+std::string LoopCloser::skip_reason(const Detection& loop) {
+  // A loop the odometry already knows (standing still, hovering, the frames just before a query): its edge,
+  // as uncertain as verification allows (min_inliers), would shrink the odometry's own uncertainty of T_j_i
+  // by less than verify.min_information_gain. Such an edge corrects nothing.
+  if (verify_config_.min_information_gain > 0 && pose_of(loop.query) && pose_of(loop.reference) &&
+      loop.reference != loop.query) {
+    PoseCov edge = PoseCov::Zero();
+    edge.topLeftCorner<3, 3>().diagonal().setConstant(verify_config_.sigma_position_m *
+                                                      verify_config_.sigma_position_m);
+    edge.bottomRightCorner<3, 3>().diagonal().setConstant(verify_config_.sigma_rotation_rad *
+                                                          verify_config_.sigma_rotation_rad);
+    const PoseCov odometry = relative_odometry_cov(loop.reference, loop.query);
+    const double gain = loop_information_gain(odometry, edge);
+    if (gain < verify_config_.min_information_gain) {
+      const double sigma_m = std::sqrt(
+          std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(odometry.topLeftCorner<3, 3>())
+                            .eigenvalues()
+                            .maxCoeff()));
+      return fmt::format(
+          "skipped: information gain {:.2f} < {} (the odometry's sigma from j to i {:.3f} m, a loop edge's "
+          "{:.3f} m)",
+          gain, verify_config_.min_information_gain, sigma_m, verify_config_.sigma_position_m);
+    }
   }
   int tried_for_query = 0;
   for (auto it = results_.rbegin(); it != results_.rend(); ++it) {
@@ -441,6 +511,7 @@ void LoopCloser::work() {
     if (draining) verify_ahead();
     LoopResult result = verify_one(loop, draining);
     if (result_listener_) result_listener_(loop, result.result);
+    if (verify_config_.min_information_gain > 0 && !result.skipped) add_innovation(result);
     bool solve_now = false;
     {
       std::lock_guard lock(mutex_);
@@ -558,7 +629,9 @@ void LoopCloser::finish() {
   try {
     solve(last_ - 1, true);
   } catch (const std::exception& e) {
-    spdlog::error("posegraph: the final solve failed: {}", e.what());
+    final_solve_error_ = e.what();
+    if (final_solve_error_.empty()) final_solve_error_ = "unknown error";
+    spdlog::error("posegraph: the final solve failed: {}", final_solve_error_);
     nodes_.clear();
     node_poses_.clear();
     final_edges_.clear();
@@ -573,10 +646,32 @@ void LoopCloser::finish() {
       "graph; final solve {:.1f} ms",
       results_.size(), verified, results_.size() - verified - skipped, skipped, final_report_.outliers,
       final_solve_ms_);
+  const ReasonCounts counts = reason_counts();
+  const auto listed = [](const std::map<std::string, std::size_t>& m) {
+    std::string text;
+    for (const auto& [key, n] : m) text += fmt::format("{}{} {}", text.empty() ? "" : ", ", key, n);
+    return text.empty() ? std::string("none") : text;
+  };
+  spdlog::info("loop closure: rejected by reason: {}; skipped by reason: {}", listed(counts.rejected),
+               listed(counts.skipped));
+}
+
+LoopCloser::ReasonCounts LoopCloser::reason_counts() const {
+  ReasonCounts counts;
+  for (const LoopResult& r : results_) {
+    if (r.result.verified) continue;
+    ++(r.skipped ? counts.skipped : counts.rejected)[verify_reason_key(r.result.reason)];
+  }
+  return counts;
 }
 
 std::vector<StampedPose> LoopCloser::corrected(const std::vector<StampedPose>& tracked) const {
-  if (nodes_.empty()) return tracked;
+  return corrected_by(tracked, node_poses_);
+}
+
+std::vector<StampedPose> LoopCloser::corrected_by(const std::vector<StampedPose>& tracked,
+                                                  const std::vector<Eigen::Isometry3d>& node_poses) const {
+  if (nodes_.empty() || node_poses.size() != nodes_.size()) return tracked;
   std::vector<StampedPose> out;
   out.reserve(tracked.size());
   // tracked poses are in frame order; nodes_ too. A frame takes the correction of the last node at or before
@@ -585,9 +680,67 @@ std::vector<StampedPose> LoopCloser::corrected(const std::vector<StampedPose>& t
   for (const StampedPose& pose : tracked) {
     while (n + 1 < nodes_.size() && dataset_.frame_t_ns(nodes_[n + 1]) <= pose.t_ns) ++n;
     const Eigen::Isometry3d& T_odo_node = *poses_[nodes_[n] - first_];
-    out.push_back({pose.t_ns, node_poses_[n] * T_odo_node.inverse() * pose.T_w_b});
+    out.push_back({pose.t_ns, node_poses[n] * T_odo_node.inverse() * pose.T_w_b});
   }
   return out;
+}
+
+nlohmann::json LoopCloser::oracle_report(
+    const std::vector<StampedPose>& tracked,
+    const std::vector<std::pair<std::size_t, std::size_t>>& truth_pairs) const {
+  if (!active_ || !graph_config_.enabled) return {{"available", false}, {"why", "no pose graph"}};
+  if (!dataset_.has_ground_truth()) return {{"available", false}, {"why", "the dataset has no ground truth"}};
+  if (nodes_.size() < 2) return {{"available", false}, {"why", "no final pose-graph solve"}};
+  const auto start = std::chrono::steady_clock::now();
+  OracleGraph graph;
+  graph.frames = nodes_;
+  for (const std::size_t frame : nodes_) graph.T_w_b.push_back(*poses_[frame - first_]);
+  for (const PoseGraphEdge& e : final_edges_) {
+    if (e.kind != EdgeKind::kOdometry) continue;
+    graph.odometry.push_back(
+        {e.a, e.b, e.T_a_b, (e.sqrt_information.transpose() * e.sqrt_information).inverse()});
+  }
+  OracleOptions options;
+  options.graph = graph_config_;
+  OracleResult oracle;
+  try {
+    oracle = solve_loop_oracle(graph, truth_pairs, dataset_, options);
+  } catch (const std::exception& e) {
+    return {{"available", false}, {"why", std::string("the oracle's solve failed: ") + e.what()}};
+  }
+  const auto rmse = [&](const std::vector<StampedPose>& poses) -> std::optional<double> {
+    const nlohmann::json accuracy = trajectory_accuracy_json(poses, dataset_);
+    if (!accuracy.value("available", false)) return std::nullopt;
+    return accuracy.at("rmse_m").get<double>();
+  };
+  const std::optional<double> odometry = rmse(tracked);
+  const std::optional<double> corrected_m = rmse(corrected(tracked));
+  const std::optional<double> floor_m = rmse(corrected_by(tracked, oracle.T_w_b));
+  if (!odometry || !corrected_m || !floor_m) return {{"available", false}, {"why", "no trajectory accuracy"}};
+  nlohmann::json share = nullptr;
+  std::string share_why;
+  const double attainable_m = *odometry - *floor_m;
+  if (oracle.loops == 0) {
+    share_why = "no ground-truth revisit between two nodes of the graph";
+  } else if (!(attainable_m >= kOracleMinGain * *odometry)) {
+    share_why = fmt::format("the oracle gains {:.1f}% < {:.0f}% of the odometry's ATE",
+                            *odometry > 0 ? 100.0 * attainable_m / *odometry : 0.0, 100.0 * kOracleMinGain);
+  } else {
+    share = (*odometry - *corrected_m) / attainable_m;
+  }
+  return {{"available", true},
+          {"ate_odometry_m", *odometry},
+          {"ate_corrected_m", *corrected_m},
+          {"ate_oracle_m", *floor_m},
+          {"share_of_attainable_gain", share},
+          {"share_why", share_why},
+          {"oracle_loop_edges", oracle.loops},
+          {"truth_pairs", truth_pairs.size()},
+          {"every_query_frames", options.every},
+          {"sigma_position_m", options.sigma_position_m},
+          {"sigma_rotation_rad", options.sigma_rotation_rad},
+          {"iterations", oracle.iterations},
+          {"ms", ms_since(start)}};
 }
 
 // loops.csv's verification cells of a loop (also the start of its loop_edges.csv row).
@@ -610,6 +763,7 @@ std::vector<std::string> LoopCloser::verification_cells(const LoopResult& r) {
 
 void LoopCloser::write_corrected(const std::filesystem::path& out_dir,
                                  const std::vector<StampedPose>& tracked) const {
+  if (!final_solve_error_.empty()) return;  // nothing was corrected: no file claims it was
   TumWriter file(out_dir / "trajectory_corrected.tum");
   for (const StampedPose& pose : corrected(tracked)) file.write(pose.t_ns, pose.T_w_b);
   file.close();
@@ -698,6 +852,7 @@ nlohmann::json LoopCloser::summary() const {
     skipped += r.skipped ? 1 : 0;
     if (!r.skipped) verify_ms.push_back(r.verify_ms);
   }
+  const ReasonCounts counts = reason_counts();
   return {{"enabled", active_},
           {"unusable_reason", unusable_},
           {"loops", results_.size()},
@@ -705,6 +860,8 @@ nlohmann::json LoopCloser::summary() const {
           {"verified_by_tracking", tracked},
           {"rejected_geometry", results_.size() - verified - skipped},
           {"skipped", skipped},
+          {"rejected_by_reason", counts.rejected},
+          {"skipped_by_reason", counts.skipped},
           {"graph_outliers", outliers},
           {"graph_nodes", nodes_.size()},
           {"odometry_cov", graph_config_.odometry_cov},
@@ -725,9 +882,15 @@ nlohmann::json LoopCloser::summary() const {
 
 nlohmann::json LoopCloser::summary_fields(const std::vector<StampedPose>& tracked) const {
   nlohmann::json closure = summary();
-  nlohmann::json corrected = trajectory_accuracy_json(this->corrected(tracked), dataset_);
-  if (corrected.value("available", false))
-    corrected["poses"] = "odometry poses with status tracking, corrected by the pose graph";
+  nlohmann::json corrected;
+  if (!final_solve_error_.empty()) {
+    corrected = {{"available", false}, {"why", "the final pose-graph solve failed: " + final_solve_error_}};
+    closure["final_solve_error"] = final_solve_error_;
+  } else {
+    corrected = trajectory_accuracy_json(this->corrected(tracked), dataset_);
+    if (corrected.value("available", false))
+      corrected["poses"] = "odometry poses with status tracking, corrected by the pose graph";
+  }
   return {{"loops_verified", closure["verified"]},
           {"loops_rejected_geometry", closure["rejected_geometry"]},
           {"loops_skipped_geometry", closure["skipped"]},
@@ -761,6 +924,9 @@ nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& da
   for (const Detection& loop : track.loops) closer.submit(loop);
   closer.finish();
   closer.write_edges(run_dir);
+  if (!closer.solve_failure().empty())
+    throw DataError(run_dir, "the final pose-graph solve failed (no trajectory_corrected.tum): " +
+                                 closer.solve_failure());
   closer.write_graph(run_dir);
   closer.write_corrected(run_dir, track.tracked_poses);
   nlohmann::json fields = closer.summary_fields(track.tracked_poses);

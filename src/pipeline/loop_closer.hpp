@@ -16,6 +16,7 @@
 #include <deque>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
@@ -23,6 +24,7 @@
 #include <string>
 #include <thread>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "core/pose_covariance.hpp"
@@ -49,7 +51,7 @@ class LoopCloser {
 
   bool active() const { return active_; }
   // The odometry node (serial), once per frame with a usable pose: the pose the verifier and the graph use,
-  // its position sigma (PoseEstimate::position_sigma_m; verify.min_sigma_gain) and its step covariance from
+  // its position sigma (PoseEstimate::position_sigma_m; the odometry check) and its step covariance from
   // the previous recorded pose (OdometryOutput::step_cov; posegraph.odometry_cov). Frames never recorded
   // have no pose.
   void record_pose(std::size_t frame, const Eigen::Isometry3d& T_w_b, double sigma_m,
@@ -73,6 +75,10 @@ class LoopCloser {
   FrameMs frame_ms(std::size_t frame) const;
   // After the last submit(): drains the queue, solves the final graph.
   void finish();
+  // After finish(): why the final pose-graph solve failed (empty when it succeeded or did not run). A failed
+  // solve corrects nothing: trajectory_corrected.tum and pose_graph.g2o are not written, the summary's
+  // trajectory_accuracy_corrected is unavailable, and the run fails (pipeline_finish.cpp).
+  const std::string& solve_failure() const { return final_solve_error_; }
 
   // After finish(): the files and the summary fields.
   void write_edges(const std::filesystem::path& out_dir) const;  // loop_edges.csv
@@ -84,12 +90,25 @@ class LoopCloser {
   void annotate_loops(LoopsWriter& loops) const;
   // tracked poses of the run -> corrected poses (same times).
   std::vector<StampedPose> corrected(const std::vector<StampedPose>& tracked) const;
+  // The loop oracle (pipeline/loop_oracle.hpp) on the final solve's odometry graph with perfect edges at
+  // `truth_pairs` (dataset frames: query i, reference j), read against this run: ATE of the odometry, of the
+  // corrected trajectory and of the oracle's (the floor), and the share of the attainable gain this run
+  // reached, (odometry - corrected) / (odometry - oracle), null when the oracle gains under 10% of the
+  // odometry's ATE. After finish(), after the stream: it costs one more solve of the final graph ("ms").
+  nlohmann::json oracle_report(const std::vector<StampedPose>& tracked,
+                               const std::vector<std::pair<std::size_t, std::size_t>>& truth_pairs) const;
+  // trajectory_corrected.tum; nothing when the final solve failed (solve_failure()).
   void write_corrected(const std::filesystem::path& out_dir, const std::vector<StampedPose>& tracked) const;
   nlohmann::json summary() const;
   // The run summary's fields: loops_verified, loops_rejected_geometry, loops_skipped_geometry,
   // trajectory_accuracy_corrected (of `tracked` corrected) and loop_closure (summary()).
   nlohmann::json summary_fields(const std::vector<StampedPose>& tracked) const;
   std::string profile_line() const;
+  // The loops verification rejected and those it skipped, counted by verify_reason_key() (sorted by key).
+  struct ReasonCounts {
+    std::map<std::string, std::size_t> rejected, skipped;
+  };
+  ReasonCounts reason_counts() const;
 
  private:
   struct LoopResult {
@@ -99,7 +118,7 @@ class LoopCloser {
     double verify_ms = 0;
     bool outlier = false;  // switched off by the final solve
     double chi2 = 0;
-    bool skipped = false;  // not verified by choice (min_sigma_gain, max_per_query, skip_after_*_frames)
+    bool skipped = false;  // not verified by choice (min_information_gain, max_per_query, skip_after_*)
   };
   static std::vector<std::string> verification_cells(const LoopResult& r);
   void work();
@@ -127,6 +146,9 @@ class LoopCloser {
   // Whether `earlier`, verified or rejected, makes skip_reason(later) say skip (skip_after_*_frames,
   // max_per_query).
   bool would_skip(const Detection& earlier, bool verified, const Detection& later) const;
+  // The oracle's gain (odometry ATE - floor) below which no share is given: the share of a gain that small
+  // is mostly the noise of the two ATEs.
+  static constexpr double kOracleMinGain = 0.10;
   static constexpr std::size_t kVerifyAheadLoops = 256;  // how far down the queue verify_ahead() looks
   // At most this many loops per thread at once: the threads take them one by one, so that one slow
   // verification does not leave the other threads idle until it ends.
@@ -135,7 +157,26 @@ class LoopCloser {
   // j, `earlier` having been verified (or rejected).
   bool in_skip_window(const Detection& earlier, bool verified, const Detection& later) const;
   // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
-  std::string skip_reason(const Detection& loop) const;
+  std::string skip_reason(const Detection& loop);
+  // The odometry's covariance of T_j_i as the pose graph would see it (worker only): the step covariances
+  // from j to i composed (the prefix chain below), times the graph's scale (scale_now()), plus an edge's
+  // floors per node between them; the model's (posegraph.odometry_cov model, or a frame without a step
+  // covariance in between) otherwise.
+  PoseCov relative_odometry_cov(std::size_t j, std::size_t i);
+  // posegraph.odometry_cov_scale, or when it is 0 the scale the loops verified so far show (1 before 3).
+  double scale_now() const;
+  // Extends the chain below to the frames of index < span (worker only).
+  void extend_chain(std::size_t span);
+  // Each recorded frame's pose and covariance relative to the start of its chain of step covariances (a frame
+  // without one starts a chain), filled as far as the loops need (worker only).
+  std::vector<std::int64_t> chain_id_;
+  std::vector<PoseCov> chain_cov_;
+  std::vector<Eigen::Isometry3d> chain_T_;
+  std::optional<std::size_t> chain_previous_;
+  std::int64_t chains_ = -1;
+  // The verified loops against the odometry so far (worker only): scale_now()'s input.
+  std::vector<LoopInnovation> innovations_;
+  void add_innovation(const LoopResult& r);
   // ORB features of a frame, detected once and kept for feature_cache_frames frames. Worker only.
   std::shared_ptr<const OrbFeatures> features_of(std::size_t frame);
   // At the end of the stream, with run.threads > 1: detects the features of those `frames` that are not
@@ -147,6 +188,9 @@ class LoopCloser {
   // solve's time.
   double solve(std::size_t last, bool final);
   std::optional<Eigen::Isometry3d> pose_of(std::size_t frame) const;
+  // `tracked` with the correction of the final graph's nodes at `node_poses` (corrected()).
+  std::vector<StampedPose> corrected_by(const std::vector<StampedPose>& tracked,
+                                        const std::vector<Eigen::Isometry3d>& node_poses) const;
   // Every frame of [from, to] has an odometry pose (none lost, initialising or without an image between).
   bool odometry_unbroken(std::size_t from, std::size_t to) const;
 
@@ -194,6 +238,7 @@ class LoopCloser {
   std::unordered_map<std::size_t, FrameMs> ms_by_frame_;
   double final_solve_ms_ = 0;
   SolveReport final_report_;
+  std::string final_solve_error_;          // why the final solve failed (empty: it did not)
   double final_odometry_cov_scale_ = 1.0;  // the final solve's (posegraph.odometry_cov odometry)
   std::vector<std::size_t> nodes_;         // frames of the final graph's nodes
   std::vector<Eigen::Isometry3d> node_poses_;

@@ -34,7 +34,7 @@ std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfi
   if (config.source != "auto") return config.source;
   const bool ekf_inputs = dataset.has_images() && dataset.has_imu() && dataset.camera().has_value() &&
                           dataset.imu_calibration().has_value();
-  const bool ekf_init = ekf.init_mode == "standstill" || dataset.has_ground_truth();
+  const bool ekf_init = ekf.init_mode != EkfInitMode::kGroundTruth || dataset.has_ground_truth();
   if (ekf_inputs && ekf_init) return "ekf";
   return dataset.has_ground_truth() ? "drift" : "none";
 }
@@ -64,9 +64,12 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
   }
   if (source == "ekf") {
     return fmt::format(
-        "the ekf to initialise ({}) and track the images and IMU of {} ({})",
-        ekf.init_mode == "ground_truth" ? "from ground truth at a frame time" : "at a standstill",
-        dataset.root().string(), frames);
+        "the ekf to start ({}) within ekf.max_init_s = {} s and track the images and IMU of {} ({})",
+        ekf.init_mode == EkfInitMode::kGroundTruth ? "from ground truth at a frame time"
+        : ekf.init_mode == EkfInitMode::kStatic    ? "while the platform is still"
+        : ekf.init_mode == EkfInitMode::kDynamic   ? "by visual-inertial alignment while moving"
+                                                   : "still or moving",
+        ekf.max_init_s, dataset.root().string(), frames);
   }
   if (source == "drift") {
     std::string truth = "none";
@@ -122,21 +125,23 @@ std::unique_ptr<OdometrySource> make_ekf_source(const OdometryConfig& config, co
                     "odometry.source ekf needs the IMU calibration (imu0 sensor.yaml), and this "
                     "dataset has none");
   }
-  if (ekf.init_mode == "ground_truth" && !dataset.has_ground_truth()) {
+  const bool from_truth = ekf.init_mode == EkfInitMode::kGroundTruth;
+  if (from_truth && !dataset.has_ground_truth()) {
     throw ConfigError("ekf.init_mode: 'ground_truth' needs ground truth, and dataset " + where.string() +
-                      " has none (use ekf.init_mode=standstill)");
+                      " has none (use ekf.init_mode=auto, the default, to start from the sensors)");
   }
+  // Started from the sensors, the filter's world is its own (gravity-aligned, +z up, yaw 0 at the start):
+  // only a start from ground truth takes the ground truth's world, and so its up axis.
   Eigen::Vector3d up_w = Eigen::Vector3d::UnitZ();
   if (config.ekf_up_axis != "auto") {
     up_w = axis_vector(config.ekf_up_axis);
-  } else if (dataset.has_ground_truth()) {
+  } else if (from_truth) {
     up_w = world_up_axis_from_imu(dataset).value_or(Eigen::Vector3d::UnitZ());
   }
-  spdlog::info("odometry: ekf source (MSCKF, window {}, {} features), init from {}, world up [{} {} {}]",
-               ekf.window_size, ekf.max_features, ekf.init_mode, up_w.x(), up_w.y(), up_w.z());
+  spdlog::info("odometry: ekf source (MSCKF, window {}, {} features), init_mode {}, world up [{} {} {}]",
+               ekf.window_size, ekf.max_features, enum_name(ekf.init_mode), up_w.x(), up_w.y(), up_w.z());
   return std::make_unique<EkfOdometry>(
-      ekf, *camera, *imu,
-      ekf.init_mode == "ground_truth" ? dataset.ground_truth() : std::vector<GroundTruthState>{}, up_w);
+      ekf, *camera, *imu, from_truth ? dataset.ground_truth() : std::vector<GroundTruthState>{}, up_w);
 }
 }  // namespace
 

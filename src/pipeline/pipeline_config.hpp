@@ -103,12 +103,13 @@ struct RunConfig {
   std::pair<std::size_t, std::size_t> frame_range(std::size_t frame_count) const;
 };
 
-// Section dataset: how inputs that are not folders are read. A ROS1 bag (run.dataset ending in .bag, README §
-// Datasets): the topics of the images (sensor_msgs/Image or CompressedImage) and of the IMU (sensor_msgs/Imu;
-// empty = no IMU), EuRoC's by default, and the folder in EuRoC ASL layout that holds the calibration and
-// ground truth a bag does not carry (cam0/sensor.yaml, imu0/sensor.yaml,
+// Section dataset: how inputs that are not folders are read. A ROS1 bag (run.dataset ending in .bag,
+// docs/datasets.md): the topics of the images (sensor_msgs/Image or CompressedImage) and of the IMU
+// (sensor_msgs/Imu; empty = no IMU), EuRoC's by default, and the folder in EuRoC ASL layout that holds the
+// calibration and ground truth a bag does not carry (cam0/sensor.yaml, imu0/sensor.yaml,
 // state_groundtruth_estimate0/data.csv; empty = the folder beside the bag named like it without ".bag", when
-// there is one). Relative paths are relative to the working directory.
+// there is one). A relative path is relative to the YAML file that names it, or to the working
+// directory when given on the command line.
 struct DatasetConfig {
   std::string bag_image_topic = "/cam0/image_raw";
   std::string bag_imu_topic = "/imu0";

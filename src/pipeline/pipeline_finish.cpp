@@ -106,21 +106,49 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   }
   nlohmann::json evaluation = {{"available", false}};
   step_ns = clock_.now_ns();
+  std::vector<std::pair<std::size_t, std::size_t>> truth_loops;
   write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
-               [&] { evaluation = evaluate_run(parts, out_dir_); });
+               [&] { evaluation = evaluate_run(parts, out_dir_, &truth_loops); });
   if (config_.output.trace) trace_end_of_stream("end of stream: evaluation", step_ns);
   // A run that went through its frames and got nothing usable fails loudly (issue 14), outputs written.
   std::vector<std::string> problems;
   if (!result.failed && !result.interrupted) {
-    problems = run_problems(run_check_input(config_, dataset_, outputs_.counters(),
-                                            steps_.odometry_source().name(), method_->detects()));
+    problems =
+        run_problems(run_check_input(config_, dataset_, outputs_.counters(), steps_.odometry_source().name(),
+                                     method_->detects(), steps_.odometry_source().start()));
     if (!problems.empty()) {
       result.failed = true;
       result.error = fmt::format("{}", fmt::join(problems, "; "));
     }
   }
+  // A final pose-graph solve that failed corrected nothing: the run fails, and says why (its other outputs
+  // are written; trajectory_corrected.tum and pose_graph.g2o are not, and are listed as missing).
+  if (!result.interrupted && closer_.active() && !closer_.solve_failure().empty()) {
+    problems.push_back("pose graph: the final solve failed, the trajectory is not corrected: " +
+                       closer_.solve_failure());
+    result.failed = true;
+    result.error = fmt::format("{}", fmt::join(problems, "; "));
+  }
   result.summary = make_run_summary(parts, result, std::move(evaluation));
   result.summary["problems"] = problems;
+  if (const auto start = steps_.odometry_source().start())
+    result.summary["odometry_start"] = odometry_start_json(*start);
+  // The loop oracle against this run (after the stream: one more solve of the final graph).
+  if (closer_.active() && config_.posegraph.enabled && !result.interrupted) {
+    nlohmann::json oracle = closer_.oracle_report(outputs_.tracked_poses(), truth_loops);
+    if (oracle.value("available", false)) {
+      const nlohmann::json& share = oracle["share_of_attainable_gain"];
+      spdlog::info(
+          "loop oracle: ATE odometry {:.3f} m, corrected {:.3f} m, oracle floor {:.3f} m: {} "
+          "({} perfect loop edges, {:.0f} ms)",
+          oracle["ate_odometry_m"].get<double>(), oracle["ate_corrected_m"].get<double>(),
+          oracle["ate_oracle_m"].get<double>(),
+          share.is_null() ? "share n/a, " + oracle["share_why"].get<std::string>()
+                          : fmt::format("{:.0f}% of the attainable gain", 100.0 * share.get<double>()),
+          oracle["oracle_loop_edges"].get<std::size_t>(), oracle["ms"].get<double>());
+    }
+    result.summary["loop_oracle"] = std::move(oracle);
+  }
   result.track = {range_.first,
                   range_.second,
                   outputs_.tracked_frames(),
@@ -158,6 +186,10 @@ std::vector<std::string> PipelineRun::missing_outputs() const {
   std::error_code ec;
   for (const std::string& name : expected)
     if (!std::filesystem::is_regular_file(out_dir_ / name, ec)) missing.push_back(name);
+  if (closer_.active() && !closer_.solve_failure().empty()) {
+    for (const char* name : {"trajectory_corrected.tum", "pose_graph.g2o"})
+      missing.push_back(std::string(name) + ": not written, the final pose-graph solve failed");
+  }
   // Files of the method and of the evaluation are named by their errors.
   for (const std::string& error : output_errors_) {
     const std::string what = error.substr(0, error.find(':'));

@@ -3,6 +3,7 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
+#include <utility>
 
 #include "io/dataset.hpp"
 #include "pipeline/odometry_factory.hpp"
@@ -12,8 +13,12 @@
 namespace loopgate {
 
 RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& dataset, const RunCounters& c,
-                              const std::string& odometry_source, bool detects) {
+                              const std::string& odometry_source, bool detects,
+                              std::optional<OdometryStart> start) {
   RunCheckInput in;
+  in.start = std::move(start);
+  in.max_init_s = config.ekf.max_init_s;
+  in.min_tracked_share = config.ekf.min_tracked_share;
   in.frames_processed = c.processed;
   in.odometry_source = odometry_source;
   in.odometry_expected = odometry_expectation(config.odometry, config.ekf, dataset);
@@ -34,11 +39,36 @@ RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& datas
 std::vector<std::string> run_problems(const RunCheckInput& in) {
   std::vector<std::string> problems;
   if (in.frames_processed == 0) return problems;
-  if (in.odometry_source != "none" && in.frames_with_pose == 0) {
+  const OdometryStart* start = in.start ? &*in.start : nullptr;
+  if (start != nullptr && start->frames_seen > 0 && !start->started) {
+    // Never started: the initialisers' last word says why, with the numbers.
+    problems.push_back(fmt::format(
+        "no odometry: odometry.source {} never started: still initialising after {:.2f} s of data from the "
+        "first frame ({} frames; ekf.max_init_s = {} s): {}",
+        in.odometry_source, start->data_s, start->frames_seen, in.max_init_s, start->status));
+  } else if (in.odometry_source != "none" && in.frames_with_pose == 0) {
     problems.push_back(fmt::format(
         "no odometry: none of the {} frames got a pose from odometry.source {}; expected {}{}",
         in.frames_processed, in.odometry_source, in.odometry_expected,
         in.first_odometry_problem.empty() ? "" : " (first frame: " + in.first_odometry_problem + ")"));
+  }
+  if (start != nullptr && start->started) {
+    if (start->after_first_s > in.max_init_s) {
+      problems.push_back(fmt::format(
+          "odometry started late: odometry.source {} started ({} initialiser) at frame {}, {:.2f} s of data "
+          "after the first frame; expected within ekf.max_init_s = {} s",
+          in.odometry_source, start->method, start->frame, start->after_first_s, in.max_init_s));
+    }
+    const double share = start->frames_since_start > 0 ? static_cast<double>(start->frames_tracking) /
+                                                             static_cast<double>(start->frames_since_start)
+                                                       : 0.0;
+    if (share < in.min_tracked_share) {
+      problems.push_back(fmt::format(
+          "odometry tracked too few frames: odometry.source {} tracked {} of the {} frames from its start on "
+          "({:.1f}%; {} start(s)); expected at least ekf.min_tracked_share = {:.1f}%",
+          in.odometry_source, start->frames_tracking, start->frames_since_start, 100.0 * share, start->starts,
+          100.0 * in.min_tracked_share));
+    }
   }
   if (in.frames_needing_image > 0 && in.frames_decoded == 0) {
     problems.push_back(fmt::format(

@@ -54,8 +54,23 @@ nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_
   AteResult ate_se3;
   try {
     posyaw.up_axis = gravity_axis(dataset, p_gt);
-    ate = compute_ate(p_est, p_gt, posyaw);
     ate_se3 = compute_ate(p_est, p_gt, se3);
+    // An estimate in a world of its own (the ekf started from the sensors: +z up) may have its up along
+    // another axis than the ground truth (-y for KITTI camera-frame worlds): the axis of the estimate that
+    // the full alignment turns onto the ground truth's up is turned onto it first, then only a yaw about
+    // up is fitted.
+    const Eigen::Vector3d up_gt = posyaw.up();
+    const Eigen::Vector3d up_est = nearest_signed_axis(ate_se3.T_gt_est.linear().transpose() * up_gt);
+    if (up_est.isApprox(up_gt)) {
+      ate = compute_ate(p_est, p_gt, posyaw);
+    } else {
+      const Eigen::Isometry3d T_turn(Eigen::Quaterniond::FromTwoVectors(up_est, up_gt));
+      std::vector<Eigen::Vector3d> p_turned;
+      p_turned.reserve(p_est.size());
+      for (const Eigen::Vector3d& p : p_est) p_turned.push_back(T_turn * p);
+      ate = compute_ate(p_turned, p_gt, posyaw);
+      ate.T_gt_est = ate.T_gt_est * T_turn;
+    }
   } catch (const std::exception& e) {
     return {{"available", false}, {"why", std::string("alignment failed: ") + e.what()}};
   }

@@ -50,7 +50,8 @@ std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Ve
   return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
 }
 
-nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir) {
+nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir,
+                            std::vector<std::pair<std::size_t, std::size_t>>* truth_loops_out) {
   const Dataset& dataset = parts.dataset;
   if (!parts.method.detects() || (!dataset.has_ground_truth() && !parts.truth_pairs))
     return {{"available", false}};
@@ -128,6 +129,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   }
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : evaluation.truth_pairs) {
+    if (truth_loops_out) truth_loops_out->emplace_back(first + q, first + r);
     truth_loops.write_row(
         {std::to_string(dataset.source_index(first + q)), std::to_string(dataset.source_index(first + r))});
   }
@@ -242,6 +244,38 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
     summary.update(parts.closer->summary_fields(parts.outputs.tracked_poses()));
   summary.update(method);
   return summary;
+}
+
+nlohmann::json odometry_start_json(const OdometryStart& start) {
+  const auto vec = [](const Eigen::Vector3d& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); };
+  nlohmann::json j = {{"started", start.started},
+                      {"frames_seen", start.frames_seen},
+                      {"data_s", start.data_s},
+                      {"starts", start.starts}};
+  if (!start.started) {
+    j["status"] = start.status;
+    return j;
+  }
+  j.update({{"method", start.method},
+            {"frame", start.frame},
+            {"t_s", ns_to_s(start.t_ns)},
+            {"after_first_frame_s", start.after_first_s},
+            {"frames_since_start", start.frames_since_start},
+            {"frames_tracking", start.frames_tracking},
+            {"tracked_share", start.frames_since_start > 0 ? static_cast<double>(start.frames_tracking) /
+                                                                 static_cast<double>(start.frames_since_start)
+                                                           : 0.0},
+            {"state",
+             {{"up_in_imu_frame", vec(start.up_i)},
+              {"roll_deg", start.roll_deg},
+              {"pitch_deg", start.pitch_deg},
+              {"v_w_mps", vec(start.v_w_mps)},
+              {"gyro_bias_radps", vec(start.gyro_bias_radps)},
+              {"accel_bias_mps2", vec(start.accel_bias_mps2)},
+              {"scale", start.scale}}},
+            {"window_s", start.window_s},
+            {"detail", start.detail}});
+  return j;
 }
 
 }  // namespace loopgate

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "eval/loop_files.hpp"
@@ -15,6 +16,7 @@
 #include "pipeline/pipeline.hpp"
 #include "pipeline/run_counters.hpp"
 #include "pipeline/time_accounting.hpp"
+#include "stages/odometry/odometry_source.hpp"
 
 namespace loopgate {
 
@@ -60,8 +62,15 @@ std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset
 // the loops and the ranked detections scored (within r_accept, or listed), the PR curve, and for gated
 // methods the gate coverage. Writes ground_truth.tum (with ground-truth poses) and truth_loops.csv into
 // `out_dir`. Only frames the run processed take part.
-nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir);
+// `truth_loops`, when given, receives the ground-truth pairs truth_loops.csv lists, as dataset frame indices
+// (query i, reference j; the loop oracle's input).
+nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir,
+                            std::vector<std::pair<std::size_t, std::size_t>>* truth_loops = nullptr);
 
 nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, nlohmann::json evaluation);
+
+// summary.json "odometry_start": how a source that starts from the data started (initialiser, frame, time,
+// the state it estimated, the decision's numbers) or why it did not, and the share of frames it tracked.
+nlohmann::json odometry_start_json(const OdometryStart& start);
 
 }  // namespace loopgate

@@ -95,8 +95,10 @@ std::size_t parallel_indices(int threads, std::size_t count, const std::atomic<b
         begin = next.fetch_add(kBlock, std::memory_order_relaxed);
       }
       if (begin >= count) return;
-      stop_request::check_abort("two-sequence run");
       try {
+        // Inside the try: an abort thrown on a pool thread reaches the caller after the join; outside it,
+        // the thread would end with an exception and the process with std::terminate.
+        stop_request::check_abort("two-sequence run");
         const auto block_start = Clock::now();
         const std::size_t end = std::min(count, begin + kBlock);
         for (std::size_t k = begin; k < end; ++k) body(k);

@@ -21,9 +21,6 @@ bool non_negative(double x) {
 }  // namespace
 
 void EkfConfig::validate() const {
-  if (init_mode != "ground_truth" && init_mode != "standstill") {
-    throw ConfigError("ekf.init_mode: '" + init_mode + "' is not one of ground_truth, standstill");
-  }
   require(window_size >= 3 && window_size <= 50, "window_size", "must be in [3, 50]");
   require(clone_every_n_frames >= 1 && clone_every_n_frames <= 10, "clone_every_n_frames",
           "must be in [1, 10]");
@@ -86,10 +83,13 @@ void EkfConfig::validate() const {
   require(positive(init_sigma_gyro_bias_radps), "init_sigma_gyro_bias_radps", "must be > 0");
   require(positive(init_sigma_accel_bias_mps2), "init_sigma_accel_bias_mps2", "must be > 0");
   require(positive(init_sigma_yaw_rad), "init_sigma_yaw_rad", "must be > 0");
-  require(positive(standstill_duration_s) && standstill_duration_s <= 3600, "standstill_duration_s",
-          "must be in (0, 3600] s");
-  require(positive(standstill_max_accel_std_mps2), "standstill_max_accel_std_mps2", "must be > 0");
-  require(positive(standstill_max_gyro_std_radps), "standstill_max_gyro_std_radps", "must be > 0");
+  require(positive(static_window_s) && static_window_s <= 60, "static_window_s", "must be in (0, 60] s");
+  require(positive(static_lowpass_s) && 2.0 * static_lowpass_s < static_window_s, "static_lowpass_s",
+          "must be > 0 and below half of static_window_s (two moving averages of it fit the window)");
+  require(positive(static_excitation_sigmas), "static_excitation_sigmas", "must be > 0");
+  require(positive(static_max_disparity_px), "static_max_disparity_px", "must be > 0");
+  require(positive(max_init_s), "max_init_s", "must be > 0 s");
+  require(min_tracked_share >= 0.0 && min_tracked_share <= 1.0, "min_tracked_share", "must be in [0, 1]");
   require(lost_min_features >= 0 && lost_min_features <= 10'000, "lost_min_features",
           "must be in [0, 10000]");
   require(lost_max_frames >= 1 && lost_max_frames <= 1'000'000, "lost_max_frames",

@@ -3,9 +3,27 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
 
+#include "core/enum_names.hpp"
+
 namespace loopgate {
+
+// How the filter starts (docs/ekf.md). auto: the static and the dynamic initialiser both look at every image
+// and the first that succeeds starts the filter; static: only when the platform is still; dynamic: only by
+// visual-inertial alignment while moving; ground_truth: pose, velocity and both IMU biases from the
+// dataset's ground truth (experiments only: the one mode that reads ground truth).
+enum class EkfInitMode { kAuto, kStatic, kDynamic, kGroundTruth };
+// "standstill" is the old name of static, still accepted; printed and echoed as static.
+inline constexpr EnumName<EkfInitMode> kEkfInitModeNames[] = {{EkfInitMode::kAuto, "auto"},
+                                                              {EkfInitMode::kStatic, "static"},
+                                                              {EkfInitMode::kDynamic, "dynamic"},
+                                                              {EkfInitMode::kGroundTruth, "ground_truth"},
+                                                              {EkfInitMode::kStatic, "standstill"}};
+constexpr std::span<const EnumName<EkfInitMode>> enum_names(EkfInitMode) {
+  return kEkfInitModeNames;
+}
 
 struct EkfConfig {
   // ---- state / window ----
@@ -14,7 +32,7 @@ struct EkfConfig {
   // the filter updates half as often. On the rendered euroc-mh05 the ATE is about the same as with 1
   // (single runs 0.22-0.38 m either way), for half the filter time.
   int clone_every_n_frames = 2;
-  std::string init_mode = "ground_truth";  // ground_truth | standstill
+  EkfInitMode init_mode = EkfInitMode::kAuto;
   double gravity_mps2 = 9.81;
   // ---- front end (KLT) ----
   int max_features = 150;            // target number of tracked features
@@ -84,11 +102,25 @@ struct EkfConfig {
   double init_sigma_vel_mps = 0.05;
   double init_sigma_gyro_bias_radps = 0.01;
   double init_sigma_accel_bias_mps2 = 0.1;
-  double init_sigma_yaw_rad = 0.001;  // standstill: yaw is unobservable, fixed to 0 with this sigma
-  // ---- standstill initialisation ----
-  double standstill_duration_s = 1.0;
-  double standstill_max_accel_std_mps2 = 0.1;
-  double standstill_max_gyro_std_radps = 0.02;
+  double init_sigma_yaw_rad = 0.001;  // static / dynamic start: yaw is unobservable, set to 0 with this sigma
+  // ---- static initialisation (the platform is still; rotor vibration allowed) ----
+  // The decision looks at the last static_window_s of IMU data, low-passed by two moving averages of
+  // static_lowpass_s each (a triangular filter: vibration at 50-200 Hz is attenuated by more than 100x, the
+  // platform's own motion is kept). "Still" when the spread of the low-passed accelerometer and gyro over the
+  // window stays below static_excitation_sigmas times the spread white sensor noise alone would leave
+  // after that filter (the effective noise densities, see imu_noise_inflation), and the feature motion
+  // between images (median over the features, then over the window's images) stays below
+  // static_max_disparity_px.
+  double static_window_s = 1.0;
+  double static_lowpass_s = 0.1;
+  double static_excitation_sigmas = 3.0;
+  double static_max_disparity_px = 0.5;
+  // ---- failure of the start ----
+  // A run whose filter has not started after this many seconds of data since the first image is a failed run
+  // (it still writes its outputs), and so is one that tracks fewer than min_tracked_share of its frames from
+  // the first start on.
+  double max_init_s = 10.0;
+  double min_tracked_share = 0.8;
   // ---- failure detection ----
   int lost_min_features = 10;           // fewer tracked features than this ...
   int lost_max_frames = 10;             // ... for this many consecutive frames -> lost
@@ -161,9 +193,12 @@ struct EkfConfig {
     v("init_sigma_gyro_bias_radps", self.init_sigma_gyro_bias_radps);
     v("init_sigma_accel_bias_mps2", self.init_sigma_accel_bias_mps2);
     v("init_sigma_yaw_rad", self.init_sigma_yaw_rad);
-    v("standstill_duration_s", self.standstill_duration_s);
-    v("standstill_max_accel_std_mps2", self.standstill_max_accel_std_mps2);
-    v("standstill_max_gyro_std_radps", self.standstill_max_gyro_std_radps);
+    v("static_window_s", self.static_window_s);
+    v("static_lowpass_s", self.static_lowpass_s);
+    v("static_excitation_sigmas", self.static_excitation_sigmas);
+    v("static_max_disparity_px", self.static_max_disparity_px);
+    v("max_init_s", self.max_init_s);
+    v("min_tracked_share", self.min_tracked_share);
     v("lost_min_features", self.lost_min_features);
     v("lost_max_frames", self.lost_max_frames);
     v("max_position_sigma_m", self.max_position_sigma_m);

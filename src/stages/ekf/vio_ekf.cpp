@@ -29,6 +29,15 @@ Eigen::Isometry3d imu_pose_from_body(const Eigen::Isometry3d& T_w_b, const Eigen
 
 }  // namespace
 
+const char* init_method_name(InitMethod method) {
+  switch (method) {
+    case InitMethod::kStatic: return "static";
+    case InitMethod::kDynamic: return "dynamic";
+    case InitMethod::kGroundTruth: return "ground_truth";
+  }
+  return "?";
+}
+
 ImuNoise effective_imu_noise(const EkfConfig& config, const ImuCalibration& imu) {
   const double k = config.imu_noise_inflation;
   return ImuNoise{pick(config.gyro_noise_density, imu.gyro_noise_density, k, "gyro_noise_density"),
@@ -71,18 +80,26 @@ VioEkf::VioEkf(const EkfConfig& config, const CameraCalibration& camera, const I
       focal_px_(0.5 * (camera.fx + camera.fy)),
       tracker_(config, camera),
       filter_(config, effective_imu_noise(config, imu), imu.T_b_i.inverse() * camera.T_b_c,
-              0.5 * (camera.fx + camera.fy)) {}
+              0.5 * (camera.fx + camera.fy)),
+      static_init_(config, effective_imu_noise(config, imu), 0.5 * (camera.fx + camera.fy)) {
+  if (config_.init_mode == EkfInitMode::kDynamic) {
+    throw ConfigError(
+        "ekf.init_mode: 'dynamic': the dynamic initialiser is not part of this build; use auto, static or "
+        "ground_truth");
+  }
+}
 
-void VioEkf::initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_cov_world) {
+void VioEkf::initialize_from(const InitialState& init) {
+  const ImuState& state = init.state;
   ImuMatrix P0 = ImuMatrix::Zero();
   const Eigen::Matrix3d R_w_i = state.q_w_i.toRotationMatrix();
   // World-frame attitude uncertainty expressed as the right (body) perturbation of the filter.
-  P0.block<3, 3>(ImuErrorIndex::kTheta, ImuErrorIndex::kTheta) = R_w_i.transpose() * rot_cov_world * R_w_i;
+  P0.block<3, 3>(ImuErrorIndex::kTheta, ImuErrorIndex::kTheta) =
+      R_w_i.transpose() * init.rot_cov_world * R_w_i;
   const Eigen::Matrix3d I3 = Eigen::Matrix3d::Identity();
   P0.block<3, 3>(ImuErrorIndex::kPos, ImuErrorIndex::kPos) = std::pow(config_.init_sigma_pos_m, 2) * I3;
-  P0.block<3, 3>(ImuErrorIndex::kVel, ImuErrorIndex::kVel) = std::pow(config_.init_sigma_vel_mps, 2) * I3;
-  P0.block<3, 3>(ImuErrorIndex::kGyroBias, ImuErrorIndex::kGyroBias) =
-      std::pow(config_.init_sigma_gyro_bias_radps, 2) * I3;
+  P0.block<3, 3>(ImuErrorIndex::kVel, ImuErrorIndex::kVel) = init.vel_cov_m2ps2;
+  P0.block<3, 3>(ImuErrorIndex::kGyroBias, ImuErrorIndex::kGyroBias) = init.gyro_bias_cov;
   P0.block<3, 3>(ImuErrorIndex::kAccelBias, ImuErrorIndex::kAccelBias) =
       std::pow(config_.init_sigma_accel_bias_mps2, 2) * I3;
   filter_.initialize(state, P0);
@@ -90,12 +107,19 @@ void VioEkf::initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_c
   previous_anchored_.reset();
 }
 
-bool VioEkf::try_initialize(const EkfFrameInput& input) {
-  if (config_.init_mode == "ground_truth") {
-    if (!input.ground_truth.has_value()) return false;
+bool VioEkf::try_initialize(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
+                            std::size_t frame) {
+  std::optional<InitialState> init;
+  if (config_.init_mode == EkfInitMode::kGroundTruth) {
+    if (!input.ground_truth.has_value()) {
+      init_status_ = "ground_truth: waiting for ground truth (none at this image's time)";
+      return false;
+    }
     const GroundTruthState& gt = *input.ground_truth;
     const Eigen::Isometry3d T_w_i = imu_pose_from_body(gt.T_w_b, T_b_i_);
-    ImuState state;
+    init.emplace();
+    init->method = InitMethod::kGroundTruth;
+    ImuState& state = init->state;
     state.t_ns = input.t_ns;
     state.q_w_i = Eigen::Quaterniond(T_w_i.rotation());
     state.p_w_m = T_w_i.translation();
@@ -107,57 +131,36 @@ bool VioEkf::try_initialize(const EkfFrameInput& input) {
     state.gyro_bias_radps = gt.gyro_bias_radps;
     state.accel_bias_mps2 = gt.accel_bias_mps2;
     state.omega_i_radps = omega_i;
-    initialize_from(state, Eigen::Matrix3d::Identity() * std::pow(config_.init_sigma_rot_rad, 2));
-    return true;
+    const Eigen::Matrix3d I3 = Eigen::Matrix3d::Identity();
+    init->rot_cov_world = I3 * std::pow(config_.init_sigma_rot_rad, 2);
+    init->vel_cov_m2ps2 = I3 * std::pow(config_.init_sigma_vel_mps, 2);
+    init->gyro_bias_cov = I3 * std::pow(config_.init_sigma_gyro_bias_radps, 2);
+    init->detail = "ground truth at the image's time (pose, velocity, both IMU biases)";
+  } else {
+    const InitFrame in{input.t_ns, input.imu, &obs};
+    init = static_init_.add_frame(in);
+    init_status_ = static_init_.status();
   }
-  // Standstill: gravity from the averaged accelerometer over the last standstill_duration_s.
-  for (const ImuSample& s : input.imu) {
-    if (standstill_buffer_.empty() || s.t_ns > standstill_buffer_.back().t_ns)
-      standstill_buffer_.push_back(s);
+  if (!init) return false;
+  init->frame = frame;
+  init->state.t_ns = input.t_ns;
+  if (init->method != InitMethod::kGroundTruth && !input.imu.empty()) {
+    init->state.omega_i_radps = input.imu.back().gyro_radps - init->state.gyro_bias_radps;
   }
-  const Timestamp window_ns = s_to_ns(config_.standstill_duration_s);
-  while (standstill_buffer_.size() > 2 &&
-         standstill_buffer_.back().t_ns - standstill_buffer_[1].t_ns >= window_ns) {
-    standstill_buffer_.pop_front();
-  }
-  if (standstill_buffer_.size() < 2 ||
-      standstill_buffer_.back().t_ns - standstill_buffer_.front().t_ns < window_ns) {
-    return false;
-  }
-  Eigen::Vector3d accel_mean = Eigen::Vector3d::Zero();
-  Eigen::Vector3d gyro_mean = Eigen::Vector3d::Zero();
-  for (const ImuSample& s : standstill_buffer_) {
-    accel_mean += s.accel_mps2;
-    gyro_mean += s.gyro_radps;
-  }
-  const auto n = static_cast<double>(standstill_buffer_.size());
-  accel_mean /= n;
-  gyro_mean /= n;
-  double accel_var = 0.0;
-  double gyro_var = 0.0;
-  for (const ImuSample& s : standstill_buffer_) {
-    accel_var += (s.accel_mps2 - accel_mean).squaredNorm();
-    gyro_var += (s.gyro_radps - gyro_mean).squaredNorm();
-  }
-  const double accel_std = std::sqrt(accel_var / (3.0 * n));
-  const double gyro_std = std::sqrt(gyro_var / (3.0 * n));
-  if (accel_std > config_.standstill_max_accel_std_mps2 || gyro_std > config_.standstill_max_gyro_std_radps ||
-      accel_mean.norm() < 0.5 * config_.gravity_mps2) {
-    return false;
-  }
-  // R_w_i maps the measured specific force (up) onto +z; yaw set to zero.
-  Eigen::Matrix3d R_w_i =
-      Eigen::Quaterniond::FromTwoVectors(accel_mean, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  const double yaw = std::atan2(R_w_i(1, 0), R_w_i(0, 0));
-  R_w_i = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * R_w_i;
-  ImuState state;
-  state.t_ns = input.t_ns;
-  state.q_w_i = Eigen::Quaterniond(R_w_i);
-  Eigen::Matrix3d rot_cov_world = Eigen::Matrix3d::Zero();
-  rot_cov_world(0, 0) = rot_cov_world(1, 1) = std::pow(config_.init_sigma_rot_rad, 2);
-  rot_cov_world(2, 2) = std::pow(config_.init_sigma_yaw_rad, 2);
-  initialize_from(state, rot_cov_world);
-  standstill_buffer_.clear();
+  initialize_from(*init);
+  static_init_.reset();
+  ++starts_;
+  const Eigen::Vector3d up_i = init->state.q_w_i.conjugate() * Eigen::Vector3d::UnitZ();
+  spdlog::info(
+      "ekf: started by the {} initialiser at image {} (t = {:.3f} s; start {}): up in the IMU frame [{:.4f} "
+      "{:.4f} {:.4f}], velocity [{:.3f} {:.3f} {:.3f}] m/s, gyro bias [{:.5f} {:.5f} {:.5f}] rad/s, scale "
+      "{:.3f}; {}",
+      init_method_name(init->method), frame, ns_to_s(input.t_ns), starts_, up_i.x(), up_i.y(), up_i.z(),
+      init->state.v_w_mps.x(), init->state.v_w_mps.y(), init->state.v_w_mps.z(),
+      init->state.gyro_bias_radps.x(), init->state.gyro_bias_radps.y(), init->state.gyro_bias_radps.z(),
+      init->scale, init->detail);
+  initial_ = std::move(init);
+  init_status_.clear();
   return true;
 }
 
@@ -177,6 +180,7 @@ double VioEkf::median_disparity_px(const std::vector<FeatureObservation>& observ
 EkfFrameOutput VioEkf::lost(std::size_t frame, const std::string& reason) {
   spdlog::warn("ekf: lost at frame {}: {}; re-initialising", frame, reason);
   filter_.reset();
+  static_init_.reset();
   previous_anchored_.reset();
   EkfFrameOutput out;
   if (last_good_.has_value()) out.pose = *last_good_;
@@ -243,11 +247,10 @@ EkfFrameOutput VioEkf::update_filter(const EkfFrameInput& input, const std::vect
                                      double disparity_px, std::size_t frame) {
   EkfFrameOutput out;
   if (!filter_.initialized()) {
-    if (!try_initialize(input)) {
+    if (!try_initialize(input, obs, frame)) {
       out.pose.t_ns = input.t_ns;
       out.pose.status = OdometryStatus::kInitialising;
-      out.reason = config_.init_mode == "ground_truth" ? "waiting for ground truth to initialise"
-                                                       : "waiting for a standstill to initialise";
+      out.reason = "initialising: " + init_status_;
       return out;
     }
     // The first frame of the filter: no IMU interval yet, clone and start the tracks.

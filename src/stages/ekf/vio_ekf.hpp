@@ -1,11 +1,11 @@
-// The `ekf` odometry source as a plain class (vio-ekf.md): KLT front end + MSCKF, initialisation from
-// ground truth or a standstill, failure detection with re-initialisation. One call per image, in order.
+// The `ekf` odometry source as a plain class (vio-ekf.md, docs/ekf.md): KLT front end + MSCKF, started by
+// the initialiser(s) of ekf.init_mode (from the sensors, or from ground truth for experiments), failure
+// detection with re-initialisation by the same initialisers. One call per image, in order.
 // To wrap it as an OdometrySource: feed OdometryInput::imu / ::image, and for init_mode ground_truth the
 // state from ground_truth_state_at(dataset.ground_truth(), t_ns).
 #pragma once
 
 #include <cstdint>
-#include <deque>
 #include <memory>
 #include <optional>
 #include <span>
@@ -16,7 +16,9 @@
 #include "core/types.hpp"
 #include "stages/ekf/ekf_config.hpp"
 #include "stages/ekf/feature_tracker.hpp"
+#include "stages/ekf/initializer.hpp"
 #include "stages/ekf/msckf.hpp"
+#include "stages/ekf/static_initializer.hpp"
 
 namespace cv {
 class Mat;
@@ -53,6 +55,9 @@ struct EkfFrameOutput {
   std::optional<PoseCov> step_cov;
 };
 
+// "static" | "dynamic" | "ground_truth": the initialiser's name, as ekf.init_mode writes it.
+const char* init_method_name(InitMethod method);
+
 // Noise used by the filter: config overrides (> 0) or the calibration, times config.imu_noise_inflation.
 // Throws ConfigError naming the key when a density ends up zero.
 ImuNoise effective_imu_noise(const EkfConfig& config, const ImuCalibration& imu);
@@ -79,12 +84,21 @@ class VioEkf {
   const Msckf& filter() const { return filter_; }
   const FeatureTracker& tracker() const { return tracker_; }
   std::size_t frames_processed() const { return frame_; }
+  // The state of the latest start (frame: index of the image among those given to process()); nullopt
+  // before the first. starts(): how often the filter started (the first start and every restart after a
+  // loss).
+  const std::optional<InitialState>& initial_state() const { return initial_; }
+  std::size_t starts() const { return starts_; }
+  // While initialising: why not yet, from each initialiser that runs, with its numbers.
+  const std::string& init_status() const { return init_status_; }
+  const StaticInitializer& static_initializer() const { return static_init_; }
 
  private:
   EkfFrameOutput update_filter(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
                                double disparity_px, std::size_t frame);
-  bool try_initialize(const EkfFrameInput& input);
-  void initialize_from(const ImuState& state, const Eigen::Matrix3d& rot_cov_world);
+  bool try_initialize(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
+                      std::size_t frame);
+  void initialize_from(const InitialState& init);
   EkfFrameOutput lost(std::size_t frame, const std::string& reason);
 
   EkfConfig config_;
@@ -93,6 +107,10 @@ class VioEkf {
   double focal_px_;
   FeatureTracker tracker_;
   Msckf filter_;
+  StaticInitializer static_init_;
+  std::optional<InitialState> initial_;
+  std::size_t starts_ = 0;
+  std::string init_status_;
   double median_disparity_px(const std::vector<FeatureObservation>& observations) const;
   // Rotation of the camera from the previous image to this one from the gyro (bias from the filter when it
   // runs): R_cur_prev maps bearings of the previous camera frame into the current one. nullopt without a
@@ -100,7 +118,6 @@ class VioEkf {
   std::optional<Eigen::Matrix3d> camera_rotation_since_previous(const EkfFrameInput& input) const;
 
   std::unordered_map<std::uint64_t, Eigen::Vector2d> previous_xy_;
-  std::deque<ImuSample> standstill_buffer_;
   std::size_t frame_ = 0;
   std::optional<Timestamp> previous_image_t_ns_;
   int few_feature_frames_ = 0;

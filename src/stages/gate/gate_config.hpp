@@ -43,7 +43,7 @@ struct GateConfig {
   // covers the rows of the hole). Cells an area would add later to a frozen row (when its column range
   // widens long after the row) are not computed; the rectangle is then the bounding box of what was.
   int row_horizon_frames = 40;
-  // Feedback of verified loop closures into the gate (issue 13, docs/architecture.md § Gate feedback): frame
+  // Feedback of verified loop closures into the gate (docs/gating.md § Gate feedback): frame
   // i's pose and position covariance are re-anchored (stages/gate/reanchor.hpp) through the latest verified
   // loop whose query frame is at least L = run.max_in_flight + the method's verdict delay frames before i.
   // Needs verify.enabled and a streaming gated method (not run.method seqslam); no effect without the gate.

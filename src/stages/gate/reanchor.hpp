@@ -1,4 +1,4 @@
-// Feedback of a verified loop closure into the pose gate (issue 13, docs/architecture.md § Gate feedback):
+// Feedback of a verified loop closure into the pose gate (docs/gating.md § Gate feedback):
 // VINS-Mono's relocalisation. A verified loop (query q, reference r) with relative body pose T_r_q says where
 // frame q was in the map around r. A later frame i is re-anchored to the map through it,
 //

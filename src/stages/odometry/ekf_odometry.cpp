@@ -3,7 +3,10 @@
 #include <spdlog/spdlog.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 #include <exception>
+#include <numbers>
 #include <opencv2/core/mat.hpp>
 #include <span>
 #include <utility>
@@ -24,10 +27,10 @@ EkfOdometry::EkfOdometry(const EkfConfig& config, const CameraCalibration& camer
     s.T_w_b.translation() = R_f_w_ * s.T_w_b.translation();
     s.v_w_mps = R_f_w_ * s.v_w_mps;
   }
-  if (config_.init_mode == "ground_truth" && ground_truth_.size() < 2) {
+  if (config_.init_mode == EkfInitMode::kGroundTruth && ground_truth_.size() < 2) {
     throw ConfigError(
         "ekf.init_mode: 'ground_truth' needs a dataset with ground truth (at least two states); "
-        "use 'standstill'");
+        "use auto (the default) to start from the sensors");
   }
 }
 
@@ -60,6 +63,50 @@ std::shared_ptr<const PreparedImage> EkfOdometry::prepare(const cv::Mat& image) 
 }
 
 OdometryOutput EkfOdometry::process(const OdometryInput& input) {
+  OdometryOutput out = track(input);
+  count(input, out);
+  return out;
+}
+
+void EkfOdometry::count(const OdometryInput& input, const OdometryOutput& out) {
+  if (!first_t_ns_) first_t_ns_ = input.t_ns;
+  ++start_.frames_seen;
+  start_.data_s = ns_to_s(input.t_ns - *first_t_ns_);
+  start_.starts = ekf_.starts();
+  const auto& init = ekf_.initial_state();
+  if (init && !start_.started) {
+    start_.started = true;
+    start_.frame = input.frame;
+    start_.t_ns = input.t_ns;
+    start_.after_first_s = ns_to_s(input.t_ns - *first_t_ns_);
+    start_.method = init_method_name(init->method);
+    start_.up_i = init->state.q_w_i.conjugate() * Eigen::Vector3d::UnitZ();
+    const Eigen::Matrix3d R = init->state.q_w_i.toRotationMatrix();
+    start_.roll_deg = std::atan2(R(2, 1), R(2, 2)) * 180.0 / std::numbers::pi;
+    start_.pitch_deg = std::asin(std::clamp(-R(2, 0), -1.0, 1.0)) * 180.0 / std::numbers::pi;
+    start_.v_w_mps = init->state.v_w_mps;
+    start_.gyro_bias_radps = init->state.gyro_bias_radps;
+    start_.accel_bias_mps2 = init->state.accel_bias_mps2;
+    start_.scale = init->scale;
+    start_.window_s = init->window_s;
+    start_.detail = init->detail;
+    start_.status.clear();
+  }
+  if (init) start_.method = init_method_name(init->method);
+  if (!start_.started) {
+    start_.status = ekf_.init_status();
+    if (!warned_late_ && start_.data_s > config_.max_init_s) {
+      warned_late_ = true;
+      spdlog::error("ekf: not started after {:.2f} s of data (ekf.max_init_s = {} s); {}", start_.data_s,
+                    config_.max_init_s, start_.status);
+    }
+    return;
+  }
+  ++start_.frames_since_start;
+  if (out.pose.status == OdometryStatus::kTracking) ++start_.frames_tracking;
+}
+
+OdometryOutput EkfOdometry::track(const OdometryInput& input) {
   // IMU of this frame, after the samples of earlier frames that did not reach the filter.
   std::vector<ImuSample> imu = pending_imu_;
   if (input.imu != nullptr) {
@@ -77,7 +124,8 @@ OdometryOutput EkfOdometry::process(const OdometryInput& input) {
   in.image = input.image;
   if (const auto* prepared = dynamic_cast<const EkfPreparedImage*>(input.prepared))
     in.prepared = &prepared->tracker;
-  if (config_.init_mode == "ground_truth") in.ground_truth = ground_truth_state_at(ground_truth_, input.t_ns);
+  if (config_.init_mode == EkfInitMode::kGroundTruth)
+    in.ground_truth = ground_truth_state_at(ground_truth_, input.t_ns);
   EkfFrameOutput result;
   try {
     result = ekf_.process(in);

@@ -20,7 +20,7 @@ namespace loopgate {
 
 class EkfOdometry : public OdometrySource {
  public:
-  // `ground_truth`: the dataset's ground-truth states, used when config.init_mode is "ground_truth"
+  // `ground_truth`: the dataset's ground-truth states, used only when config.init_mode is ground_truth
   // (interpolated to the frame time with ground_truth_state_at). `up_w`: the dataset world's up axis; the
   // filter runs in a world rotated so that it is +z (its gravity is along -z) and the poses are rotated
   // back. Throws ConfigError for an invalid config or camera calibration, or for init_mode ground_truth
@@ -35,6 +35,7 @@ class EkfOdometry : public OdometrySource {
   OdometryOutput process(const OdometryInput& input) override;
   // The tracker's image pyramid (VioEkf::prepare_image); nullptr for an image it cannot take.
   std::shared_ptr<const PreparedImage> prepare(const cv::Mat& image) const override;
+  std::optional<OdometryStart> start() const override { return start_; }
 
   const VioEkf& filter() const { return ekf_; }
   // The last frame's full filter output (timings, update statistics), for tests and benchmarks.
@@ -42,6 +43,7 @@ class EkfOdometry : public OdometrySource {
 
  private:
   OdometryOutput lost(const OdometryInput& input, const std::string& reason);
+  OdometryOutput track(const OdometryInput& input);
 
   EkfConfig config_;
   VioEkf ekf_;
@@ -50,6 +52,10 @@ class EkfOdometry : public OdometrySource {
   std::optional<EkfFrameOutput> last_;
   std::optional<PoseEstimate> last_pose_;
   std::vector<ImuSample> pending_imu_;  // samples of frames that did not reach the filter
+  OdometryStart start_;
+  std::optional<Timestamp> first_t_ns_;
+  bool warned_late_ = false;
+  void count(const OdometryInput& input, const OdometryOutput& out);
 };
 
 }  // namespace loopgate

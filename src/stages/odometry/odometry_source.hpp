@@ -7,8 +7,8 @@
 //   none:  no poses at all (appearance-only runs, issue 14): frames carry no pose, frames.csv says
 //          odom_status none, trajectory.tum is empty; only run.mode full can detect loops without poses (the
 //          pose gate, run.mode odometry and verify need them: config errors).
-//   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth unless
-//          ekf.init_mode is standstill), else drift when it has ground truth, else none. The default:
+//   auto:  ekf when the dataset has images, IMU, camera and IMU calibration (and ground truth when
+//          ekf.init_mode is ground_truth), else drift when it has ground truth, else none. The default:
 //          EuRoC-layout data with IMU gets the ekf, an image folder none.
 // Every source emits one PoseEstimate per image. The sources take plain data (a trajectory, ground-truth
 // states, calibrations, an axis); pipeline/odometry_factory.hpp builds the configured one from a Dataset.
@@ -56,8 +56,9 @@ struct OdometryConfig {
   double file_rot_sigma2_b_rad2_per_m = 1e-5;
   double file_max_gap_s = 0.5;  // a frame farther than this from any trajectory pose is reported lost
   // ekf: the dataset world's up axis (the filter's gravity is along -up): auto | x | -x | y | -y | z | -z.
-  // auto: the world axis nearest the mean specific force of the IMU rotated into the world by the ground
-  // truth (z for EuRoC, -y for KITTI camera-frame worlds); z without ground truth.
+  // auto: with ekf.init_mode ground_truth the world axis nearest the mean specific force of the IMU rotated
+  // into the world by the ground truth (z for EuRoC, -y for KITTI camera-frame worlds); started from the
+  // sensors the filter's own gravity-aligned world, z.
   std::string ekf_up_axis = "auto";
 
   // The keys, in order, for loading, printing and the JSON echo (Self is OdometryConfig or const
@@ -109,6 +110,31 @@ struct OdometryOutput {
   std::optional<PoseCov> step_cov;
 };
 
+// How a source with a start-up phase (the ekf) started, for summary.json and the run's checks
+// (run_checks.hpp): which initialiser, where, the state it estimated, and how many frames it tracked since.
+struct OdometryStart {
+  bool started = false;
+  std::string method;        // "static" | "dynamic" | "ground_truth" (the latest start)
+  std::size_t frame = 0;     // the dataset frame of the first start
+  Timestamp t_ns = 0;        // its time
+  double after_first_s = 0;  // seconds of data from the first frame the source saw to the first start
+  std::size_t starts = 0;    // the first start and every restart after a loss
+  std::size_t frames_seen = 0;
+  std::size_t frames_since_start = 0;  // frames from the first start on (it included)
+  std::size_t frames_tracking = 0;     // of those, frames with status tracking
+  double data_s = 0;                   // seconds from the first to the last frame the source saw
+  // The state the first start estimated (the filter world: +z up, yaw 0 for static and dynamic).
+  Eigen::Vector3d up_i = Eigen::Vector3d::Zero();  // the world's up in the IMU frame (gravity direction)
+  double roll_deg = 0, pitch_deg = 0;
+  Eigen::Vector3d v_w_mps = Eigen::Vector3d::Zero();
+  Eigen::Vector3d gyro_bias_radps = Eigen::Vector3d::Zero();
+  Eigen::Vector3d accel_bias_mps2 = Eigen::Vector3d::Zero();
+  double scale = 1.0;     // dynamic: the metric scale it found
+  double window_s = 0.0;  // seconds of data the decision used
+  std::string detail;     // the decision's numbers
+  std::string status;     // before the first start: why not yet (each initialiser, with its numbers)
+};
+
 class OdometrySource {
  public:
   virtual ~OdometrySource() = default;
@@ -126,6 +152,8 @@ class OdometrySource {
   // nullptr when the source has nothing to prepare or cannot take the image (process() then reports that).
   // Never throws.
   virtual std::shared_ptr<const PreparedImage> prepare(const cv::Mat& /*image*/) const { return nullptr; }
+  // Sources that start from the data (the ekf): how they started; nullopt for the others.
+  virtual std::optional<OdometryStart> start() const { return std::nullopt; }
 };
 
 // odometry.source none: no poses (appearance-only runs).

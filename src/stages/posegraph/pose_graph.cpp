@@ -2,6 +2,7 @@
 
 #include <ceres/ceres.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <memory>
@@ -30,6 +31,20 @@ std::array<double, 7> to_state(const Eigen::Isometry3d& T) {
 }
 
 }  // namespace
+
+double loop_information_gain(const Matrix6d& odometry_cov, const Matrix6d& loop_cov) {
+  const Matrix6d odo = 0.5 * (odometry_cov + odometry_cov.transpose());
+  // (C_o^-1 + C_l^-1)^-1 = C_o - C_o (C_o + C_l)^-1 C_o: needs only C_o + C_l invertible (C_l is).
+  const Matrix6d fused = odo - odo * (odo + loop_cov).ldlt().solve(odo);
+  const Eigen::Matrix3d p_odo = odo.topLeftCorner<3, 3>();
+  const Eigen::Matrix3d p_fused =
+      0.5 * (fused.topLeftCorner<3, 3>() + fused.topLeftCorner<3, 3>().transpose());
+  const double before = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(p_odo).eigenvalues().maxCoeff();
+  if (!(std::isfinite(before) && before > 0.0)) return 0.0;
+  const double after = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(p_fused).eigenvalues().maxCoeff();
+  if (!std::isfinite(after)) return 0.0;
+  return std::clamp(1.0 - std::max(0.0, after) / before, 0.0, 1.0);
+}
 
 void PoseGraphConfig::validate() const {
   const auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };

@@ -87,6 +87,16 @@ struct LoopInnovation {
 double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
                                      double max_scale);
 
+// What a loop edge between frames j and i would add to what the odometry knows of their relative pose: the
+// fraction by which it shrinks the largest position variance of T_j_i, 1 - lambda_max(P_fused) /
+// lambda_max(P_odometry), where P is the position block (first three rows and columns) of the covariance
+// (position, rotation) and the fused covariance is that of the two independent estimates combined,
+// (C_odometry^-1 + C_loop^-1)^-1. 0 when the odometry knows the relative pose exactly, near 1 when the loop
+// edge is far more certain. With both isotropic it is s_odo^2 / (s_odo^2 + s_loop^2): 0.5 when the two are
+// equally certain. C_loop must be positive definite; C_odometry positive semi-definite.
+double loop_information_gain(const Eigen::Matrix<double, 6, 6>& odometry_cov,
+                             const Eigen::Matrix<double, 6, 6>& loop_cov);
+
 enum class EdgeKind { kOdometry, kLoop };
 
 struct PoseGraphEdge {

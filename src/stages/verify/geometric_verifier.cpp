@@ -187,12 +187,35 @@ cv::Mat normalise_illumination(const cv::Mat& grey, double sigma_px, double nois
   return out;
 }
 
+std::string verify_reason_key(const std::string& reason) {
+  const auto has = [&reason](const char* text) { return reason.find(text) != std::string::npos; };
+  const auto starts = [&reason](const char* text) { return reason.rfind(text, 0) == 0; };
+  if (reason == "verified") return "verified";
+  if (starts("verified by tracking")) return "verified_by_tracking";
+  if (starts("skipped: information gain")) return "small_information_gain";
+  if (starts("skipped: near")) return "skip_window";
+  if (starts("skipped:") && has("already verified")) return "max_per_query";
+  if (has("; tracked:")) return "illumination";  // the tracking fallback ran (an illumination change)
+  if (has("no camera calibration")) return "no_calibration";
+  if (has("image too small")) return "image_too_small";
+  if (has("has no images") || has("image missing")) return "image_missing";
+  if (has("no odometry pose")) return "no_odometry_pose";
+  if (has("baseline")) return "short_baseline";
+  if (has("matches with 3-D points")) return "too_few_features";
+  if (has("inliers <")) return "too_few_inliers";
+  if (has("PnP")) return "pnp_failed";
+  if (has("relative translation")) return "translation_too_large";
+  if (has("from the odometry's frame i")) return "odometry_disagreement";
+  return "other";
+}
+
 void VerifyConfig::validate() const {
   if (features < 50) throw ConfigError("verify.features: must be >= 50");
   if (orb_patch_px < 5) throw ConfigError("verify.orb_patch_px: must be >= 5");
   if (orb_fast_threshold < 1) throw ConfigError("verify.orb_fast_threshold: must be >= 1");
-  if (!(std::isfinite(min_sigma_gain) && min_sigma_gain >= 0.0))
-    throw ConfigError("verify.min_sigma_gain: must be a finite number >= 0 (0: verify regardless)");
+  if (!(std::isfinite(min_information_gain) && min_information_gain >= 0.0 && min_information_gain < 1.0))
+    throw ConfigError(
+        "verify.min_information_gain: must be a finite number in [0, 1) (0: verify regardless)");
   if (max_per_query < 0) throw ConfigError("verify.max_per_query: must be >= 0 (0: no limit)");
   if (skip_after_verified_frames < 0) throw ConfigError("verify.skip_after_verified_frames: must be >= 0");
   if (skip_after_rejected_frames < 0) throw ConfigError("verify.skip_after_rejected_frames: must be >= 0");
@@ -483,7 +506,7 @@ void GeometricVerifier::solve_pose(const std::vector<cv::Point3d>& object,
   // The minimal solver is AP3P (Ke & Roumeliotis 2017: 3 points and a 4th to choose among its solutions), the
   // usual one in PnP RANSAC: its samples of 4 points reach the 0.99 confidence in fewer iterations than
   // EPnP's 5 (72 against 145 at half inliers) and each costs a fraction of an EPnP solve. The pose is refined
-  // on the inliers below, whichever solver found them (docs/architecture.md § Loop closures, the
+  // on the inliers below, whichever solver found them (docs/loop-correction.md, the
   // measurement).
   try {
     ok = cv::solvePnPRansac(object, image, cv::Mat::eye(3, 3, CV_64F), cv::noArray(), rvec, tvec, false,

@@ -44,10 +44,15 @@ struct VerifyConfig {
   double odometry_chi2 = 16.27;
   // Which loops are verified (the loop closer; 0 = no limit / no skipping). A revisit gives one loop per
   // query frame; one verified edge every few frames is all the pose graph needs.
-  // A loop (i, j) is verified only when the odometry's position sigma grew from j to i by at least
-  // min_sigma_gain x sigma_position_m (sqrt(sigma_i^2 - sigma_j^2)): an edge no more certain than what the
-  // odometry already knows corrects nothing (standing still, hovering). 0: verify regardless.
-  double min_sigma_gain = 1.0;
+  // A loop (i, j) is verified only when its edge would tell the pose graph something the odometry does not
+  // know: the loop edge's covariance at min_inliers (sigma_position_m, sigma_rotation_rad: the least certain
+  // edge verification accepts) fused with the odometry's own covariance of T_j_i (the step covariances from j
+  // to i composed, as the graph's odometry edges compose them, times the scale the graph uses) must shrink
+  // the largest position variance of T_j_i by at least this fraction (loop_information_gain(),
+  // stages/posegraph). Below 10% the edge moves the relative position's sigma by under 5% (sqrt(0.9) = 0.95):
+  // standing still, hovering, the frames just before the query. A property of the two estimates, not of a
+  // data set (docs/loop-correction.md). 0: verify regardless.
+  double min_information_gain = 0.1;
   int max_per_query = 0;               // loops verified per query frame (the first ones submitted)
   int skip_after_verified_frames = 0;  // skip (i, j) when (i', j') was verified with |i-i'|, |j-j'| <= N
   int skip_after_rejected_frames = 0;  // the same after a rejected (i', j')
@@ -81,7 +86,7 @@ struct VerifyConfig {
     v("sigma_position_m", self.sigma_position_m);
     v("sigma_rotation_rad", self.sigma_rotation_rad);
     v("odometry_chi2", self.odometry_chi2);
-    v("min_sigma_gain", self.min_sigma_gain);
+    v("min_information_gain", self.min_information_gain);
     v("max_per_query", self.max_per_query);
     v("skip_after_verified_frames", self.skip_after_verified_frames);
     v("skip_after_rejected_frames", self.skip_after_rejected_frames);
@@ -109,18 +114,27 @@ struct VerifyResult {
 
 // A verified loop against the odometry: where the loop puts frame i (T_w_bj T_j_i) and where the odometry
 // puts it (T_w_bi) are compared in units of sigma^2 = sigma_i^2 - sigma_j^2 + sigma_edge^2: the growth of the
-// odometry's position sigma from j to i (the sigma of the largest eigenvalue, frames.csv's sigma_m, as
-// verify.min_sigma_gain uses it) and the loop edge's position sigma (the largest of loop.cov's). The
-// squared distance over sigma^2 must not exceed `chi2_bound`. Image geometry cannot reject a place that
-// looks and is built the same as another one (aliasing); the odometry knows the two are far apart. This is
-// the odometry check of Kimera-RPGO's PCM and RTAB-Map's RGBD/OptimizeMaxError, before the edge reaches the
-// graph. Returns the rejection reason ("geometry: 41.30 m from the odometry's frame i, 23.1 sigma > 4.03"),
-// empty when the loop agrees, and empty when the odometry cannot judge: a sigma that is not a finite number
-// > 0 (no covariance), or sigma_i < sigma_j (it learnt where it is in between). The caller also leaves out
-// loops whose odometry chain from j to i is broken (a lost frame, a re-initialisation).
+// odometry's position sigma from j to i (the sigma of the largest eigenvalue, frames.csv's sigma_m) and the
+// loop edge's position sigma (the largest of loop.cov's). The squared distance over sigma^2 must not exceed
+// `chi2_bound`. Image geometry cannot reject a place that looks and is built the same as another one
+// (aliasing); the odometry knows the two are far apart. This is the odometry check of Kimera-RPGO's PCM and
+// RTAB-Map's RGBD/OptimizeMaxError, before the edge reaches the graph. Returns the rejection reason
+// ("geometry: 41.30 m from the odometry's frame i, 23.1 sigma > 4.03"), empty when the loop agrees, and empty
+// when the odometry cannot judge: a sigma that is not a finite number > 0 (no covariance), or sigma_i <
+// sigma_j (it learnt where it is in between). The caller also leaves out loops whose odometry chain from j to
+// i is broken (a lost frame, a re-initialisation).
 std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::Isometry3d& T_w_bj,
                                   const VerifyResult& loop, double sigma_i_m, double sigma_j_m,
                                   double chi2_bound);
+
+// A stable key for the reason a loop was or was not verified (VerifyResult::reason, and the loop closer's
+// "skipped: ..." reasons), for counting them: verified, verified_by_tracking; rejected: no_calibration,
+// image_too_small (the images are below verify.min_image_px), image_missing, no_odometry_pose,
+// short_baseline (j and its neighbour too close to triangulate), too_few_features (too few matches with
+// triangulated points at this image resolution), too_few_inliers, pnp_failed, translation_too_large,
+// odometry_disagreement, illumination (ORB did not verify it and the tracking fallback across a change of
+// illumination did not either); skipped: small_information_gain, skip_window, max_per_query; other.
+std::string verify_reason_key(const std::string& reason);
 
 // What the verifier needs of one frame: its grey image and its odometry pose.
 struct VerifyFrame {
