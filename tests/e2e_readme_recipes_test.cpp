@@ -157,11 +157,6 @@ fs::path run_recipe(const std::string& name, Make&& make) {
     if (args[k - 1] == "--out") word = out.string();
     command += " " + word;
   }
-  // The rendered drive starts in motion, and the EKF's default start (ekf.init_mode auto) needs a still
-  // start until the dynamic initialiser is part of the build (docs/ekf.md): the one word added, so that the
-  // rest of the recipe is still checked. A recording that starts still needs nothing added.
-  if (command.find("odometry.source=ekf") != std::string::npos)
-    command += " --set ekf.init_mode=ground_truth";
   std::string output;
   const int status = run_command(command, &output);
   EXPECT_EQ(status, 0) << "README.md:" << r.line << ": " << r.command << "\nran: " << command << "\n"

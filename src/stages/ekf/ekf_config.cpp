@@ -95,6 +95,21 @@ void EkfConfig::validate() const {
   require(lost_max_frames >= 1 && lost_max_frames <= 1'000'000, "lost_max_frames",
           "must be in [1, 1000000] frames");
   require(positive(max_position_sigma_m), "max_position_sigma_m", "must be > 0");
+  require(dynamic_init_window_s >= 0.2 && dynamic_init_window_s <= 30, "dynamic_init_window_s",
+          "must be in [0.2, 30] s");
+  require(non_negative(dynamic_init_min_parallax_px), "dynamic_init_min_parallax_px", "must be >= 0");
+  require(dynamic_init_min_features >= 8 && dynamic_init_min_features <= 10'000, "dynamic_init_min_features",
+          "must be in [8, 10000] (the essential matrix needs at least 5, RANSAC more)");
+  require(non_negative(dynamic_init_min_accel_std_mps2), "dynamic_init_min_accel_std_mps2", "must be >= 0");
+  require(positive(dynamic_init_max_gravity_error_mps2), "dynamic_init_max_gravity_error_mps2",
+          "must be > 0");
+  require(non_negative(dynamic_init_min_translation_m), "dynamic_init_min_translation_m", "must be >= 0");
+  require(positive(dynamic_init_max_speed_sigma_ratio) && dynamic_init_max_speed_sigma_ratio <= 10.0,
+          "dynamic_init_max_speed_sigma_ratio", "must be in (0, 10]");
+  require(positive(dynamic_init_min_sigma_tilt_rad), "dynamic_init_min_sigma_tilt_rad", "must be > 0");
+  require(positive(dynamic_init_min_sigma_vel_mps), "dynamic_init_min_sigma_vel_mps", "must be > 0");
+  require(positive(dynamic_init_min_sigma_gyro_bias_radps), "dynamic_init_min_sigma_gyro_bias_radps",
+          "must be > 0");
 }
 
 }  // namespace loopgate

@@ -125,6 +125,19 @@ struct EkfConfig {
   int lost_min_features = 10;           // fewer tracked features than this ...
   int lost_max_frames = 10;             // ... for this many consecutive frames -> lost
   double max_position_sigma_m = 100.0;  // beyond this the filter is declared diverged
+  // ---- dynamic initialisation (visual-inertial alignment over a window of images while moving) ----
+  double dynamic_init_window_s = 2.0;          // span of the window of images the alignment uses
+  double dynamic_init_min_parallax_px = 10.0;  // median parallax of the SfM pair left after the best rotation
+  int dynamic_init_min_features = 30;          // features seen in both images of the SfM pair
+  double dynamic_init_min_accel_std_mps2 = 0.2;      // accelerometer variation over the window (excitation)
+  double dynamic_init_max_gravity_error_mps2 = 1.0;  // | |g| - gravity_mps2 | of the unconstrained solve
+  double dynamic_init_min_translation_m = 0.1;       // metric translation over the window, at least
+  // The velocity the alignment finds must be known to this fraction of the speed (plus the velocity floor
+  // below): a start at constant velocity leaves the scale unobservable and is refused, not guessed.
+  double dynamic_init_max_speed_sigma_ratio = 0.1;
+  double dynamic_init_min_sigma_tilt_rad = 0.01;  // floor of the roll/pitch sigma handed to the filter
+  double dynamic_init_min_sigma_vel_mps = 0.05;   // floor of the velocity sigma
+  double dynamic_init_min_sigma_gyro_bias_radps = 0.002;  // floor of the gyro bias sigma
 
   // The keys, in order, for loading, printing and the JSON echo (Self is EkfConfig or const EkfConfig).
   template <class Self, class V>
@@ -187,6 +200,16 @@ struct EkfConfig {
     v("lost_min_features", self.lost_min_features);
     v("lost_max_frames", self.lost_max_frames);
     v("max_position_sigma_m", self.max_position_sigma_m);
+    v("dynamic_init_window_s", self.dynamic_init_window_s);
+    v("dynamic_init_min_parallax_px", self.dynamic_init_min_parallax_px);
+    v("dynamic_init_min_features", self.dynamic_init_min_features);
+    v("dynamic_init_min_accel_std_mps2", self.dynamic_init_min_accel_std_mps2);
+    v("dynamic_init_max_gravity_error_mps2", self.dynamic_init_max_gravity_error_mps2);
+    v("dynamic_init_min_translation_m", self.dynamic_init_min_translation_m);
+    v("dynamic_init_max_speed_sigma_ratio", self.dynamic_init_max_speed_sigma_ratio);
+    v("dynamic_init_min_sigma_tilt_rad", self.dynamic_init_min_sigma_tilt_rad);
+    v("dynamic_init_min_sigma_vel_mps", self.dynamic_init_min_sigma_vel_mps);
+    v("dynamic_init_min_sigma_gyro_bias_radps", self.dynamic_init_min_sigma_gyro_bias_radps);
   }
   // Throws ConfigError naming the key ("ekf.<key>") and what is allowed.
   void validate() const;

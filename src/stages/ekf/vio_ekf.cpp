@@ -81,13 +81,8 @@ VioEkf::VioEkf(const EkfConfig& config, const CameraCalibration& camera, const I
       tracker_(config, camera),
       filter_(config, effective_imu_noise(config, imu), imu.T_b_i.inverse() * camera.T_b_c,
               0.5 * (camera.fx + camera.fy)),
-      static_init_(config, effective_imu_noise(config, imu), 0.5 * (camera.fx + camera.fy)) {
-  if (config_.init_mode == EkfInitMode::kDynamic) {
-    throw ConfigError(
-        "ekf.init_mode: 'dynamic': the dynamic initialiser is not part of this build; use auto, static or "
-        "ground_truth");
-  }
-}
+      static_init_(config, effective_imu_noise(config, imu), 0.5 * (camera.fx + camera.fy)),
+      dynamic_init_(config, imu.T_b_i.inverse() * camera.T_b_c, 0.5 * (camera.fx + camera.fy)) {}
 
 void VioEkf::initialize_from(const InitialState& init) {
   const ImuState& state = init.state;
@@ -137,9 +132,19 @@ bool VioEkf::try_initialize(const EkfFrameInput& input, const std::vector<Featur
     init->gyro_bias_cov = I3 * std::pow(config_.init_sigma_gyro_bias_radps, 2);
     init->detail = "ground truth at the image's time (pose, velocity, both IMU biases)";
   } else {
+    // auto: both initialisers see every image; a still start is taken first (it needs no motion), the
+    // alignment when the platform moves.
     const InitFrame in{input.t_ns, input.imu, &obs};
-    init = static_init_.add_frame(in);
-    init_status_ = static_init_.status();
+    const bool use_static = config_.init_mode != EkfInitMode::kDynamic;
+    const bool use_dynamic = config_.init_mode != EkfInitMode::kStatic;
+    if (use_static) init = static_init_.add_frame(in);
+    std::optional<InitialState> moving;
+    if (use_dynamic) moving = dynamic_init_.add_frame(in);
+    if (!init) init = std::move(moving);
+    init_status_.clear();
+    if (use_static) init_status_ = static_init_.status();
+    if (use_dynamic)
+      init_status_ += (init_status_.empty() ? "" : "; ") + ("dynamic: " + dynamic_init_.status());
   }
   if (!init) return false;
   init->frame = frame;
@@ -149,6 +154,7 @@ bool VioEkf::try_initialize(const EkfFrameInput& input, const std::vector<Featur
   }
   initialize_from(*init);
   static_init_.reset();
+  dynamic_init_.reset();
   ++starts_;
   const Eigen::Vector3d up_i = init->state.q_w_i.conjugate() * Eigen::Vector3d::UnitZ();
   spdlog::info(
@@ -181,6 +187,7 @@ EkfFrameOutput VioEkf::lost(std::size_t frame, const std::string& reason) {
   spdlog::warn("ekf: lost at frame {}: {}; re-initialising", frame, reason);
   filter_.reset();
   static_init_.reset();
+  dynamic_init_.reset();
   previous_anchored_.reset();
   EkfFrameOutput out;
   if (last_good_.has_value()) out.pose = *last_good_;

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/types.hpp"
+#include "stages/ekf/dynamic_initializer.hpp"
 #include "stages/ekf/ekf_config.hpp"
 #include "stages/ekf/feature_tracker.hpp"
 #include "stages/ekf/initializer.hpp"
@@ -92,6 +93,7 @@ class VioEkf {
   // While initialising: why not yet, from each initialiser that runs, with its numbers.
   const std::string& init_status() const { return init_status_; }
   const StaticInitializer& static_initializer() const { return static_init_; }
+  const DynamicInitializer& dynamic_initializer() const { return dynamic_init_; }
 
  private:
   EkfFrameOutput update_filter(const EkfFrameInput& input, const std::vector<FeatureObservation>& obs,
@@ -108,6 +110,7 @@ class VioEkf {
   FeatureTracker tracker_;
   Msckf filter_;
   StaticInitializer static_init_;
+  DynamicInitializer dynamic_init_;
   std::optional<InitialState> initial_;
   std::size_t starts_ = 0;
   std::string init_status_;

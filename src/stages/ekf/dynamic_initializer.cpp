@@ -1,0 +1,878 @@
+#include "stages/ekf/dynamic_initializer.hpp"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Dense>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <stdexcept>
+
+#include "core/geometry.hpp"
+
+namespace loopgate {
+namespace {
+
+std::string fmt(const char* format, auto... args) {
+  char buf[1024];
+  std::snprintf(buf, sizeof(buf), format, args...);
+  return buf;
+}
+
+// Pre-integrated IMU between two images, in the frame of the IMU at the first (b_k), for a gyro bias bg:
+// R_bk_bk1, the velocity and position increments of the specific force, and their Jacobians on bg.
+struct Preintegrated {
+  double dt_s = 0.0;
+  Eigen::Matrix3d dR = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d dv = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dp = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d J_R_bg = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d J_v_bg = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d J_p_bg = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d J_v_ba = Eigen::Matrix3d::Zero();  // d dv / d ba (the bias is subtracted from the reading)
+  Eigen::Matrix3d J_p_ba = Eigen::Matrix3d::Zero();
+};
+
+// Integrates `samples` (time-ordered, the first at or before t_a when available) over [t_a, t_b]: between two
+// readings the mean of both, before the first and after the last the nearest reading held.
+Preintegrated preintegrate(const std::vector<ImuSample>& samples, Timestamp t_a, Timestamp t_b,
+                           const Eigen::Vector3d& bg) {
+  Preintegrated pi;
+  pi.dt_s = ns_to_s(t_b - t_a);
+  auto step = [&](const Eigen::Vector3d& w_raw, const Eigen::Vector3d& a, double dt) {
+    if (dt <= 0.0) return;
+    const Eigen::Vector3d w = w_raw - bg;
+    const Eigen::Matrix3d a_x = skew(a);
+    pi.dp += pi.dv * dt + 0.5 * pi.dR * a * dt * dt;
+    pi.J_p_bg += pi.J_v_bg * dt - 0.5 * pi.dR * a_x * pi.J_R_bg * dt * dt;
+    pi.J_p_ba += pi.J_v_ba * dt - 0.5 * pi.dR * dt * dt;
+    pi.J_v_ba -= pi.dR * dt;
+    pi.dv += pi.dR * a * dt;
+    pi.J_v_bg -= pi.dR * a_x * pi.J_R_bg * dt;
+    const Eigen::Matrix3d dR_step = so3_exp(w * dt);
+    pi.J_R_bg = dR_step.transpose() * pi.J_R_bg - so3_right_jacobian(w * dt) * dt;
+    pi.dR = pi.dR * dR_step;
+  };
+  if (samples.empty()) return pi;
+  Timestamp t = t_a;
+  if (samples.front().t_ns > t_a) {
+    const Timestamp t_end = std::min(samples.front().t_ns, t_b);
+    step(samples.front().gyro_radps, samples.front().accel_mps2, ns_to_s(t_end - t));
+    t = t_end;
+  }
+  for (std::size_t i = 0; i + 1 < samples.size() && t < t_b; ++i) {
+    const ImuSample& s0 = samples[i];
+    const ImuSample& s1 = samples[i + 1];
+    const Timestamp lo = std::max(s0.t_ns, t);
+    const Timestamp hi = std::min(s1.t_ns, t_b);
+    if (hi <= lo) continue;
+    step(0.5 * (s0.gyro_radps + s1.gyro_radps), 0.5 * (s0.accel_mps2 + s1.accel_mps2), ns_to_s(hi - lo));
+    t = hi;
+  }
+  if (t < t_b) step(samples.back().gyro_radps, samples.back().accel_mps2, ns_to_s(t_b - t));
+  return pi;
+}
+
+// Linear multi-view triangulation of a point in c0 from normalised observations in cameras with poses
+// T_ck_c0. Returns false when the point is behind a camera or poorly constrained.
+bool triangulate(const std::vector<Eigen::Isometry3d>& T_ck_c0, const std::vector<Eigen::Vector2d>& xy,
+                 double max_reproj, Eigen::Vector3d* p_c0) {
+  const int n = static_cast<int>(xy.size());
+  Eigen::MatrixXd A(2 * n, 4);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Matrix<double, 3, 4> P = T_ck_c0[static_cast<std::size_t>(k)].matrix().topRows<3>();
+    A.row(2 * k) = xy[static_cast<std::size_t>(k)].x() * P.row(2) - P.row(0);
+    A.row(2 * k + 1) = xy[static_cast<std::size_t>(k)].y() * P.row(2) - P.row(1);
+  }
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(A, Eigen::ComputeFullV);
+  const Eigen::Vector4d h = svd.matrixV().col(3);
+  if (std::abs(h(3)) < 1e-12) return false;
+  *p_c0 = h.head<3>() / h(3);
+  for (int k = 0; k < n; ++k) {
+    const Eigen::Vector3d pc = T_ck_c0[static_cast<std::size_t>(k)] * *p_c0;
+    if (pc.z() <= 1e-6) return false;
+    if ((pc.head<2>() / pc.z() - xy[static_cast<std::size_t>(k)]).norm() > max_reproj) return false;
+  }
+  return true;
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0.0;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+Eigen::Vector2d project(const Eigen::Vector3d& p) {
+  return p.head<2>() / p.z();
+}
+
+// Visual-inertial alignment with known rotations (the gyro's, bias-corrected; after the closed-form linear
+// initialisation of Dong-Si and Mourikis 2012 as used by OpenVINS' dynamic initialiser). The unknowns are
+// x = [v0, g, ba]: the velocity and gravity in the IMU frame at the first image (b0) and the accelerometer
+// bias, plus the position P_f of every track in b0. An observation (u, v) of track f in image k gives two
+// equations, linear in all of them:
+//   [1 0 -u; 0 1 -v] R_ck_b0 (P_f - p_k - R_k p_b_c) = 0,   p_k = v0 T_k + g T_k^2 / 2 + alpha_k + J_k ba,
+// which is the reprojection error times the depth. A closed-form solve of them gives the first guess; the
+// reprojection errors themselves are then minimised (below). The tracks are eliminated by their Schur
+// complement and |g| is held on its sphere. Because the pre-integrated accelerometer gives metric positions
+// directly, there is no up-to-scale structure whose scale could be biased by its noise.
+struct AlignInput {
+  std::vector<Eigen::Matrix3d> R_b0_bk;  // rotation of image k's IMU frame in b0
+  std::vector<double> T_s;               // time since the first image
+  std::vector<Eigen::Vector3d> alpha;    // pre-integrated position in b0 (zero bias), and its bias Jacobian
+  std::vector<Eigen::Matrix3d> J_alpha_ba;
+  std::vector<Eigen::Matrix3d> J_R_bg;  // right Jacobian of R_b0_bk on the gyro bias
+  Eigen::Matrix3d R_b_c;
+  Eigen::Vector3d p_b_c;
+  std::vector<std::vector<std::pair<std::size_t, Eigen::Vector2d>>> tracks;  // (image, normalised xy)
+  std::vector<Eigen::Vector3d> sfm_points_c0;  // per track: its SfM point (c0, SfM units)
+  std::vector<Eigen::Vector3d> sfm_c0_ck;      // per image: the camera position of the SfM (c0, SfM units)
+  double sigma_xy = 1.0 / 460.0;               // normalised-coordinate noise
+  double sigma_ba_mps2 = 0.1;                  // prior of the accelerometer bias (zero mean)
+  double sigma_bg_radps = 0.01;                // prior of the gyro bias correction (zero mean)
+  double gravity_mps2 = 9.81;
+  double outlier_xy = 5.0 / 460.0;  // a track with an observation further than this is dropped
+};
+
+constexpr int kAlignDim = 12;  // v0, g, ba, dbg
+
+struct AlignOutput {
+  Eigen::Matrix<double, kAlignDim, 1> x = Eigen::Matrix<double, kAlignDim, 1>::Zero();
+  Eigen::Matrix<double, kAlignDim, kAlignDim> cov = Eigen::Matrix<double, kAlignDim, kAlignDim>::Identity();
+  double g_norm_free = 0.0;  // |g| of one step with gravity's norm free, from the solution
+  double rms_xy = 0.0;       // reprojection RMS of the tracks kept (normalised)
+  std::size_t tracks_used = 0;
+  std::size_t tracks_dropped = 0;
+  std::vector<Eigen::Vector3d> p_b0_bk;  // positions of the IMU at the images
+};
+
+Eigen::Matrix<double, 3, 2> tangent_basis(const Eigen::Vector3d& u) {
+  const Eigen::Vector3d helper = std::abs(u.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  Eigen::Matrix<double, 3, 2> B;
+  B.col(0) = u.cross(helper).normalized();
+  B.col(1) = u.cross(B.col(0));
+  return B;
+}
+
+// Position of the IMU at image k in b0 for x = [v0, g, ba].
+Eigen::Vector3d imu_position(const AlignInput& in, std::size_t k, const Eigen::Matrix<double, 9, 1>& x) {
+  const double T = in.T_s[k];
+  return x.segment<3>(0) * T + 0.5 * T * T * x.segment<3>(3) + in.alpha[k] +
+         in.J_alpha_ba[k] * x.segment<3>(6);
+}
+
+// The first guess, from the structure from motion: its camera positions are metric up to one scale s, so
+//   v0 T_k + g T_k^2 / 2 - s R_b_c c_k = p_b_c - R_k p_b_c - alpha_k      (c_k: camera k in c0, SfM units)
+// is linear in [v0, g, s] (the accelerometer bias at zero); gravity is then put on its sphere and v0, s
+// solved again. The tracks start at their SfM points, scaled. (The reprojection equations themselves, solved
+// in closed form, would favour a shrunken scene: their residuals scale with the depths.)
+bool linear_guess(const AlignInput& in, Eigen::Matrix<double, 9, 1>* x_out,
+                  std::vector<std::optional<Eigen::Vector3d>>* P_out, std::string* why) {
+  const std::size_t n = in.T_s.size();
+  auto solve = [&](bool fixed_g, const Eigen::Vector3d& g_fixed, Eigen::VectorXd* sol) {
+    const int cols = fixed_g ? 4 : 7;
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(3 * n), cols);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(3 * n));
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto r = static_cast<Eigen::Index>(3 * k);
+      const double T = in.T_s[k];
+      A.block(r, 0, 3, 3) = T * Eigen::Matrix3d::Identity();
+      Eigen::Vector3d rhs = in.p_b_c - in.R_b0_bk[k] * in.p_b_c - in.alpha[k];
+      if (fixed_g) {
+        rhs -= 0.5 * T * T * g_fixed;
+      } else {
+        A.block(r, 3, 3, 3) = 0.5 * T * T * Eigen::Matrix3d::Identity();
+      }
+      A.block(r, cols - 1, 3, 1) = -(in.R_b_c * in.sfm_c0_ck[k]);
+      b.segment(r, 3) = rhs;
+    }
+    *sol = A.colPivHouseholderQr().solve(b);
+    return sol->allFinite();
+  };
+  Eigen::VectorXd sol;
+  if (!solve(false, Eigen::Vector3d::Zero(), &sol) || sol.segment<3>(3).norm() < 1e-6) {
+    *why = "alignment: singular first guess";
+    return false;
+  }
+  const Eigen::Vector3d g = sol.segment<3>(3).normalized() * in.gravity_mps2;
+  if (!solve(true, g, &sol) || !(sol(3) > 0.0)) {
+    *why =
+        fmt("alignment: the structure's scale comes out %.4g (not positive)", sol.size() > 3 ? sol(3) : 0.0);
+    return false;
+  }
+  const double scale = sol(3);
+  x_out->setZero();
+  x_out->segment<3>(0) = sol.head<3>();
+  x_out->segment<3>(3) = g;
+  P_out->assign(in.tracks.size(), std::nullopt);
+  for (std::size_t f = 0; f < in.tracks.size(); ++f) {
+    (*P_out)[f] = in.R_b_c * (scale * in.sfm_points_c0[f]) + in.p_b_c;
+  }
+  return true;
+}
+
+// Gauss-Newton (Levenberg-Marquardt) on the reprojection errors themselves, from the linear guess. The
+// unknowns are x = [v0, g, ba, dbg] - dbg a correction of the gyro bias that turns every rotation by
+// Exp(J_k dbg) - with g moved only on its sphere, and every track's position (eliminated by its Schur
+// complement); both biases are under their zero-mean priors. Tracks behind a camera or with an observation
+// further than outlier_xy are dropped as the solve goes. One more step with gravity's norm free gives the
+// |g| the data alone ask for: a check of the whole solve.
+std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::string* why) {
+  using VecX = Eigen::Matrix<double, kAlignDim, 1>;
+  using MatX = Eigen::Matrix<double, kAlignDim, kAlignDim>;
+  using VecZ = Eigen::Matrix<double, kAlignDim - 1, 1>;
+  using MatZ = Eigen::Matrix<double, kAlignDim - 1, kAlignDim - 1>;
+  using MatXZ = Eigen::Matrix<double, kAlignDim, kAlignDim - 1>;
+  const std::size_t nt = in.tracks.size();
+  Eigen::Matrix<double, 9, 1> x9;
+  std::vector<std::optional<Eigen::Vector3d>> P;
+  if (!linear_guess(in, &x9, &P, why)) return std::nullopt;
+  VecX x = VecX::Zero();
+  x.head<9>() = x9;
+  const double w0 = 1.0 / (in.sigma_xy * in.sigma_xy);
+  const double prior_ba = 1.0 / (in.sigma_ba_mps2 * in.sigma_ba_mps2);
+  const double prior_bg = 1.0 / (in.sigma_bg_radps * in.sigma_bg_radps);
+  auto rotation = [&](std::size_t k, const VecX& xx) {
+    return Eigen::Matrix3d(in.R_b0_bk[k] * so3_exp(in.J_R_bg[k] * xx.segment<3>(9)));
+  };
+  auto prior_cost = [&](const VecX& xx) {
+    return prior_ba * xx.segment<3>(6).squaredNorm() + prior_bg * xx.segment<3>(9).squaredNorm();
+  };
+  // Reprojection cost (in units of the pixel sigma squared) of x and P; drops bad tracks when asked.
+  auto cost = [&](const VecX& xx, const std::vector<std::optional<Eigen::Vector3d>>& PP, bool drop,
+                  std::vector<std::optional<Eigen::Vector3d>>* PP_out, std::size_t* obs) {
+    double c = 0.0;
+    *obs = 0;
+    for (std::size_t f = 0; f < nt; ++f) {
+      if (!PP[f]) continue;
+      double track = 0.0;
+      bool bad = false;
+      for (const auto& [k, xy] : in.tracks[f]) {
+        const Eigen::Matrix3d R_k = rotation(k, xx);
+        const Eigen::Vector3d pc =
+            in.R_b_c.transpose() *
+            (R_k.transpose() * (*PP[f] - imu_position(in, k, xx.head<9>())) - in.p_b_c);
+        if (pc.z() <= 1e-3) {
+          bad = true;
+          break;
+        }
+        const double e2 = (pc.head<2>() / pc.z() - xy).squaredNorm();
+        bad = bad || e2 > in.outlier_xy * in.outlier_xy;
+        track += e2;
+      }
+      if (bad && drop) {
+        (*PP_out)[f].reset();
+        continue;
+      }
+      c += bad ? in.outlier_xy * in.outlier_xy * static_cast<double>(in.tracks[f].size()) : track;
+      *obs += in.tracks[f].size();
+    }
+    return c * w0 + prior_cost(xx);
+  };
+  // The normal equations of one Gauss-Newton step in all unknowns (tracks eliminated), with the priors.
+  struct Step {
+    MatX N = MatX::Zero();
+    VecX q = VecX::Zero();
+    std::vector<std::optional<Eigen::Matrix3d>> Haa_inv;
+    std::vector<Eigen::Matrix<double, 3, kAlignDim>> Hab;
+    std::vector<Eigen::Vector3d> ga;
+    std::size_t active = 0;
+  };
+  auto linearise = [&](const VecX& xx, const std::vector<std::optional<Eigen::Vector3d>>& PP) {
+    Step s;
+    s.Haa_inv.assign(nt, std::nullopt);
+    s.Hab.resize(nt);
+    s.ga.resize(nt);
+    for (std::size_t f = 0; f < nt; ++f) {
+      if (!PP[f]) continue;
+      Eigen::Matrix3d haa = Eigen::Matrix3d::Zero();
+      Eigen::Matrix<double, 3, kAlignDim> hab = Eigen::Matrix<double, 3, kAlignDim>::Zero();
+      MatX hbb = MatX::Zero();
+      Eigen::Vector3d a_r = Eigen::Vector3d::Zero();
+      VecX b_r = VecX::Zero();
+      for (const auto& [k, xy] : in.tracks[f]) {
+        const Eigen::Matrix3d R_k = rotation(k, xx);
+        const Eigen::Vector3d u = R_k.transpose() * (*PP[f] - imu_position(in, k, xx.head<9>()));
+        const Eigen::Vector3d pc = in.R_b_c.transpose() * (u - in.p_b_c);
+        const double iz = 1.0 / std::max(pc.z(), 1e-3);
+        Eigen::Matrix<double, 2, 3> Jpi;
+        Jpi << iz, 0.0, -pc.x() * iz * iz, 0.0, iz, -pc.y() * iz * iz;
+        const Eigen::Matrix<double, 2, 3> A = Jpi * in.R_b_c.transpose() * R_k.transpose();
+        const double T = in.T_s[k];
+        Eigen::Matrix<double, 3, 9> dp_dx;
+        dp_dx << T * Eigen::Matrix3d::Identity(), 0.5 * T * T * Eigen::Matrix3d::Identity(), in.J_alpha_ba[k];
+        Eigen::Matrix<double, 2, kAlignDim> B;
+        B << -A * dp_dx, Jpi * in.R_b_c.transpose() * skew(u) * in.J_R_bg[k];
+        const Eigen::Vector2d e = pc.head<2>() * iz - xy;
+        haa += A.transpose() * A;
+        hab += A.transpose() * B;
+        hbb += B.transpose() * B;
+        a_r += A.transpose() * e;
+        b_r += B.transpose() * e;
+      }
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(haa);
+      if (!(eig.eigenvalues()(0) > 1e-9 * eig.eigenvalues()(2))) continue;
+      const Eigen::Matrix3d inv = haa.inverse();
+      s.Haa_inv[f] = inv;
+      s.Hab[f] = hab;
+      s.ga[f] = a_r;
+      s.N += w0 * (hbb - hab.transpose() * inv * hab);
+      s.q += w0 * (b_r - hab.transpose() * inv * a_r);
+      ++s.active;
+    }
+    s.N.block<3, 3>(6, 6) += prior_ba * Eigen::Matrix3d::Identity();
+    s.q.segment<3>(6) += prior_ba * xx.segment<3>(6);
+    s.N.block<3, 3>(9, 9) += prior_bg * Eigen::Matrix3d::Identity();
+    s.q.segment<3>(9) += prior_bg * xx.segment<3>(9);
+    return s;
+  };
+  // Tangent parametrisation of gravity on its sphere: x = x0 + C dz.
+  auto sphere_basis = [&](const VecX& xx) {
+    MatXZ C = MatXZ::Zero();
+    C.block<3, 3>(0, 0).setIdentity();
+    C.block<3, 2>(3, 3) = tangent_basis(xx.segment<3>(3).normalized());
+    C.block<6, 6>(6, 5).setIdentity();
+    return C;
+  };
+  AlignOutput out;
+  double lambda = 1e-3;
+  std::size_t obs = 0;
+  for (int it = 0; it < 30; ++it) {
+    // Drop the tracks that are bad at the current estimate (not in the first iterations: the guess is rough).
+    if (it >= 3) cost(x, P, true, &P, &obs);
+    const Step s = linearise(x, P);
+    if (s.active < 8) {
+      *why = fmt("alignment: %zu consistent tracks < 8", s.active);
+      return std::nullopt;
+    }
+    const MatXZ C = sphere_basis(x);
+    const MatZ Nz = C.transpose() * s.N * C;
+    const VecZ qz = C.transpose() * s.q;
+    const double c0 = cost(x, P, false, nullptr, &obs);
+    bool accepted = false;
+    bool converged = false;
+    for (int tries = 0; tries < 8 && !accepted; ++tries) {
+      MatZ Nd = Nz;
+      Nd.diagonal() *= 1.0 + lambda;
+      const VecZ dz = -Nd.ldlt().solve(qz);
+      const VecX dx = C * dz;
+      VecX x_new = x + dx;
+      x_new.segment<3>(3) = x_new.segment<3>(3).normalized() * in.gravity_mps2;
+      std::vector<std::optional<Eigen::Vector3d>> P_new = P;
+      for (std::size_t f = 0; f < nt; ++f) {
+        if (P_new[f] && s.Haa_inv[f]) *P_new[f] -= *s.Haa_inv[f] * (s.ga[f] + s.Hab[f] * dx);
+        if (P_new[f] && !s.Haa_inv[f]) P_new[f].reset();  // no parallax at this estimate
+      }
+      const double c1 = cost(x_new, P_new, false, nullptr, &obs);
+      if (c1 < c0) {
+        converged = (c0 - c1) < 1e-9 * c0;
+        x = x_new;
+        P = std::move(P_new);
+        lambda = std::max(lambda / 10.0, 1e-9);
+        accepted = true;
+      } else {
+        lambda *= 10.0;
+      }
+    }
+    if (!accepted || converged) break;
+  }
+  const double chi2 = cost(x, P, true, &P, &obs);
+  const Step s = linearise(x, P);
+  const MatXZ C = sphere_basis(x);
+  // One step with gravity's norm free, from the solution: the |g| the data alone ask for.
+  const VecX dx_free = -s.N.ldlt().solve(s.q);
+  out.g_norm_free = (x.segment<3>(3) + dx_free.segment<3>(3)).norm();
+  out.x = x;
+  out.tracks_used = s.active;
+  out.tracks_dropped = nt - s.active;
+  const double reproj2 = std::max(0.0, chi2 - prior_cost(x)) / w0;
+  out.rms_xy = obs > 0 ? std::sqrt(reproj2 / static_cast<double>(2 * obs)) : 0.0;
+  const double dof =
+      std::max(1.0, static_cast<double>(2 * obs) - 3.0 * static_cast<double>(s.active) - (kAlignDim - 1.0));
+  const MatZ Nz = C.transpose() * s.N * C;
+  out.cov = C * (Nz.inverse() * std::max(1.0, chi2 / dof)) * C.transpose();
+  out.p_b0_bk.resize(in.T_s.size());
+  for (std::size_t k = 0; k < in.T_s.size(); ++k) out.p_b0_bk[k] = imu_position(in, k, x.head<9>());
+  return out;
+}
+
+}  // namespace
+
+DynamicInitializer::DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c,
+                                       double focal_px)
+    : config_(config), T_i_c_(T_i_c), focal_px_(focal_px) {
+  config_.validate();
+  if (!(focal_px_ > 0.0 && std::isfinite(focal_px_))) throw std::invalid_argument("focal_px must be > 0");
+}
+
+void DynamicInitializer::reset() {
+  window_.clear();
+  last_sample_.reset();
+  frames_seen_ = 0;
+  status_ = "no image yet";
+}
+
+std::optional<InitialState> DynamicInitializer::add_frame(const InitFrame& frame) {
+  const std::size_t index = frames_seen_++;
+  // Time order of the images and of the IMU samples: a break empties the window (the alignment needs a
+  // continuous IMU record between its images).
+  if (!window_.empty() && frame.t_ns <= window_.back().t_ns) {
+    window_.clear();
+    last_sample_.reset();
+    status_ = fmt("image %zu: time %lld ns not after the previous image's; window restarted", index,
+                  static_cast<long long>(frame.t_ns));
+    return std::nullopt;
+  }
+  Frame f;
+  f.t_ns = frame.t_ns;
+  if (frame.observations != nullptr) {
+    for (const FeatureObservation& o : *frame.observations) {
+      if (o.xy.allFinite()) f.features.emplace(o.id, o.xy);
+    }
+  }
+  if (last_sample_) f.imu.push_back(*last_sample_);
+  for (const ImuSample& s : frame.imu) {
+    // The sample at the boundary between two images may be given with both.
+    if (!f.imu.empty() && s.t_ns == f.imu.back().t_ns && s.gyro_radps == f.imu.back().gyro_radps &&
+        s.accel_mps2 == f.imu.back().accel_mps2) {
+      continue;
+    }
+    if (!s.gyro_radps.allFinite() || !s.accel_mps2.allFinite() ||
+        (!f.imu.empty() && s.t_ns <= f.imu.back().t_ns)) {
+      window_.clear();
+      last_sample_.reset();
+      status_ =
+          fmt("image %zu: IMU sample at %lld ns not finite or not after the previous one; window restarted",
+              index, static_cast<long long>(s.t_ns));
+      return std::nullopt;
+    }
+    f.imu.push_back(s);
+  }
+  if (!f.imu.empty()) last_sample_ = f.imu.back();
+  if (!window_.empty() && (f.imu.empty() || f.imu.front().t_ns > window_.back().t_ns ||
+                           f.imu.back().t_ns < f.t_ns - s_to_ns(0.05))) {
+    // No IMU reading covering the interval since the previous image (allowing 50 ms held at the end).
+    window_.clear();
+    window_.push_back(std::move(f));
+    status_ = fmt(
+        "image %zu: no IMU samples covering the interval since the previous image; window restarted", index);
+    return std::nullopt;
+  }
+  window_.push_back(std::move(f));
+  const Timestamp window_ns = s_to_ns(config_.dynamic_init_window_s);
+  while (window_.size() > 2 && window_.back().t_ns - window_[1].t_ns >= window_ns) window_.pop_front();
+  const double span_s = ns_to_s(window_.back().t_ns - window_.front().t_ns);
+  if (window_.back().features.empty()) {
+    status_ = fmt("image %zu: no features", index);
+    return std::nullopt;
+  }
+  if (span_s < 0.95 * config_.dynamic_init_window_s) {
+    status_ = fmt("collecting: %.2f s of %.2f s", span_s, config_.dynamic_init_window_s);
+    return std::nullopt;
+  }
+  std::optional<InitialState> result = try_align();
+  if (result) result->frame = index;
+  return result;
+}
+
+std::optional<InitialState> DynamicInitializer::try_align() {
+  const std::size_t n = window_.size();
+  const double focal = focal_px_;
+  const double span_s = ns_to_s(window_.back().t_ns - window_.front().t_ns);
+  if (n < 3) {
+    status_ = fmt("only %zu images in %.2f s", n, span_s);
+    return std::nullopt;
+  }
+
+  // ---- pre-integration with a zero gyro bias ----
+  Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+  std::vector<Preintegrated> pre(n);
+  auto integrate_all = [&]() {
+    for (std::size_t k = 1; k < n; ++k) {
+      pre[k] = preintegrate(window_[k].imu, window_[k - 1].t_ns, window_[k].t_ns, bg);
+    }
+  };
+  integrate_all();
+
+  // ---- SfM pair: the oldest image and the one with the largest rotation-compensated parallax ----
+  const Eigen::Matrix3d R_b_c = T_i_c_.linear();
+  const Eigen::Vector3d p_b_c = T_i_c_.translation();
+  const Frame& f0 = window_.front();
+  auto parallax_px = [&](const Frame& fk, const Eigen::Matrix3d& R_ck_c0, std::vector<std::uint64_t>* ids) {
+    std::vector<double> d;
+    for (const auto& [id, x0] : f0.features) {
+      const auto it = fk.features.find(id);
+      if (it == fk.features.end()) continue;
+      const Eigen::Vector3d r = R_ck_c0 * Eigen::Vector3d(x0.x(), x0.y(), 1.0);
+      if (r.z() <= 1e-6) continue;
+      d.push_back((project(r) - it->second).norm() * focal);
+      if (ids != nullptr) ids->push_back(id);
+    }
+    return std::make_pair(median(d), d.size());
+  };
+  // The rotation that best maps the bearings of image 0 onto those of image k (Kabsch): the parallax left
+  // after it is what translation makes, free of the gyro bias.
+  auto rotation_fit = [&](const Frame& fk) {
+    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+    for (const auto& [id, x0] : f0.features) {
+      const auto it = fk.features.find(id);
+      if (it == fk.features.end()) continue;
+      M += x0.homogeneous().normalized() * it->second.homogeneous().normalized().transpose();
+    }
+    const Eigen::JacobiSVD<Eigen::Matrix3d> svd3(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+    D(2, 2) = (svd3.matrixV() * svd3.matrixU().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+    return Eigen::Matrix3d(svd3.matrixV() * D * svd3.matrixU().transpose());
+  };
+  std::size_t best = 0;
+  double best_parallax = -1.0;
+  std::size_t best_common = 0;
+  std::size_t max_common = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    const auto [par, common] = parallax_px(window_[k], rotation_fit(window_[k]), nullptr);
+    max_common = std::max(max_common, common);
+    if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
+    if (par > best_parallax) {
+      best_parallax = par;
+      best = k;
+      best_common = common;
+    }
+  }
+  if (best == 0) {
+    status_ = fmt("features: at most %zu seen in the oldest image and another of the window < %d", max_common,
+                  config_.dynamic_init_min_features);
+    return std::nullopt;
+  }
+  if (best_parallax < config_.dynamic_init_min_parallax_px) {
+    status_ = fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images 0-%zu over %.2f s)",
+                  best_parallax, config_.dynamic_init_min_parallax_px, best_common, best, span_s);
+    return std::nullopt;
+  }
+
+  // ---- IMU excitation: the accelerometer's variation over the window ----
+  Eigen::Vector3d acc_mean = Eigen::Vector3d::Zero();
+  std::size_t acc_count = 0;
+  for (std::size_t k = 1; k < n; ++k) {
+    for (const ImuSample& s : window_[k].imu) {
+      acc_mean += s.accel_mps2;
+      ++acc_count;
+    }
+  }
+  acc_mean /= static_cast<double>(std::max<std::size_t>(acc_count, 1));
+  double acc_var = 0.0;
+  for (std::size_t k = 1; k < n; ++k) {
+    for (const ImuSample& s : window_[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
+  }
+  const double acc_std = std::sqrt(acc_var / static_cast<double>(std::max<std::size_t>(acc_count, 1)));
+  if (acc_std < config_.dynamic_init_min_accel_std_mps2) {
+    status_ = fmt("IMU excitation: accelerometer std %.3f m/s^2 < %.3f m/s^2 over %.2f s", acc_std,
+                  config_.dynamic_init_min_accel_std_mps2, span_s);
+    return std::nullopt;
+  }
+
+  // ---- essential matrix and relative pose of the pair ----
+  std::vector<std::uint64_t> pair_ids;
+  std::vector<cv::Point2d> pts0;
+  std::vector<cv::Point2d> pts1;
+  for (const auto& [id, x0] : f0.features) {
+    const auto it = window_[best].features.find(id);
+    if (it == window_[best].features.end()) continue;
+    pair_ids.push_back(id);
+    pts0.emplace_back(x0.x(), x0.y());
+    pts1.emplace_back(it->second.x(), it->second.y());
+  }
+  const double thr = config_.ransac_threshold_px / focal;
+  cv::Mat inlier_mask;
+  const cv::Mat E =
+      cv::findEssentialMat(pts0, pts1, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999, thr, 1000, inlier_mask);
+  if (E.rows != 3 || E.cols != 3) {
+    status_ = fmt("essential matrix: no solution between images 0 and %zu (%zu features)", best, pts0.size());
+    return std::nullopt;
+  }
+  cv::Mat R_cv;
+  cv::Mat t_cv;
+  const int good = cv::recoverPose(E, pts0, pts1, cv::Mat::eye(3, 3, CV_64F), R_cv, t_cv, inlier_mask);
+  if (good < config_.dynamic_init_min_features / 2) {
+    status_ = fmt("relative pose: %d inliers in front of both cameras < %d (images 0-%zu)", good,
+                  config_.dynamic_init_min_features / 2, best);
+    return std::nullopt;
+  }
+  Eigen::Matrix3d R_1_0;
+  Eigen::Vector3d t_1_0;
+  cv::cv2eigen(R_cv, R_1_0);
+  cv::cv2eigen(t_cv, t_1_0);
+  const double vision_parallax = parallax_px(window_[best], R_1_0, nullptr).first;
+  if (vision_parallax < config_.dynamic_init_min_parallax_px) {
+    status_ = fmt("parallax %.1f px < %.1f px (vision-compensated, images 0-%zu over %.2f s)",
+                  vision_parallax, config_.dynamic_init_min_parallax_px, best, span_s);
+    return std::nullopt;
+  }
+
+  // ---- structure: triangulate the pair's inliers, PnP the others, then all tracks and all poses again ----
+  const double max_reproj = 3.0 * config_.ransac_threshold_px / focal + 2.0 / focal;
+  std::vector<Eigen::Isometry3d> T_ck_c0(n, Eigen::Isometry3d::Identity());
+  Eigen::Isometry3d T1 = Eigen::Isometry3d::Identity();
+  T1.linear() = R_1_0;
+  T1.translation() = t_1_0;
+  T_ck_c0[best] = T1;
+  std::unordered_map<std::uint64_t, Eigen::Vector3d> points;
+  for (std::size_t i = 0; i < pair_ids.size(); ++i) {
+    if (inlier_mask.at<unsigned char>(static_cast<int>(i)) == 0) continue;
+    Eigen::Vector3d p;
+    if (triangulate({T_ck_c0[0], T1}, {f0.features.at(pair_ids[i]), window_[best].features.at(pair_ids[i])},
+                    max_reproj, &p)) {
+      points[pair_ids[i]] = p;
+    }
+  }
+  // PnP of image k from `guess`; false (T untouched) when it fails.
+  auto pnp = [&](std::size_t k, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) -> bool {
+    std::vector<cv::Point3d> obj;
+    std::vector<cv::Point2d> img;
+    for (const auto& [id, x] : window_[k].features) {
+      const auto it = points.find(id);
+      if (it == points.end()) continue;
+      obj.emplace_back(it->second.x(), it->second.y(), it->second.z());
+      img.emplace_back(x.x(), x.y());
+    }
+    if (obj.size() < 10) return false;
+    cv::Mat R_guess;
+    cv::Mat rvec;
+    cv::Mat tvec;
+    cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
+    cv::Rodrigues(R_guess, rvec);
+    cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
+    cv::Mat inliers;
+    if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
+                            static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
+        inliers.rows < 8) {
+      return false;
+    }
+    cv::Mat R_est;
+    cv::Rodrigues(rvec, R_est);
+    Eigen::Matrix3d R;
+    Eigen::Vector3d t;
+    cv::cv2eigen(R_est, R);
+    cv::cv2eigen(tvec, t);
+    T_out->setIdentity();
+    T_out->linear() = R;
+    T_out->translation() = t;
+    return true;
+  };
+  // Outwards from the pair, each image starting from its neighbour's pose.
+  // Tracks of image k not triangulated yet, from their observations in the (posed) images before k.
+  auto triangulate_new = [&](std::size_t k) {
+    for (const auto& [id, x] : window_[k].features) {
+      if (points.contains(id)) continue;
+      std::vector<Eigen::Isometry3d> poses;
+      std::vector<Eigen::Vector2d> xy;
+      for (std::size_t j = 0; j < k; ++j) {
+        const auto it = window_[j].features.find(id);
+        if (it == window_[j].features.end()) continue;
+        poses.push_back(T_ck_c0[j]);
+        xy.push_back(it->second);
+      }
+      if (xy.size() < 3) continue;
+      // At least 1 degree between the first and the last ray (in c0): a point triangulated from less is
+      // mostly noise in depth.
+      const Eigen::Vector3d r0 = poses.front().linear().transpose() * xy.front().homogeneous();
+      const Eigen::Vector3d r1 = poses.back().linear().transpose() * xy.back().homogeneous();
+      if (r0.normalized().cross(r1.normalized()).norm() < 0.017) continue;
+      Eigen::Vector3d p;
+      if (triangulate(poses, xy, max_reproj, &p)) points[id] = p;
+    }
+  };
+  for (std::size_t k = 1; k < n; ++k) {
+    if (k == best) continue;
+    if (k > best) triangulate_new(k);
+    if (!pnp(k, T_ck_c0[k - 1], &T_ck_c0[k])) {
+      status_ = fmt("PnP failed for image %zu of %zu (%zu triangulated points; pair 0-%zu)", k, n,
+                    points.size(), best);
+      return std::nullopt;
+    }
+  }
+  // Refinement by alternation (resection-intersection, a poor man's bundle adjustment): every track seen at
+  // least three times, then every pose but the first (the gauge), a few times.
+  for (int pass = 0; pass < 5; ++pass) {
+    std::unordered_map<std::uint64_t, std::pair<std::vector<Eigen::Isometry3d>, std::vector<Eigen::Vector2d>>>
+        tracks;
+    for (std::size_t k = 0; k < n; ++k) {
+      for (const auto& [id, x] : window_[k].features) {
+        tracks[id].first.push_back(T_ck_c0[k]);
+        tracks[id].second.push_back(x);
+      }
+    }
+    points.clear();
+    for (const auto& [id, obs] : tracks) {
+      if (obs.second.size() < 3) continue;
+      Eigen::Vector3d p;
+      if (triangulate(obs.first, obs.second, 2.0 * max_reproj, &p)) points[id] = p;
+    }
+    for (std::size_t k = 1; k < n; ++k) {
+      if (!pnp(k, T_ck_c0[k], &T_ck_c0[k])) {
+        status_ = fmt("PnP (refinement) failed for image %zu of %zu (%zu points)", k, n, points.size());
+        return std::nullopt;
+      }
+    }
+  }
+  // Up-to-scale unit: the translation between the first and the last camera.
+  std::vector<Eigen::Matrix3d> R_c0_bk(n);
+  std::vector<Eigen::Vector3d> p_c0_ck(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Isometry3d T_c0_ck = T_ck_c0[k].inverse();
+    R_c0_bk[k] = T_c0_ck.linear() * R_b_c.transpose();
+    p_c0_ck[k] = T_c0_ck.translation();
+  }
+  const double unit = (p_c0_ck[n - 1] - p_c0_ck[0]).norm();
+  if (unit < 1e-9) {
+    status_ = "structure: no translation between the first and last images";
+    return std::nullopt;
+  }
+  for (Eigen::Vector3d& p : p_c0_ck) p /= unit;
+
+  // ---- gyro bias: rotations of vision against the pre-integrated gyro ----
+  Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d g_vec = Eigen::Vector3d::Zero();
+  for (std::size_t k = 1; k < n; ++k) {
+    const Eigen::Matrix3d R_vis = R_c0_bk[k - 1].transpose() * R_c0_bk[k];
+    const Eigen::Vector3d r = so3_log(pre[k].dR.transpose() * R_vis);
+    H += pre[k].J_R_bg.transpose() * pre[k].J_R_bg;
+    g_vec += pre[k].J_R_bg.transpose() * r;
+  }
+  const Eigen::LDLT<Eigen::Matrix3d> H_ldlt(H);
+  bg = H_ldlt.solve(g_vec);
+  if (!bg.allFinite()) {
+    status_ = "gyro bias: singular system";
+    return std::nullopt;
+  }
+  integrate_all();
+
+  // ---- alignment with the gyro's rotations: velocity, gravity and accelerometer bias in b0 ----
+  AlignInput in;
+  in.R_b_c = R_b_c;
+  in.p_b_c = p_b_c;
+  in.R_b0_bk.assign(n, Eigen::Matrix3d::Identity());
+  in.T_s.assign(n, 0.0);
+  in.alpha.assign(n, Eigen::Vector3d::Zero());
+  in.J_alpha_ba.assign(n, Eigen::Matrix3d::Zero());
+  in.J_R_bg.assign(n, Eigen::Matrix3d::Zero());
+  std::vector<Eigen::Vector3d> beta(n, Eigen::Vector3d::Zero());
+  std::vector<Eigen::Matrix3d> J_beta_ba(n, Eigen::Matrix3d::Zero());
+  for (std::size_t k = 1; k < n; ++k) {
+    const Preintegrated& p = pre[k];
+    const Eigen::Matrix3d& R = in.R_b0_bk[k - 1];
+    in.T_s[k] = in.T_s[k - 1] + p.dt_s;
+    in.alpha[k] = in.alpha[k - 1] + beta[k - 1] * p.dt_s + R * p.dp;
+    in.J_alpha_ba[k] = in.J_alpha_ba[k - 1] + J_beta_ba[k - 1] * p.dt_s + R * p.J_p_ba;
+    beta[k] = beta[k - 1] + R * p.dv;
+    J_beta_ba[k] = J_beta_ba[k - 1] + R * p.J_v_ba;
+    in.J_R_bg[k] = p.dR.transpose() * in.J_R_bg[k - 1] + p.J_R_bg;
+    in.R_b0_bk[k] = R * p.dR;
+  }
+  in.sfm_c0_ck = p_c0_ck;
+  for (const auto& [id, point] : points) {
+    std::vector<std::pair<std::size_t, Eigen::Vector2d>> obs;
+    for (std::size_t k = 0; k < n; ++k) {
+      const auto it = window_[k].features.find(id);
+      if (it != window_[k].features.end()) obs.emplace_back(k, it->second);
+    }
+    if (obs.size() < 3) continue;
+    in.tracks.push_back(std::move(obs));
+    in.sfm_points_c0.push_back(point / unit);
+  }
+  in.sigma_xy = config_.pixel_sigma_px / focal;
+  in.sigma_ba_mps2 = config_.init_sigma_accel_bias_mps2;
+  in.sigma_bg_radps = config_.init_sigma_gyro_bias_radps;
+  in.gravity_mps2 = config_.gravity_mps2;
+  in.outlier_xy = config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px / focal;
+  std::string why;
+  const std::optional<AlignOutput> al = align_known_rotations(in, &why);
+  if (!al) {
+    status_ = why;
+    return std::nullopt;
+  }
+  const double G = config_.gravity_mps2;
+  if (!(std::abs(al->g_norm_free - G) <= config_.dynamic_init_max_gravity_error_mps2)) {
+    status_ = fmt("gravity norm %.3f vs %.3f m/s^2 (tolerance %.2f; %zu tracks, reprojection RMS %.2f px)",
+                  al->g_norm_free, G, config_.dynamic_init_max_gravity_error_mps2, al->tracks_used,
+                  al->rms_xy * focal);
+    return std::nullopt;
+  }
+  const double rms_px = al->rms_xy * focal;
+  if (!(rms_px <= config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px)) {
+    status_ = fmt("alignment reprojection RMS %.2f px > %.2f px", rms_px,
+                  config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px);
+    return std::nullopt;
+  }
+  const Eigen::Vector3d g = al->x.segment<3>(3);
+  const Eigen::Vector3d ba = al->x.segment<3>(6);
+  const Eigen::Vector3d dbg = al->x.segment<3>(9);
+  const Eigen::Vector3d bg_refined = bg + dbg;
+  const Eigen::Matrix3d R_n = in.R_b0_bk[n - 1] * so3_exp(in.J_R_bg[n - 1] * dbg);
+  const double T_n = in.T_s[n - 1];
+  const Eigen::Vector3d v_n = al->x.segment<3>(0) + g * T_n + beta[n - 1] + J_beta_ba[n - 1] * ba;
+  Eigen::Matrix<double, 3, 9> J_vn;
+  J_vn << Eigen::Matrix3d::Identity(), T_n * Eigen::Matrix3d::Identity(), J_beta_ba[n - 1];
+  const Eigen::Matrix3d vel_cov_b0 = J_vn * al->cov.topLeftCorner<9, 9>() * J_vn.transpose();
+  const double speed_sigma = std::sqrt(std::max(0.0, vel_cov_b0.trace()));
+  const double speed_limit =
+      config_.dynamic_init_max_speed_sigma_ratio * v_n.norm() + config_.dynamic_init_min_sigma_vel_mps;
+  if (!(speed_sigma <= speed_limit)) {
+    status_ =
+        fmt("velocity sigma %.3f m/s > %.3f m/s (speed %.2f m/s): too little excitation to fix the scale",
+            speed_sigma, speed_limit, v_n.norm());
+    return std::nullopt;
+  }
+  const double translation_m = ((al->p_b0_bk[n - 1] + R_n * p_b_c) - (al->p_b0_bk[0] + p_b_c)).norm();
+  if (translation_m < config_.dynamic_init_min_translation_m) {
+    status_ = fmt("translation %.3f m < %.3f m over %.2f s", translation_m,
+                  config_.dynamic_init_min_translation_m, span_s);
+    return std::nullopt;
+  }
+
+  // ---- the state at the last image, in a world frame with +z up and the IMU's yaw zero ----
+  const Eigen::Matrix3d R_w_b0 =
+      Eigen::Quaterniond::FromTwoVectors(g.normalized(), -Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Matrix3d R_w_bn = R_w_b0 * R_n;
+  const double yaw = std::atan2(R_w_bn(1, 0), R_w_bn(0, 0));
+  const Eigen::Matrix3d R_w =
+      Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * R_w_b0;  // b0 -> world
+
+  InitialState out;
+  out.method = InitMethod::kDynamic;
+  out.state.t_ns = window_.back().t_ns;
+  out.state.q_w_i = Eigen::Quaterniond(R_w * R_n).normalized();
+  out.state.p_w_m.setZero();
+  out.state.v_w_mps = R_w * v_n;
+  out.state.gyro_bias_radps = bg_refined;
+  out.state.accel_bias_mps2 = ba;
+  if (!window_.back().imu.empty())
+    out.state.omega_i_radps = window_.back().imu.back().gyro_radps - bg_refined;
+  // Covariances: those of the least squares (scaled by their residuals), floored by the config.
+  const double sigma_tilt = std::max(config_.dynamic_init_min_sigma_tilt_rad,
+                                     std::sqrt(std::max(al->cov.block<3, 3>(3, 3).trace() / 2.0, 0.0)) / G);
+  out.rot_cov_world = Eigen::Vector3d(sigma_tilt * sigma_tilt, sigma_tilt * sigma_tilt,
+                                      config_.init_sigma_yaw_rad * config_.init_sigma_yaw_rad)
+                          .asDiagonal();
+  const double min_v2 = config_.dynamic_init_min_sigma_vel_mps * config_.dynamic_init_min_sigma_vel_mps;
+  out.vel_cov_m2ps2 = R_w * vel_cov_b0 * R_w.transpose() + Eigen::Matrix3d::Identity() * min_v2;
+  const double min_bg2 =
+      config_.dynamic_init_min_sigma_gyro_bias_radps * config_.dynamic_init_min_sigma_gyro_bias_radps;
+  out.gyro_bias_cov = al->cov.block<3, 3>(9, 9) + Eigen::Matrix3d::Identity() * min_bg2;
+  out.scale = translation_m;
+  out.window_s = span_s;
+  out.detail = fmt(
+      "dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, %zu tracks (%zu dropped), "
+      "translation %.2f m, speed %.2f +- %.3f m/s, |g| %.3f before the norm constraint, reprojection RMS "
+      "%.2f px, gyro bias (%.4f %.4f %.4f) rad/s, accel bias (%.3f %.3f %.3f) m/s^2, accel std %.2f m/s^2",
+      n, span_s, best, vision_parallax, al->tracks_used, al->tracks_dropped, translation_m, v_n.norm(),
+      speed_sigma, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(), bg_refined.z(), ba.x(), ba.y(),
+      ba.z(), acc_std);
+  status_ = out.detail;
+  return out;
+}
+
+}  // namespace loopgate
