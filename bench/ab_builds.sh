@@ -1,7 +1,7 @@
 #!/bin/sh
 # Two builds of loopgate on the same run: `loopgate run --rate max` N times each (default 5), A and B
 # alternating so that a change of the machine's speed hits both; prints every run's real-time factor, CPU
-# seconds and end of the stream, then the medians and the ratio B / A. Real-time factors from different hours
+# seconds and end of the stream, then the medians and the ratio B / A. Real-time factors from different times
 # do not compare (docs/results.md); the ratio of one such measurement does.
 # Usage: bench/ab_builds.sh LOOPGATE_A LOOPGATE_B CONFIG DATASET [N] [--set KEY=VALUE ...]
 #   e.g. bench/ab_builds.sh old/loopgate build/release/loopgate configs/euroc-mh05.yaml /work/data/mh05 5 \

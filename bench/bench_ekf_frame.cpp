@@ -138,7 +138,7 @@ BENCHMARK(BM_EkfTracking)->Unit(benchmark::kMillisecond);
 // The corner detection's steps on one grid cell (6 x 4 cells, as ekf.grid_cols / grid_rows), over every cell
 // of every 10th of the first 400 images (LOOPGATE_EKF_DATASET or the real V1_01 excerpt): OpenCV's Shi-Tomasi
 // response of a cell (BM_DetectionCellResponse) and the noise median of a cell's responses, by nth_element
-// over every second row and column (arg 0, before 2026-11-28) or by quarter_median() (arg 1).
+// over every second row and column (arg 0, the former way) or by quarter_median() (arg 1).
 std::vector<cv::Mat> detection_cells(benchmark::State& state, bool responses) {
   const char* dataset_env = std::getenv("LOOPGATE_EKF_DATASET");
   const std::filesystem::path dir = dataset_env != nullptr ? std::filesystem::path(dataset_env) : micro_dir();
@@ -192,7 +192,7 @@ BENCHMARK(BM_DetectionCellResponse)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecon
 
 // The KLT's pyramid (window 15, levels 0-2, derivatives) of every 10th of the first 400 images, and the KLT
 // of 150 Shi-Tomasi corners from each of them into the next image (ekf.klt_* defaults): OpenCV (arg 0) or
-// core/klt.hpp (arg 1, what the tracker runs since 2026-11-28).
+// core/klt.hpp (arg 1, what the tracker runs).
 struct KltPairs {
   std::vector<cv::Mat> images;                     // image, next image, ...
   std::vector<std::vector<cv::Point2f>> corners;   // per pair

@@ -1,4 +1,4 @@
-// Does a faster PNG decoder pay (issue 16)? The decode of one frame as loopgate did it before (OpenCV
+// Does a faster PNG decoder pay? The decode of one frame as loopgate did it before (OpenCV
 // imdecode, IMREAD_UNCHANGED, then grey when the file is colour), OpenCV decoding straight to grey,
 // loopgate's decode today (io/png_grey.hpp: libdeflate for 8-bit grey PNGs, else OpenCV), and, when the build
 // found Debian's libspng (spng.pc), libspng decoding to 8-bit grey. Every variant decodes the same files,
@@ -115,7 +115,7 @@ void BM_DecodeOpenCvGrey(benchmark::State& state) {
 }
 BENCHMARK(BM_DecodeOpenCvGrey)->Unit(benchmark::kMicrosecond);
 
-// loopgate's path since issue 16 (LoadedDataset::decode): the 8-bit grey fast path (libdeflate's inflate and
+// loopgate's path (LoadedDataset::decode): the 8-bit grey fast path (libdeflate's inflate and
 // our unfiltering), today's path for every other file.
 cv::Mat decode_loopgate(const std::vector<unsigned char>& bytes) {
   cv::Mat grey = loopgate::decode_png_grey8(bytes.data(), bytes.size());

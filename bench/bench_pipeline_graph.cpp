@@ -85,7 +85,7 @@ void BM_GraphDecodeAll(benchmark::State& state) {
   config.run.decode = DecodePolicy::kAll;
   config.output.progress = "off";
   config.odometry.heading_axis = "z";
-  config.match.margin = 50;  // below the 120 frames: a run that cannot compare any pair fails (issue 14)
+  config.match.margin = 50;  // below the 120 frames: a run that cannot compare any pair fails
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline";
   double wall_s = 0, cpu_s = 0, data_s = 0, frames = 0;
   for (auto _ : state) {

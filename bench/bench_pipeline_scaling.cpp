@@ -1,4 +1,4 @@
-// The cost of loop detection as the map grows (issue 16; the paper's Fig. 8 at 100x its 4 541 frames): the
+// The cost of loop detection as the map grows (the paper's Fig. 8 at 100x its 4 541 frames): the
 // whole pipeline (run_pipeline: the graph, the gate, DIRD, the DP + NMS, every output) over a synthetic drive
 // held in memory, where images add nothing but their descriptors' cost:
 //

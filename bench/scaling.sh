@@ -1,5 +1,5 @@
 #!/bin/sh
-# Loop detection as the map grows (issue 16, the paper's Fig. 8 at up to 100x its 4 541 frames): runs
+# Loop detection as the map grows (the paper's Fig. 8 at up to 100x its 4 541 frames): runs
 # bench_pipeline_scaling (the whole pipeline on a synthetic drive in memory, a revisit every 460 frames; see
 # the comment at the top of bench/bench_pipeline_scaling.cpp) for every size and mode, each under
 # /usr/bin/time -v, one after the other, then prints one table and draws OUT/scaling.png (scripts/plot.py

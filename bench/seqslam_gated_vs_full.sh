@@ -1,5 +1,5 @@
 #!/bin/sh
-# Full SeqSLAM vs gated SeqSLAM (issue 12), each run N times (default 3, alternating, each alone) by
+# Full SeqSLAM vs gated SeqSLAM, each run N times (default 3, alternating, each alone) by
 # `loopgate run --method seqslam --mode full|gated` on one dataset; prints every run's times and the medians:
 #   wall        the whole run's wall time (decode, odometry, gate, describe, match, sink, end of stream)
 #   end         the end-of-stream time (SeqSLAM's difference matrix, contrast enhancement and search)

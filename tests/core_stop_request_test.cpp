@@ -1,4 +1,4 @@
-// Process-wide stop requests (issue 15): the first signal asks to stop, a second one to abort long loops.
+// Process-wide stop requests: the first signal asks to stop, a second one to abort long loops.
 #include <gtest/gtest.h>
 
 #include <csignal>

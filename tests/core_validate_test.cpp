@@ -33,7 +33,7 @@ TEST(CoreValidate, RequireNamesKeyMessageAndValue) {
             "odometry.file_max_gap_s: must be > 0 (got 0)");
 }
 
-// Issue 15: every parameter is bounded, and the error says the bound.
+// Every parameter is bounded, and the error says the bound.
 TEST(CoreValidate, RequireInSaysTheBound) {
   EXPECT_NO_THROW(require_in("match.nms_half_window", 59, 0, 1000, "frames"));
   EXPECT_EQ(message_of([] { require_in("match.nms_half_window", 2000000000, 0, 1000, "frames"); }),
@@ -43,7 +43,7 @@ TEST(CoreValidate, RequireInSaysTheBound) {
   EXPECT_NE(message_of([] { require_in("gate.beta_m", std::nan(""), 0.0, 1e5); }), "(no ConfigError)");
 }
 
-// Issue 15: a 20 MB field quoted into an error (and so into summary.json) is capped.
+// A 20 MB field quoted into an error (and so into summary.json) is capped.
 TEST(CoreValidate, QuotedFieldsAreCapped) {
   EXPECT_EQ(quote_excerpt("0.5"), "'0.5'");
   EXPECT_EQ(quote_excerpt("a\tb"), "'a?b'");

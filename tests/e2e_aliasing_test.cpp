@@ -1,4 +1,4 @@
-// Perceptual aliasing end to end (issue 5): `loopgate simulate --preset aliasing` renders a street where
+// Perceptual aliasing end to end: `loopgate simulate --preset aliasing` renders a street where
 // place B is a copy of place A (same facade textures, 80+ m apart, each driven once) plus one genuine
 // revisit. With configs/aliasing.yaml, `run --mode full` (DIRD on every frame) reports false loops between A
 // and B; `run --mode gated` (the pose gate: the odometry keeps A and B far apart) reports none and still
@@ -194,7 +194,7 @@ TEST(E2eAliasing, GatedModeReportsNoFalseLoopAndFindsTheGenuineOne) {
                                   " --mode gated --out " + out.string() + " --set output.progress=off",
                               &status);
   if (status != 0 && log.find("run.mode") != std::string::npos) {
-    FAIL() << "`loopgate run --mode gated` was rejected: the gated mode is not wired yet (issue 5).\n" << log;
+    FAIL() << "`loopgate run --mode gated` was rejected: the gated mode is not wired yet.\n" << log;
   }
   ASSERT_EQ(status, 0) << log;
   const double accept_m = accept_radius_m();

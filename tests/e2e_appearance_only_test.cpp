@@ -1,4 +1,4 @@
-// Appearance-only runs (issue 14): an image folder with no poses at all runs loop detection on every frame
+// Appearance-only runs: an image folder with no poses at all runs loop detection on every frame
 // (odometry.source none, or auto finding no odometry), evaluated against published (query, reference) pairs;
 // the pose gate needs poses, so gated mode is a clear error, and compare runs the full methods only. The real
 // binary on a folder the test generates, and on RTAB-Map's real indoor loop (../shared/data/rtabmap-samples,

@@ -90,7 +90,7 @@ TEST_F(E2eCompare, EveryMethodSideBySide) {
   EXPECT_GT(compare["comparison"]["full_over_gated_descriptors"].get<double>(), 1.0);
   EXPECT_TRUE(fs::exists(out / "gated" / "candidate_areas.csv"));
   EXPECT_TRUE(fs::exists(out / "gated" / "descriptor.csv"));
-  // Issue 14: the truth counted in 3-D, in the ground plane and before eval.min_travel_m, printed and stored.
+  // The truth counted in 3-D, in the ground plane and before eval.min_travel_m, printed and stored.
   EXPECT_NE(output.find("ground-truth loop query frames: "), std::string::npos) << output;
   const auto& counts = compare["truth_counts"];
   EXPECT_EQ(counts["horizontal_plane"], "xy");  // the simulator's world is z up

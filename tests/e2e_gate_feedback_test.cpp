@@ -1,4 +1,4 @@
-// gate.feedback end to end (issue 13): on a short rendered street drive with loops forced by a small match
+// gate.feedback end to end: on a short rendered street drive with loops forced by a small match
 // margin and a small lag, the gate is re-anchored through verified loops; 1 and 2 threads give the same
 // files (the gate waits for exactly the loops of query frames <= i - L, never "what is ready"); every anchor
 // is the latest loop verified among those frames; without verify.enabled it is a config error; off, nothing

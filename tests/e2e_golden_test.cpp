@@ -1,7 +1,7 @@
 // Behaviour is pinned: the deterministic outputs of full DIRD, gated DIRD, full SeqSLAM and gated SeqSLAM
 // (loops.csv, frames.csv, trajectory.tum, candidate_cells.csv and the evaluation block of summary.json) have
-// the digests in tests/golden/run_digests.txt, recorded before the pipeline was reorganised (issue 11; gated
-// SeqSLAM's when it was added, issue 12). A refactor must leave them unchanged; a change of behaviour updates
+// the digests in tests/golden/run_digests.txt, recorded before the pipeline was reorganised (gated
+// SeqSLAM's when it was added). A refactor must leave them unchanged; a change of behaviour updates
 // the file on purpose, in the same commit, saying why:
 //   /usr/bin/python3 scripts/run_digest.py OUT/aliasing OUT/aliasing-seqslam-gated OUT/thumbs
 //     OUT/thumbs-seqslam-gated OUT/nordland-dird OUT/nordland-seqslam   (one command line)

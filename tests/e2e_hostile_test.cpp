@@ -1,4 +1,4 @@
-// The hostile-input audit (issue 15), end to end: the real binary on data the test generates. Nothing hangs
+// The hostile-input audit, end to end: the real binary on data the test generates. Nothing hangs
 // (bounded parameters, FIFOs refused), nothing is lost (SIGTERM/SIGHUP like SIGINT, two-sequence runs too,
 // one run per output folder, no output over an input, whole-or-absent files on a full disk), nothing is
 // silently wrong (an outlier row is the row dropped, frames keep their numbers, the majority image size,

@@ -1,4 +1,4 @@
-// The loop closer end to end (issue 13): on a short rendered street drive, loops forced by a small match
+// The loop closer end to end: on a short rendered street drive, loops forced by a small match
 // margin (pairs a few metres apart, which do share geometry) are verified and corrected identically with 1
 // and 2 threads, and the outputs carry their columns; thumbnail-size images skip verification with a reason;
 // the aliasing preset's copied street verifies in the images and is rejected by the odometry check; without
@@ -487,7 +487,7 @@ TEST(E2eLoopClosure, TheAliasingPresetsCopiedStreetIsRejectedByTheOdometry) {
 
 // The demo's only revisit is at night under street lamps, of a route driven by day. ORB does not match the
 // night frames to the day's; the tracking fallback does. With 4x the demo's drift the corrected trajectory
-// has at most half the odometry's error (issue 13), and every loop verified at night was verified by
+// has at most half the odometry's error, and every loop verified at night was verified by
 // tracking or by ORB with the reason saying which.
 TEST(E2eLoopClosure, TheNightRevisitIsVerifiedByTrackingAndHalvesTheError) {
   const fs::path sim = testing::make_temp_dir("e2e-closure-night-sim");

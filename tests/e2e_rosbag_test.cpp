@@ -1,4 +1,4 @@
-// A ROS1 bag gives the run the same data in ASL layout gives (issue 14). `loopgate simulate` renders a short
+// A ROS1 bag gives the run the same data in ASL layout gives. `loopgate simulate` renders a short
 // EuRoC-layout drive; the test writes it into a bag with EuRoC's topics (/cam0/image_raw sensor_msgs/Image
 // mono8, /imu0 sensor_msgs/Imu) and its calibration and ground truth into the ASL folder a bag needs beside
 // it; `loopgate run` on the ASL folder and on the bag must then write the same frames.csv, loops.csv and

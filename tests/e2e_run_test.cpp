@@ -87,7 +87,7 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
     EXPECT_EQ(summary["stages"][stage]["calls"].get<int>(), 60) << stage;
   }
   EXPECT_EQ(read_csv(out / "timing.csv").size(), 60u);
-  // trace.json (issue 14): the process named (method, mode, dataset), every stage of every frame a span on a
+  // trace.json: the process named (method, mode, dataset), every stage of every frame a span on a
   // named track, the end-of-stream work as spans on the producer's track.
   const auto trace = nlohmann::json::parse(read_file(out / "trace.json"));
   std::string process_name;
@@ -120,12 +120,12 @@ TEST(E2eRun, GeneratedKittiEveryFrameOnceAndBadImageReported) {
   EXPECT_NE(output.find("p99 ms"), std::string::npos) << "profiler table on stderr";
 }
 
-// Issue 14: a folder holding another run's outputs is refused (nothing in it changes) unless --force, which
+// A folder holding another run's outputs is refused (nothing in it changes) unless --force, which
 // replaces them; the same for compare.
 TEST(E2eRun, AnotherRunsOutputsAreRefusedUnlessForced) {
   const fs::path dataset = make_kitti_dataset(30);
   const fs::path out = testing::make_temp_dir("e2e-run-refuse");
-  // A margin the 30 frames exceed: a run that cannot compare any pair fails (issue 14).
+  // A margin the 30 frames exceed: a run that cannot compare any pair fails.
   const std::string base =
       "run --dataset " + dataset.string() + " --out " + out.string() + " --set match.margin=20";
   int status = -1;
@@ -226,7 +226,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   const auto summary = nlohmann::json::parse(read_file(out / "summary.json"));
   EXPECT_EQ(summary["frames_processed"].get<int>(), 30);
   EXPECT_TRUE(summary["dataset"]["has_imu"].get<bool>());
-  // Provenance (issue 14): how this output was made.
+  // Provenance: how this output was made.
   const auto& provenance = summary.at("provenance");
   EXPECT_NE(provenance.at("command_line").get<std::string>().find(" run --config "), std::string::npos)
       << provenance.dump();
@@ -269,7 +269,7 @@ TEST(E2eRun, SimulatedDemoWithImu) {
   EXPECT_EQ(summary2["frames_processed"].get<int>(), 30);
 }
 
-// trajectory.tum holds only the poses the odometry estimated (issue 14): the EKF initialises from ground
+// trajectory.tum holds only the poses the odometry estimated: the EKF initialises from ground
 // truth, which here begins at frame 10, so frames 0-9 are "initialising" and had been written as identity
 // poses (evo then failed on a short EuRoC excerpt). Every row of trajectory.tum is a tracking frame's pose.
 TEST(E2eRun, TrajectoryHoldsOnlyEstimatedPoses) {
@@ -351,7 +351,7 @@ TEST(E2eRun, CalibrationOptionIsCheckedAndNamed) {
   EXPECT_NE(output.find("is a KITTI sequence"), std::string::npos) << output;
 }
 
-// eval.truth_pairs_file (issue 14): the published (query, reference) pairs are the run's loop ground truth;
+// eval.truth_pairs_file: the published (query, reference) pairs are the run's loop ground truth;
 // the key is printed at start and echoed in summary.json; a pair naming a frame the dataset does not have is
 // an error naming the file and line, before anything is written.
 TEST(E2eRun, TruthPairsFileIsTheGroundTruth) {

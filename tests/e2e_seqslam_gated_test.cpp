@@ -1,4 +1,4 @@
-// Gated SeqSLAM end to end (issue 12): `loopgate simulate --preset aliasing`, then `loopgate run --method
+// Gated SeqSLAM end to end: `loopgate simulate --preset aliasing`, then `loopgate run --method
 // seqslam` with --mode gated and --mode full on it (configs/aliasing.yaml). The run says which SeqSLAM it
 // runs; the gated one writes the gate's files and columns, preprocesses and compares far less, and where the
 // full run's best match is a covered cell it reports the same frame (full SeqSLAM restricted to the covered

@@ -1,4 +1,4 @@
-// No silent failures (issue 14), end to end: a run that went through every frame and got nothing usable (no
+// No silent failures, end to end: a run that went through every frame and got nothing usable (no
 // odometry, no image, no detection possible) says so on the console, naming the file and what it expected,
 // and exits non-zero, with every output written (they show what happened frame by frame). The real binary on
 // KITTI-layout data the test generates.

@@ -179,7 +179,7 @@ TEST(E2eSimulate, TumTrajectoryWithSynthesisedImu) {
   EXPECT_NEAR(std::stod(mid[4]), 0.0, 0.2);
 }
 
-// Issue 14: an EuRoC ground truth without cam0/data.csv beside it makes simulate invent the frame times, and
+// An EuRoC ground truth without cam0/data.csv beside it makes simulate invent the frame times, and
 // it says so loudly; --frame-times gives them, as an EuRoC cam0/data.csv or a plain list (integer ns or
 // decimal seconds), and a bad list is an error naming its file and line.
 TEST(E2eSimulate, FrameTimesAreGivenOrLoudlyInvented) {

@@ -1,4 +1,4 @@
-// TUM-VI's layout end to end (issue 14): a simulated EuRoC tree rewritten the TUM-VI way (ground truth in
+// TUM-VI's layout end to end: a simulated EuRoC tree rewritten the TUM-VI way (ground truth in
 // mav0/mocap0/data.csv, calibration in Kalibr files dso/camchain.yaml and dso/imu_config.yaml, no
 // state_groundtruth_estimate0 and no sensor.yaml) runs with ground truth and the EKF, and gives the same
 // frames.csv, loops.csv and trajectory.tum as the same data in EuRoC's own layout.

@@ -101,7 +101,7 @@ TEST(EvalGroundTruth, FramesWithoutGroundTruthAreSkipped) {
   EXPECT_TRUE(gt.is_positive(16));
 }
 
-// eval.min_travel_m (issue 14): hovering is not a loop. Out along x to x = 9 (frames 0..9), hovering there
+// eval.min_travel_m: hovering is not a loop. Out along x to x = 9 (frames 0..9), hovering there
 // with millimetre jitter for 40 frames (10..49), then back to x = 0 (frames 50..59).
 TEST(EvalGroundTruth, ARevisitNeedsTravelInBetween) {
   std::vector<Eigen::Vector3d> p;

@@ -91,7 +91,7 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   EXPECT_EQ(keys, 14);
   EXPECT_EQ(config.gap_frames, 30);
   EXPECT_DOUBLE_EQ(config.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
-  EXPECT_FALSE(config.feedback);               // gate.feedback is off by default (issue 13)
+  EXPECT_FALSE(config.feedback);               // gate.feedback is off by default
   EXPECT_EQ(config.sigma_norm, "max_eigen");
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);
 }

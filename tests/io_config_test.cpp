@@ -170,7 +170,7 @@ TEST(IoConfig, FileErrorsNameTheFile) {
   EXPECT_EQ(config.alpha.seed, 9);
 }
 
-// Issue 15: a YAML key (or section) given twice is an error naming both lines; the last value no longer
+// A YAML key (or section) given twice is an error naming both lines; the last value no longer
 // wins silently.
 TEST(IoConfig, DuplicateKeysAreErrorsNamingBothLines) {
   const auto error = [](const std::string& text) {
@@ -190,7 +190,7 @@ TEST(IoConfig, DuplicateKeysAreErrorsNamingBothLines) {
   EXPECT_EQ(error("alpha:\n  count: 4\nbeta:\n  count: 4\n"), "");  // same key, different sections
 }
 
-// Issue 15: a FIFO given as --config blocked open() forever.
+// A FIFO given as --config blocked open() forever.
 TEST(IoConfig, ConfigFileMustBeARegularFile) {
   const auto dir = testing::make_temp_dir("config-fifo");
   ASSERT_EQ(::mkfifo((dir / "config.yaml").c_str(), 0600), 0);
@@ -205,7 +205,7 @@ TEST(IoConfig, ConfigFileMustBeARegularFile) {
   }
 }
 
-// Issue 15: a huge value is quoted capped in the error.
+// A huge value is quoted capped in the error.
 TEST(IoConfig, HugeValuesAreQuotedCapped) {
   try {
     from_yaml("", {"alpha.count=" + std::string(1'000'000, '9') + "x"});

@@ -85,7 +85,7 @@ TEST(IoDataset, NoFramesIsAnError) {
     open_dataset(root / "kitti2", lenient);
     FAIL();
   } catch (const DataError& e) {
-    // Its only row is bad: more than half of the file (issue 15), before "no usable frames".
+    // Its only row is bad: more than half of the file, before "no usable frames".
     EXPECT_NE(e.message().find("1 of its 1 rows are bad"), std::string::npos) << e.what();
   }
 }

@@ -288,7 +288,7 @@ TEST(IoEuroc, LenientRecordsAndSkips) {
   const auto d = open_euroc(dir, options);
   EXPECT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));  // the two bad rows skipped
   for (std::size_t i = 0; i < d->frame_count(); ++i) EXPECT_EQ(d->frame_t_ns(i), kT0 + i * kFramePeriod);
-  // IMU (issue 15): the longest run of increasing times is kept (0, 5, 10, 30: line 3 is the sample out of
+  // IMU: the longest run of increasing times is kept (0, 5, 10, 30: line 3 is the sample out of
   // order with the samples around it, dropped like a row of any other table); NaN and truncated rows skipped.
   std::vector<Timestamp> imu_t;
   for (const ImuSample& s : d->imu_samples()) imu_t.push_back(s.t_ns - kT0);

@@ -1,4 +1,4 @@
-// Guards on a command's files (issue 15): inputs are regular files (a FIFO would block open() forever), no
+// Guards on a command's files: inputs are regular files (a FIFO would block open() forever), no
 // output is an input, and one command at a time writes into an output folder.
 #include <gtest/gtest.h>
 #include <sys/stat.h>

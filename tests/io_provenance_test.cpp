@@ -1,4 +1,4 @@
-// Provenance of a run's outputs (src/io/provenance.hpp, issue 14): version, command line, start time, host
+// Provenance of a run's outputs (src/io/provenance.hpp): version, command line, start time, host
 // and the hash of the effective configuration.
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-// ROS1 bag reader (issue 14) on bags the tests write (tests/bag_test_writer.hpp): frames timed by
+// ROS1 bag reader on bags the tests write (tests/bag_test_writer.hpp): frames timed by
 // header.stamp and read again in any order and from several threads, IMU, the encodings (colour converted
 // like a colour PNG, 16-bit scaled like a 16-bit PNG, unknown ones named), CompressedImage decoding to the
 // pixels of the same PNG or JPEG file, calibration and ground truth from an EuRoC ASL folder, and the errors

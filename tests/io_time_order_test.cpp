@@ -1,4 +1,4 @@
-// Time order of the dataset tables (issue 15): a single outlier row is the one dropped, judged against the
+// Time order of the dataset tables: a single outlier row is the one dropped, judged against the
 // rows on both sides of it (the longest run of strictly increasing times is kept), not the good rows after
 // it; a file mostly bad fails loudly even in lenient mode; a rejected KITTI row does not renumber the later
 // frames; the reference image size is the majority's, not frame 0's.

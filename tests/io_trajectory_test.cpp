@@ -416,7 +416,7 @@ TEST(IoTrajectory, GarbageInputOnlyGivesDataErrors) {
     strict([&] { read_kitti_times(file); });
     std::vector<DataIssue> issues;
     io_detail::IssueLog lenient(false, &issues);
-    // Lenient: bad rows are recorded; only a file mostly bad is an error (issue 15), and only a DataError.
+    // Lenient: bad rows are recorded; only a file mostly bad is an error, and only a DataError.
     const auto tolerant = [&](auto&& read) {
       try {
         read();

@@ -76,7 +76,7 @@ TEST(PipelineConfig, BadValuesNameTheKey) {
   EXPECT_NE(error_of({"output.progress=maybe"}).find("output.progress"), std::string::npos);
 }
 
-// Issue 15: parameters that could hang a run or exhaust memory are bounded, and the error says the bound.
+// Parameters that could hang a run or exhaust memory are bounded, and the error says the bound.
 TEST(PipelineConfig, EveryParameterIsBounded) {
   EXPECT_NE(error_of({"match.nms_half_window=2000000000"})
                 .find("match.nms_half_window: must be in [0, 1000] frames (got 2000000000)"),
@@ -124,7 +124,7 @@ TEST(PipelineConfig, EveryParameterIsBounded) {
   }
 }
 
-// Issue 15: --rate 1e-300 overflowed (t - t0) / rate in int64; --frames 500:100 said "no frame of the
+// --rate 1e-300 overflowed (t - t0) / rate in int64; --frames 500:100 said "no frame of the
 // 18446744073709551615 in the dataset".
 TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   EXPECT_NE(
@@ -148,7 +148,7 @@ TEST(PipelineConfig, RatesAndRangesSayWhatIsWrong) {
   EXPECT_EQ(run.frame_range(15), (std::pair<std::size_t, std::size_t>{10, 15}));
 }
 
-// odometry.source none (issue 14): appearance only, with run.mode full; what needs poses is an error naming
+// odometry.source none: appearance only, with run.mode full; what needs poses is an error naming
 // the key and the way out.
 TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
   EXPECT_EQ(error_of({"odometry.source=none", "run.mode=full"}), "");
@@ -173,7 +173,7 @@ TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
   EXPECT_FALSE(shipped.eval.truth_pairs_file.empty());
 }
 
-// A bound error names where the key was set (issue 14): the file and line, or the --set.
+// A bound error names where the key was set: the file and line, or the --set.
 TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
   const std::filesystem::path file = std::filesystem::temp_directory_path() / "loopgate-bound-origin.yaml";
   std::ofstream(file) << "eval:\n  truth_radius_m: 2\n  min_travel_m: -1\n";
@@ -191,7 +191,7 @@ TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
             "eval.min_travel_m=1e9)");
 }
 
-// gate.feedback (issue 13) needs verified loops while the stream runs: verify.enabled, and not SeqSLAM; the
+// gate.feedback needs verified loops while the stream runs: verify.enabled, and not SeqSLAM; the
 // error names the key and where it was set.
 TEST(PipelineConfig, GateFeedbackNeedsVerificationAndAStreamingMethod) {
   EXPECT_EQ(error_of({"gate.feedback=true", "verify.enabled=true"}), "");

@@ -190,7 +190,7 @@ TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
   EXPECT_EQ(result.summary["images_decoded"].get<std::size_t>(), 0u);  // lazy decode: nobody needs pixels
 }
 
-// Issue 15: an interrupted run's evaluation counted the ground-truth positives of frames it never processed.
+// An interrupted run's evaluation counted the ground-truth positives of frames it never processed.
 // Now it covers the frames it got to: the same evaluation as a run over exactly that range, and fewer
 // positives than the whole dataset's.
 TEST(PipelineFullMode, InterruptedRunIsEvaluatedOnlyOverTheFramesItGotTo) {

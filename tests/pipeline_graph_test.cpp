@@ -153,7 +153,7 @@ TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
   const auto rows = read_csv(out / "frames.csv");
   ASSERT_EQ(rows.size(), result.frames_processed);
   for (std::size_t i = 0; i < rows.size(); ++i) EXPECT_EQ(rows[i][0], std::to_string(i));  // contiguous seq
-  // Issue 14: trace.json shows each dropped frame and each deadline miss as an instant event, with its frame.
+  // Trace.json shows each dropped frame and each deadline miss as an instant event, with its frame.
   const auto trace = nlohmann::json::parse(testing::read_file(out / "trace.json"));
   std::set<std::int64_t> dropped, missed;
   std::set<std::int64_t> processed;
@@ -171,7 +171,7 @@ TEST(PipelineGraph, RealTimeReplayDropsWhenSaturated) {
   for (const std::int64_t frame : missed) EXPECT_EQ(processed.count(frame), 1u) << frame;
 }
 
-// The stop request comes on an event, not a timer (issue 15: a fixed 150 ms timer failed under TSan, where
+// The stop request comes on an event, not a timer (a fixed 150 ms timer failed under TSan, where
 // no frame was through by then): when frame 50 is read. At most run.max_in_flight frames are in the graph,
 // so every frame up to 50 - max_in_flight has left it, and the producer stops within max_in_flight frames.
 TEST(PipelineGraph, StopRequestDrainsAndWritesOutputs) {
@@ -208,7 +208,7 @@ TEST(PipelineGraph, EscapingExceptionCancelsAndNamesTheFrame) {
   EXPECT_TRUE(summary["failed"].get<bool>());
 }
 
-// Issue 15: odometry.file pointing at this run's own output (a previous run's trajectory.tum) was read,
+// Odometry.file pointing at this run's own output (a previous run's trajectory.tum) was read,
 // then overwritten. Refused before anything is written; the file is left as it was.
 TEST(PipelineGraph, AnInputThatIsAnOutputIsRefused) {
   const FakeDataset dataset(20);

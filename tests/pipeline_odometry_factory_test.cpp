@@ -157,7 +157,7 @@ TEST(PipelineOdometryFactory, FileSourceReadsTheTrajectory) {
 }
 
 // odometry.file in KITTI (12 columns: line k is frame k, timed by the dataset; 13: a time first) and EuRoC
-// formats as well as TUM (issue 14), told apart by their content or named by odometry.file_format.
+// formats as well as TUM, told apart by their content or named by odometry.file_format.
 TEST(PipelineOdometryFactory, FileSourceReadsKittiAndEurocFormats) {
   const testing::FakeDataset dataset(10);
   const fs::path dir = testing::make_temp_dir("odometry-factory-formats");
@@ -200,7 +200,7 @@ TEST(PipelineOdometryFactory, FileSourceReadsKittiAndEurocFormats) {
   }
 }
 
-// Issue 15: a trajectory that does not overlap the dataset made every frame "odometry lost" with exit 0;
+// A trajectory that does not overlap the dataset made every frame "odometry lost" with exit 0;
 // now it is an error naming the file and both time spans.
 // An image folder has no ground truth, IMU or calibration: auto resolves to none (appearance only), which
 // gives no poses; a run that needs them (the gate, odometry mode, verify) is refused, saying why.

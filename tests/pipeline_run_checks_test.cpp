@@ -1,4 +1,4 @@
-// The run's checks (issue 14): a run that got nothing usable says what is missing, naming what it expected.
+// The run's checks: a run that got nothing usable says what is missing, naming what it expected.
 #include <gtest/gtest.h>
 
 #include <string>

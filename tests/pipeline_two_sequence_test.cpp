@@ -115,7 +115,7 @@ TEST(PipelineTwoSequence, QueryFindsItsAlignedReference) {
   EXPECT_FALSE(std::filesystem::exists(out / "trace.json"));  // output.trace is off
 }
 
-// --trace in two-sequence mode (issue 14): the process named, the phases on the main track, and the
+// --trace in two-sequence mode: the process named, the phases on the main track, and the
 // describe blocks on the threads that did them, covering every frame of both sequences once.
 TEST(PipelineTwoSequence, TraceShowsPhasesAndBlocks) {
   const RevisitDataset reference(kPeriod, 1, 0);
@@ -447,11 +447,11 @@ TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {
   }
 }
 
-// Issue 7: Nordland summer (reference) vs winter (query), configs/nordland.yaml, both methods, the whole
+// Nordland summer (reference) vs winter (query), configs/nordland.yaml, both methods, the whole
 // ride (3576 x 3576). Measured when written (docs/nordland.md): DIRD AP 0.104, R@P100 0, 1361 query
 // frames with a loop, the best one within +-2 frames for 743; SeqSLAM AP 0.483, R@P100 0.355, 1535
 // accepted of which 1494 within +-2, every query's match within +-2 for 1782.
-// Issue 15: a stop request (SIGINT, SIGTERM, SIGHUP in the app) left an empty output folder. Now the query
+// A stop request (SIGINT, SIGTERM, SIGHUP in the app) left an empty output folder. Now the query
 // frames described before it (a prefix) are matched and every output is written for them; a stop before
 // the reference is complete gives complete, empty outputs.
 TEST(PipelineTwoSequence, StopRequestWritesOutputsForTheQueryFramesDescribed) {
@@ -545,7 +545,7 @@ TEST(PipelineTwoSequence, NordlandSummerWinterDirdVsSeqSlam) {
   EXPECT_GT(s_pr["average_precision"].get<double>(),
             2 * d["evaluation"]["precision_recall"]["average_precision"].get<double>());
 
-  // Issue 12: dird-seqslam (the config's method) beats both, AP and recall at 1 (measured: 0.962, 0.963).
+  // Dird-seqslam (the config's method) beats both, AP and recall at 1 (measured: 0.962, 0.963).
   const auto dird_seqslam = load_config<PipelineConfig>(config_file, {"output.progress=off"});
   ASSERT_EQ(dird_seqslam.run.method, Detector::kDirdSeqSlam);
   const auto dird_seqslam_out = testing::make_temp_dir("pipeline-nordland-dird-seqslam");
