@@ -31,7 +31,7 @@
 #include "io/g2o_file.hpp"
 #include "io/trajectory_io.hpp"
 #include "pipeline/loop_oracle.hpp"
-#include "pipeline/run_metrics.hpp"
+#include "pipeline/outputs/run_metrics.hpp"
 
 namespace {
 

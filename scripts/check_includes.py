@@ -45,8 +45,24 @@ ROS_ALLOWED = ("bag",)
 ROS_RULE = "only bag/ includes ROS1 headers (their generated messages do not compile as C++20)"
 ROS_PREFIXES = ("ros/", "rosbag/", "sensor_msgs/", "std_msgs/", "geometry_msgs/")
 
+# The rooms of pipeline/, bottom to top (docs/architecture.md § Rooms of the pipeline). A file in a room
+# includes only rooms below or beside it: frame/ (what a frame carries, its input steps, the run clock, the
+# gate-feedback channel) < methods/ (detection methods, their registry, distances, stores) < outputs/ (writers,
+# summary, run folder, RunResult) < graph/ (the run's objects and node bodies, end-of-run checks). The files
+# directly in pipeline/ are the folder's base (pipeline_config, odometry_factory: they include no room) and its
+# entry points (pipeline.hpp/.cpp, two_sequence: they may include every room). loop closure (loops/, or the
+# loop_* and loops_writer files directly in pipeline/) keeps its own rules.
+PIPELINE_ROOMS = ("frame", "methods", "outputs", "graph")
+PIPELINE_BASE = ("pipeline_config", "odometry_factory")
+PIPELINE_ENTRY = ("pipeline.hpp",)
+ROOM_RULE = "pipeline/%s/ must not include pipeline/%s/ (rooms include only rooms below them: %s)"
+BASE_RULE = "pipeline/%s must not include pipeline/%s/ (the folder's base includes no room)"
+ENTRY_RULE = "only pipeline/pipeline.cpp and app/ include pipeline/pipeline.hpp (the entry point, nothing below it)"
+
 __doc__ += "".join("  - " + rule + "\n" for _, _, rule in RULES) + "  - " + TBB_RULE + "\n"
 __doc__ += "  - " + ROS_RULE + "\n"
+__doc__ += "  - inside pipeline/: rooms run downhill, " + " < ".join(PIPELINE_ROOMS) + "; the base files ("
+__doc__ += ", ".join(PIPELINE_BASE) + ") include no room; " + ENTRY_RULE + "\n"
 
 INCLUDE = re.compile(r'^\s*#\s*include\s*([<"])([^>"]+)[>"]')
 
@@ -84,6 +100,51 @@ def include_lines(path):
             match = INCLUDE.match(code)
             if match:
                 yield number, match.group(1), match.group(2)
+
+
+def pipeline_place(rel_path):
+    """Where a path relative to the source root sits in pipeline/: ("room", name), ("base", stem),
+    ("entry", file name), ("other", ...) for any other pipeline/ file, or None outside pipeline/."""
+    parts = rel_path.replace(os.sep, "/").split("/")
+    if len(parts) < 2 or parts[0] != "pipeline":
+        return None
+    if len(parts) > 2:
+        return ("room", parts[1]) if parts[1] in PIPELINE_ROOMS else ("other", parts[1])
+    stem = os.path.splitext(parts[1])[0]
+    if stem in PIPELINE_BASE:
+        return ("base", stem)
+    if parts[1] in PIPELINE_ENTRY:
+        return ("entry", parts[1])
+    return ("other", parts[1])
+
+
+def included_path(src_root, file_path, delimiter, included):
+    """The path (relative to the source root) of a project include, or None."""
+    if delimiter == '"':
+        beside = os.path.normpath(os.path.join(os.path.dirname(file_path), included))
+        if included.startswith(".") or os.path.isfile(beside):
+            rel = os.path.relpath(beside, src_root)
+            return None if rel.startswith("..") else rel.replace(os.sep, "/")
+    first = included.replace("\\", "/").split("/")[0]
+    return included.replace("\\", "/") if first in MODULES and "/" in included else None
+
+
+def room_violation(rel_file, rel_included):
+    """The room rule an include inside pipeline/ breaks, or None."""
+    target = pipeline_place(rel_included)
+    if target is None:
+        return None
+    if target[0] == "entry" and rel_file.replace(os.sep, "/") != "pipeline/pipeline.cpp":
+        return ENTRY_RULE if pipeline_place(rel_file) is not None else None
+    source = pipeline_place(rel_file)
+    if source is None or target[0] != "room":
+        return None
+    if source[0] == "base":
+        return BASE_RULE % (source[1], target[1])
+    if source[0] == "room" and PIPELINE_ROOMS.index(target[1]) > PIPELINE_ROOMS.index(source[1]):
+        below = PIPELINE_ROOMS[:PIPELINE_ROOMS.index(source[1])]
+        return ROOM_RULE % (source[1], target[1], ", ".join(below) if below else "none")
+    return None
 
 
 def included_module(src_root, file_path, delimiter, included):
@@ -125,6 +186,12 @@ def check(src_root):
                     violations.append((path, number, text, ROS_RULE))
                 target = included_module(src_root, path, delimiter, included)
                 if target is None:
+                    continue
+                if module == "pipeline" and target == "pipeline":
+                    rel_included = included_path(src_root, path, delimiter, included)
+                    rule = room_violation(os.path.relpath(path, src_root), rel_included) if rel_included else None
+                    if rule:
+                        violations.append((path, number, text, rule))
                     continue
                 for applies_to, forbidden, rule in RULES:
                     if applies_to(module) and target in forbidden:

@@ -33,6 +33,20 @@ CASES = (
     ("io/ros_user.cpp", '#include "io/dataset.hpp"\n#include <sensor_msgs/Image.h>\n', 2),
     ("pipeline/bag_user.cpp", '#include "bag/bag_reader.hpp"\n', 1),
     ("bag/up.cpp", '#include <rosbag/bag.h>\n#include "core/types.hpp"\n', 2),
+    # The rooms of pipeline/: a method including the graph or the outputs, outputs including the graph, the
+    # frame room including a method, the base including a room, a room including the entry point upwards.
+    ("pipeline/methods/m.cpp", '#include "pipeline/frame/frame_record.hpp"\n#include "pipeline/graph/g.hpp"\n', 2),
+    ("pipeline/methods/w.cpp", '#include "pipeline/outputs/run_outputs.hpp"\n', 1),
+    ("pipeline/outputs/o.cpp", '#include "pipeline/methods/m.hpp"\n#include "../graph/pipeline_run.hpp"\n', 2),
+    ("pipeline/frame/f.hpp", '#include "pipeline/methods/detection_method.hpp"\n', 1),
+    ("pipeline/pipeline_config.cpp", '#include "pipeline/methods/method_registry.hpp"\n', 1),
+    ("pipeline/outputs/r.cpp", '#include "pipeline/pipeline.hpp"\n', 1),
+    ("pipeline/loop_x.cpp", '#include "pipeline/pipeline_config.hpp"\n#include "pipeline/pipeline.hpp"\n', 2),
+    # Allowed: the rooms downhill, the entry point over every room, app/ over the entry point.
+    ("pipeline/graph/g.cpp", '#include "pipeline/outputs/o.hpp"\n#include "pipeline/methods/m.hpp"\n'
+     '#include "pipeline/frame/f.hpp"\n#include "pipeline/pipeline_config.hpp"\n', None),
+    ("pipeline/outputs/o.cpp", '#include "pipeline/methods/m.hpp"\n#include "pipeline/frame/f.hpp"\n', None),
+    ("pipeline/pipeline.cpp", '#include "pipeline/pipeline.hpp"\n#include "pipeline/graph/g.hpp"\n', None),
     # Allowed: the layering as it is meant to be, TBB in pipeline/ and sim/, includes in comments.
     ("pipeline/graph.cpp",
      '#include <tbb/flow_graph.h>\n#include "io/dataset.hpp"\n#include "stages/gate/pose_gate.hpp"\n', None),

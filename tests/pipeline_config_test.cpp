@@ -10,6 +10,7 @@
 
 #include "core/error.hpp"
 #include "io/config.hpp"
+#include "pipeline/methods/method_registry.hpp"
 #include "test_support.hpp"
 
 namespace loopgate {
@@ -22,6 +23,16 @@ std::filesystem::path config_file(const std::string& name) {
 std::string error_of(const std::vector<std::string>& overrides) {
   try {
     load_config<PipelineConfig>({}, overrides);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// The error of load_pipeline_config, which adds the checks that depend on the method's row.
+std::string method_error_of(const std::vector<std::string>& overrides) {
+  try {
+    load_pipeline_config({}, overrides, {}, ConfigPaths::kAsWritten);
   } catch (const ConfigError& e) {
     return e.what();
   }
@@ -200,7 +211,8 @@ TEST(PipelineConfig, GateFeedbackNeedsVerificationAndAStreamingMethod) {
       error_of({"gate.feedback=true"}),
       "gate.feedback: the gate is re-anchored on verified loop closures, and verify.enabled is false: set "
       "verify.enabled=true or gate.feedback=false (--set gate.feedback=true)");
-  EXPECT_NE(error_of({"gate.feedback=true", "verify.enabled=true", "run.method=seqslam"})
+  EXPECT_EQ(method_error_of({"gate.feedback=true", "verify.enabled=true", "run.method=dird-seqslam"}), "");
+  EXPECT_NE(method_error_of({"gate.feedback=true", "verify.enabled=true", "run.method=seqslam"})
                 .find("gate.feedback: run.method seqslam decides its loops at the end of the stream"),
             std::string::npos);
   const std::filesystem::path file = std::filesystem::temp_directory_path() / "loopgate-feedback-origin.yaml";

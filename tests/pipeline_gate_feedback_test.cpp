@@ -8,7 +8,7 @@
 #include <optional>
 #include <stdexcept>
 
-#include "pipeline/gate_feedback.hpp"
+#include "pipeline/frame/gate_feedback.hpp"
 
 namespace loopgate {
 namespace {

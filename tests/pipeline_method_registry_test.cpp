@@ -7,7 +7,7 @@
 
 #include "core/error.hpp"
 #include "io/config.hpp"
-#include "pipeline/method_registry.hpp"
+#include "pipeline/methods/method_registry.hpp"
 #include "pipeline/pipeline_config.hpp"
 
 namespace loopgate {

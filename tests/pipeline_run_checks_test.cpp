@@ -3,7 +3,7 @@
 
 #include <string>
 
-#include "pipeline/run_checks.hpp"
+#include "pipeline/graph/run_checks.hpp"
 
 namespace loopgate {
 namespace {

@@ -13,7 +13,7 @@
 #include <thread>
 
 #include "parallel/parallel_handoff.hpp"
-#include "pipeline/time_accounting.hpp"
+#include "pipeline/outputs/time_accounting.hpp"
 
 namespace loopgate {
 namespace {

@@ -31,7 +31,7 @@
 #include "core/error.hpp"
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
-#include "pipeline/method_registry.hpp"
+#include "pipeline/methods/method_registry.hpp"
 
 namespace loopgate::app {
 

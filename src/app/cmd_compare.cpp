@@ -36,7 +36,7 @@
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/loop_closer.hpp"
-#include "pipeline/method_registry.hpp"
+#include "pipeline/methods/method_registry.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"

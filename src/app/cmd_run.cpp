@@ -16,7 +16,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
-#include "pipeline/method_registry.hpp"
+#include "pipeline/methods/method_registry.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/two_sequence.hpp"
 

@@ -17,9 +17,9 @@
 #include "parallel/parallel_handoff.hpp"
 #include "pipeline/loop_oracle.hpp"
 #include "pipeline/loops_writer.hpp"
-#include "pipeline/pipeline.hpp"
+#include "pipeline/outputs/run_metrics.hpp"
+#include "pipeline/outputs/run_result.hpp"
 #include "pipeline/pipeline_config.hpp"
-#include "pipeline/run_metrics.hpp"
 
 namespace loopgate {
 

@@ -12,7 +12,7 @@
 #include <optional>
 #include <vector>
 
-#include "pipeline/detection_method.hpp"
+#include "pipeline/methods/detection_method.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/sequence_matcher.hpp"
 

@@ -6,7 +6,6 @@
 
 #include "core/error.hpp"
 #include "io/config.hpp"
-#include "pipeline/method_registry.hpp"
 
 namespace loopgate {
 
@@ -132,12 +131,6 @@ void PipelineConfig::validate_gate_feedback() const {
     throw ConfigError(
         "gate.feedback: the gate is re-anchored on verified loop closures, and verify.enabled is false: set "
         "verify.enabled=true or gate.feedback=false");
-  }
-  const MethodEntry* method = method_entry(*this);
-  if (method != nullptr && !method->streams_loops) {
-    throw ConfigError(
-        "gate.feedback: run.method seqslam decides its loops at the end of the stream, so no loop exists "
-        "while the gate runs: use run.method dird or dird-seqslam, or gate.feedback=false");
   }
 }
 

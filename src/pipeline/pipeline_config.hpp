@@ -291,8 +291,8 @@ struct PipelineConfig {
   // odometry.source none gives no poses: the modes and options that need them are errors (the same check
   // for `auto` resolving to none is made when the dataset is known, pipeline/odometry_factory.hpp).
   void validate_odometry_none() const;
-  // gate.feedback needs verified loops (verify.enabled) that exist while the stream runs (not SeqSLAM, which
-  // decides at the end of the stream).
+  // gate.feedback needs verified loops (verify.enabled); that they exist while the stream runs is the
+  // method's row's to say (validate_method, pipeline/methods/method_registry.hpp).
   void validate_gate_feedback() const;
   // How the datasets of this run are opened (run.strict, run.camera_index, section dataset).
   OpenOptions open_options() const;
