@@ -61,6 +61,163 @@ std::optional<fs::path> first_existing(const std::vector<fs::path>& candidates) 
   return std::nullopt;
 }
 
+// Where times.txt (and the sequence's metadata) live: `dir`, or one level up when `dir` holds only a subset
+// of the images (image_N/ here, times.txt in the parent).
+struct KittiPlace {
+  fs::path meta_dir;
+  bool subset = false;
+};
+
+KittiPlace locate_times(const fs::path& dir, const fs::path& image_dir) {
+  std::error_code ec;
+  KittiPlace place{dir, false};
+  if (fs::exists(dir / "times.txt", ec)) require_regular_file(dir / "times.txt");
+  if (fs::is_regular_file(dir / "times.txt", ec)) return place;
+  const fs::path parent = fs::absolute(dir, ec).parent_path();
+  if (fs::is_directory(image_dir, ec) && fs::is_regular_file(parent / "times.txt", ec)) {
+    place.meta_dir = parent;
+    place.subset = true;
+    return place;
+  }
+  throw DataError(
+      dir / "times.txt",
+      "times.txt not found, expected KITTI layout (image_N/ with times.txt here or one level up)");
+}
+
+// The image files of `image_dir` by frame number; names that are not a frame number of times.txt, and second
+// images of a frame, are reported and ignored.
+std::map<std::size_t, fs::path> index_images(const fs::path& image_dir, const fs::path& times_file,
+                                             std::size_t time_rows, io_detail::IssueLog& log) {
+  std::map<std::size_t, fs::path> images;
+  std::error_code ec;
+  if (!fs::is_directory(image_dir, ec)) return images;
+  for (const fs::path& file : io_detail::list_image_files(image_dir)) {
+    const std::optional<std::size_t> index = frame_number(file);
+    if (!index) {
+      log.report(file, 0, "image name is not a frame number, expected e.g. 000042.png (file ignored)");
+    } else if (*index >= time_rows) {
+      log.report(file, 0,
+                 "image " + std::to_string(*index) + " has no row in " + times_file.string() + " (" +
+                     std::to_string(time_rows) + " rows; file ignored)");
+    } else if (!images.emplace(*index, file).second) {
+      log.report(file, 0,
+                 "second image for frame " + std::to_string(*index) + " besides " +
+                     images[*index].filename().string() + " (file ignored)");
+    }
+  }
+  return images;
+}
+
+// A whole sequence: one frame per valid times.txt row (its image, or the default name when it is missing),
+// with warnings for rejected rows, missing images and images found under another camera's folder.
+void add_sequence_frames(io_detail::LoadedDataset& d, const std::vector<std::optional<Timestamp>>& times,
+                         const std::map<std::size_t, fs::path>& images, const fs::path& dir,
+                         const fs::path& image_dir, const fs::path& times_file, int camera_index) {
+  std::size_t missing = 0;
+  std::string rejected;  // the frames whose times.txt row was rejected: a gap in the numbering
+  std::size_t rejected_count = 0;
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    if (!times[i]) {
+      if (++rejected_count <= 10) rejected += (rejected.empty() ? "" : ", ") + std::to_string(i);
+      continue;
+    }
+    const auto it = images.find(i);
+    d.frames.push_back(io_detail::FrameEntry{
+        *times[i], it != images.end() ? it->second : default_image_name(image_dir, i), i});
+    if (d.images_present && it == images.end()) ++missing;
+  }
+  if (rejected_count > 0) {
+    spdlog::warn(
+        "{}: {} row(s) rejected, so frame(s) {}{} are skipped; every other frame keeps its KITTI number "
+        "(its image 000123.png is frame 123 in frames.csv and loops.csv), which shows the gap",
+        times_file.string(), rejected_count, rejected, rejected_count > 10 ? ", ..." : "");
+  }
+  // Another camera's folder here: the user most likely wants that camera (KITTI's colour download has only
+  // image_2/ and image_3/).
+  std::error_code ec;
+  std::string other;
+  for (int k = 0; k <= 3 && other.empty() && !d.images_present; ++k) {
+    const fs::path candidate = image_dir.parent_path() / ("image_" + std::to_string(k));
+    if (k != camera_index && fs::is_directory(candidate, ec)) other = std::to_string(k);
+  }
+  if (!d.images_present && !other.empty()) {
+    spdlog::warn(
+        "{}: no images in {}, but image_{}/ is there: set run.camera_index={} to read it (frames have "
+        "timestamps only)",
+        dir.string(), image_dir.string(), other, other);
+  } else if (!d.images_present) {
+    spdlog::info("{}: no images in {}: frames have timestamps only", dir.string(), image_dir.string());
+  } else if (missing > 0) {
+    spdlog::warn("{}: {} of {} frames have no image file (those frames fail to load)", image_dir.string(),
+                 missing, d.frames.size());
+  }
+}
+
+// Ground truth (T_w_cam0 = T_w_b) from the first poses file found: 13 columns carry their own times, 12
+// columns are row i = frame i, timed by times.txt.
+void read_ground_truth(io_detail::LoadedDataset& d, const std::vector<fs::path>& candidates,
+                       const std::vector<std::optional<Timestamp>>& times, const fs::path& times_file,
+                       const fs::path& dir, io_detail::IssueLog& log) {
+  const auto poses_file = first_existing(candidates);
+  if (!poses_file) return;
+  const auto rows = io_detail::read_kitti_pose_rows(*poses_file, log);
+  const bool timed = std::any_of(rows.begin(), rows.end(), [](const auto& r) { return r && r->t_ns; });
+  if (timed) {
+    // 13 columns: each pose has its own time; it is interpolated to the frame times like EuRoC's.
+    for (const auto& row : rows) {
+      if (!row) continue;
+      GroundTruthState s;
+      s.t_ns = *row->t_ns;
+      s.T_w_b = row->T_w_cam0;
+      d.gt.push_back(s);
+    }
+    spdlog::info("{}: ground truth from {}, timed by its first column", dir.string(), poses_file->string());
+  } else {
+    // 12 columns: row i is frame i, timed by times.txt.
+    if (rows.size() != times.size()) {
+      log.report(*poses_file, 0,
+                 std::to_string(rows.size()) + " poses, expected " + std::to_string(times.size()) +
+                     " (the rows of " + times_file.string() + ")" +
+                     (rows.size() > times.size() ? "; extra poses ignored" : "; ground truth ends early"));
+    }
+    for (std::size_t i = 0; i < std::min(rows.size(), times.size()); ++i) {
+      if (!times[i] || !rows[i]) continue;
+      GroundTruthState s;
+      s.t_ns = *times[i];
+      s.T_w_b = rows[i]->T_w_cam0;
+      d.gt.push_back(s);
+    }
+  }
+  spdlog::debug("{}: ground truth from {}", dir.string(), poses_file->string());
+}
+
+// The camera of `camera_index` from the first calib.txt found, its rate from the valid frame times; a bad
+// file is reported and ignored.
+void read_calibration(io_detail::LoadedDataset& d, const std::vector<fs::path>& candidates,
+                      const std::vector<std::optional<Timestamp>>& times, int camera_index,
+                      io_detail::IssueLog& log) {
+  const auto calib_file = first_existing(candidates);
+  if (!calib_file) return;
+  try {
+    CameraCalibration camera = read_kitti_calib(*calib_file, camera_index);
+    std::optional<Timestamp> first;
+    std::optional<Timestamp> last;
+    std::size_t count = 0;
+    for (const auto& t : times) {
+      if (!t) continue;
+      if (!first) first = t;
+      last = t;
+      ++count;
+    }
+    if (count >= 2 && *last > *first) {
+      camera.rate_hz = static_cast<double>(count - 1) / ns_to_s(*last - *first);
+    }
+    d.camera_calibration = camera;
+  } catch (const DataError& e) {
+    log.report(e.file(), e.line(), e.message() + " (calibration ignored)");
+  }
+}
+
 }  // namespace
 
 std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& options) {
@@ -71,22 +228,9 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw DataError(dir, "KITTI sequence directory not found");
   const fs::path image_dir = dir / ("image_" + std::to_string(options.camera_index));
-
-  // Where times.txt (and the sequence metadata) live.
-  fs::path meta_dir = dir;
-  bool subset = false;
-  if (fs::exists(dir / "times.txt", ec)) require_regular_file(dir / "times.txt");
-  if (!fs::is_regular_file(dir / "times.txt", ec)) {
-    const fs::path parent = fs::absolute(dir, ec).parent_path();
-    if (fs::is_directory(image_dir, ec) && fs::is_regular_file(parent / "times.txt", ec)) {
-      meta_dir = parent;
-      subset = true;
-    } else {
-      throw DataError(
-          dir / "times.txt",
-          "times.txt not found, expected KITTI layout (image_N/ with times.txt here or one level up)");
-    }
-  }
+  const KittiPlace place = locate_times(dir, image_dir);
+  const fs::path& meta_dir = place.meta_dir;
+  const bool subset = place.subset;
 
   auto d = std::make_unique<io_detail::LoadedDataset>();
   d->layout_name = "kitti";
@@ -97,24 +241,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
   const std::vector<std::optional<Timestamp>> times = io_detail::read_kitti_time_rows(times_file, log);
   d->source_time_table = times;
 
-  // Image files by frame number.
-  std::map<std::size_t, fs::path> images;
-  if (fs::is_directory(image_dir, ec)) {
-    for (const fs::path& file : io_detail::list_image_files(image_dir)) {
-      const std::optional<std::size_t> index = frame_number(file);
-      if (!index) {
-        log.report(file, 0, "image name is not a frame number, expected e.g. 000042.png (file ignored)");
-      } else if (*index >= times.size()) {
-        log.report(file, 0,
-                   "image " + std::to_string(*index) + " has no row in " + times_file.string() + " (" +
-                       std::to_string(times.size()) + " rows; file ignored)");
-      } else if (!images.emplace(*index, file).second) {
-        log.report(file, 0,
-                   "second image for frame " + std::to_string(*index) + " besides " +
-                       images[*index].filename().string() + " (file ignored)");
-      }
-    }
-  }
+  const std::map<std::size_t, fs::path> images = index_images(image_dir, times_file, times.size(), log);
   d->images_present = !images.empty();
 
   if (subset) {
@@ -124,43 +251,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
     spdlog::info("{}: no times.txt here: {} frames are the images present, timed by {}", dir.string(),
                  d->frames.size(), times_file.string());
   } else {
-    std::size_t missing = 0;
-    std::string rejected;  // the frames whose times.txt row was rejected: a gap in the numbering
-    std::size_t rejected_count = 0;
-    for (std::size_t i = 0; i < times.size(); ++i) {
-      if (!times[i]) {
-        if (++rejected_count <= 10) rejected += (rejected.empty() ? "" : ", ") + std::to_string(i);
-        continue;
-      }
-      const auto it = images.find(i);
-      d->frames.push_back(io_detail::FrameEntry{
-          *times[i], it != images.end() ? it->second : default_image_name(image_dir, i), i});
-      if (d->images_present && it == images.end()) ++missing;
-    }
-    if (rejected_count > 0) {
-      spdlog::warn(
-          "{}: {} row(s) rejected, so frame(s) {}{} are skipped; every other frame keeps its KITTI number "
-          "(its image 000123.png is frame 123 in frames.csv and loops.csv), which shows the gap",
-          times_file.string(), rejected_count, rejected, rejected_count > 10 ? ", ..." : "");
-    }
-    // Another camera's folder here: the user most likely wants that camera (KITTI's colour download has only
-    // image_2/ and image_3/).
-    std::string other;
-    for (int k = 0; k <= 3 && other.empty() && !d->images_present; ++k) {
-      const fs::path candidate = image_dir.parent_path() / ("image_" + std::to_string(k));
-      if (k != options.camera_index && fs::is_directory(candidate, ec)) other = std::to_string(k);
-    }
-    if (!d->images_present && !other.empty()) {
-      spdlog::warn(
-          "{}: no images in {}, but image_{}/ is there: set run.camera_index={} to read it (frames have "
-          "timestamps only)",
-          dir.string(), image_dir.string(), other, other);
-    } else if (!d->images_present) {
-      spdlog::info("{}: no images in {}: frames have timestamps only", dir.string(), image_dir.string());
-    } else if (missing > 0) {
-      spdlog::warn("{}: {} of {} frames have no image file (those frames fail to load)", image_dir.string(),
-                   missing, d->frames.size());
-    }
+    add_sequence_frames(*d, times, images, dir, image_dir, times_file, options.camera_index);
   }
 
   if (d->frames.empty()) {
@@ -169,68 +260,17 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
                            : "no usable frames, expected one time in seconds per row");
   }
 
-  // Ground truth (T_w_cam0 = T_w_b).
   std::vector<fs::path> pose_candidates = {dir / "poses.txt"};
   if (subset) pose_candidates.push_back(meta_dir / "poses.txt");
   const std::string sequence = fs::absolute(meta_dir, ec).filename().string();
   pose_candidates.push_back(meta_dir / "poses" / (sequence + ".txt"));
   pose_candidates.push_back(fs::absolute(meta_dir, ec).parent_path().parent_path() / "poses" /
                             (sequence + ".txt"));
-  if (const auto poses_file = first_existing(pose_candidates)) {
-    const auto rows = io_detail::read_kitti_pose_rows(*poses_file, log);
-    const bool timed = std::any_of(rows.begin(), rows.end(), [](const auto& r) { return r && r->t_ns; });
-    if (timed) {
-      // 13 columns: each pose has its own time; it is interpolated to the frame times like EuRoC's.
-      for (const auto& row : rows) {
-        if (!row) continue;
-        GroundTruthState s;
-        s.t_ns = *row->t_ns;
-        s.T_w_b = row->T_w_cam0;
-        d->gt.push_back(s);
-      }
-      spdlog::info("{}: ground truth from {}, timed by its first column", dir.string(), poses_file->string());
-    } else {
-      // 12 columns: row i is frame i, timed by times.txt.
-      if (rows.size() != times.size()) {
-        log.report(*poses_file, 0,
-                   std::to_string(rows.size()) + " poses, expected " + std::to_string(times.size()) +
-                       " (the rows of " + times_file.string() + ")" +
-                       (rows.size() > times.size() ? "; extra poses ignored" : "; ground truth ends early"));
-      }
-      for (std::size_t i = 0; i < std::min(rows.size(), times.size()); ++i) {
-        if (!times[i] || !rows[i]) continue;
-        GroundTruthState s;
-        s.t_ns = *times[i];
-        s.T_w_b = rows[i]->T_w_cam0;
-        d->gt.push_back(s);
-      }
-    }
-    spdlog::debug("{}: ground truth from {}", dir.string(), poses_file->string());
-  }
+  read_ground_truth(*d, pose_candidates, times, times_file, dir, log);
 
-  // Calibration.
   std::vector<fs::path> calib_candidates = {dir / "calib.txt"};
   if (subset) calib_candidates.push_back(meta_dir / "calib.txt");
-  if (const auto calib_file = first_existing(calib_candidates)) {
-    try {
-      CameraCalibration camera = read_kitti_calib(*calib_file, options.camera_index);
-      std::optional<Timestamp> first;
-      std::optional<Timestamp> last;
-      std::size_t count = 0;
-      for (const auto& t : times) {
-        if (!t) continue;
-        if (!first) first = t;
-        last = t;
-        ++count;
-      }
-      if (count >= 2 && *last > *first) {
-        camera.rate_hz = static_cast<double>(count - 1) / ns_to_s(*last - *first);
-      }
-      d->camera_calibration = camera;
-    } catch (const DataError& e) {
-      log.report(e.file(), e.line(), e.message() + " (calibration ignored)");
-    }
-  }
+  read_calibration(*d, calib_candidates, times, options.camera_index, log);
 
   d->finish();
   io_detail::log_summary(*d);

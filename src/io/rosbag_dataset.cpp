@@ -226,9 +226,9 @@ fs::path asl_dir_for(const fs::path& bag_file, const OpenOptions& options) {
   return fs::is_directory(beside, ec) ? beside : fs::path{};
 }
 
-}  // namespace
-
-std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions& options) {
+// The camera and topic options of a bag: run.camera_index 0 or 1, an image topic, and a topic that names its
+// camera (/cam0/image_raw) naming the camera whose calibration is read.
+void check_bag_options(const OpenOptions& options) {
   if (options.camera_index != 0 && options.camera_index != 1) {
     throw ConfigError("camera_index: " + std::to_string(options.camera_index) + ", expected 0 or 1");
   }
@@ -251,6 +251,42 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
     }
     at = end + 1;
   }
+}
+
+// The IMU samples of `imu_topic`, in strictly increasing header.stamp order (the others reported).
+void read_bag_imu(bag::BagReader& reader, const fs::path& bag_file, const std::string& imu_topic,
+                  io_detail::IssueLog& log, io_detail::LoadedDataset& d) {
+  std::vector<bag::ImuRecord> records;
+  try {
+    records = reader.read_imu(imu_topic);
+  } catch (const bag::BagError& e) {
+    throw DataError(bag_file, e.message() + " (dataset.bag_imu_topic; empty = no IMU)");
+  }
+  TopicProblems imu_problems(bag_file, imu_topic);
+  std::vector<io_detail::TimedRow<ImuSample> > samples;
+  for (std::size_t k = 0; k < records.size(); ++k) {
+    const bag::ImuRecord& r = records[k];
+    if (!r.read_error.empty()) {
+      imu_problems.add(k, r.read_error);
+      continue;
+    }
+    ImuSample s;
+    s.t_ns = r.header_t_ns;
+    s.gyro_radps = Eigen::Vector3d(r.angular_velocity_radps[0], r.angular_velocity_radps[1],
+                                   r.angular_velocity_radps[2]);
+    s.accel_mps2 = Eigen::Vector3d(r.linear_acceleration_mps2[0], r.linear_acceleration_mps2[1],
+                                   r.linear_acceleration_mps2[2]);
+    samples.push_back({k, s.t_ns, s});
+  }
+  for (auto& row : imu_problems.keep_increasing(std::move(samples))) d.imu.push_back(row.value);
+  imu_problems.report(log, records.size());
+  d.imu_present = true;
+}
+
+}  // namespace
+
+std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions& options) {
+  check_bag_options(options);
   std::error_code ec;
   if (!fs::exists(bag_file, ec)) throw DataError(bag_file, "bag file not found");
   require_regular_file(bag_file);
@@ -293,35 +329,7 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
     return read_grey(*reader, topic, messages.at(frame));
   };
 
-  // IMU.
-  if (!options.bag_imu_topic.empty()) {
-    const std::string& imu_topic = options.bag_imu_topic;
-    std::vector<bag::ImuRecord> records;
-    try {
-      records = reader->read_imu(imu_topic);
-    } catch (const bag::BagError& e) {
-      throw DataError(bag_file, e.message() + " (dataset.bag_imu_topic; empty = no IMU)");
-    }
-    TopicProblems imu_problems(bag_file, imu_topic);
-    std::vector<io_detail::TimedRow<ImuSample> > samples;
-    for (std::size_t k = 0; k < records.size(); ++k) {
-      const bag::ImuRecord& r = records[k];
-      if (!r.read_error.empty()) {
-        imu_problems.add(k, r.read_error);
-        continue;
-      }
-      ImuSample s;
-      s.t_ns = r.header_t_ns;
-      s.gyro_radps = Eigen::Vector3d(r.angular_velocity_radps[0], r.angular_velocity_radps[1],
-                                     r.angular_velocity_radps[2]);
-      s.accel_mps2 = Eigen::Vector3d(r.linear_acceleration_mps2[0], r.linear_acceleration_mps2[1],
-                                     r.linear_acceleration_mps2[2]);
-      samples.push_back({k, s.t_ns, s});
-    }
-    for (auto& row : imu_problems.keep_increasing(std::move(samples))) d->imu.push_back(row.value);
-    imu_problems.report(log, records.size());
-    d->imu_present = true;
-  }
+  if (!options.bag_imu_topic.empty()) read_bag_imu(*reader, bag_file, options.bag_imu_topic, log, *d);
 
   // Calibration and ground truth: the bag has none; an EuRoC ASL folder gives them.
   if (const fs::path asl = asl_dir_for(bag_file, options); !asl.empty()) {

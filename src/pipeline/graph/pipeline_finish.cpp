@@ -68,26 +68,7 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   if (config_.output.trace)
     trace_end_of_stream("end of stream: outputs (csv, trajectories, method files)", step_ns);
   step_ns = clock_.now_ns();
-  const RunCounters& counters = outputs_.counters();
-  result.frames_in = replay_.frames_in();
-  result.frames_dropped = replay_.frames_dropped();
-  result.frames_processed = counters.processed;
-  result.deadline_misses = counters.deadline_misses;
-  result.frames_ok = counters.frames_ok;
-  result.frames_warning = counters.frames_warning;
-  result.frames_error = counters.frames_error;
-  result.data_s = counters.data_s();
-  result.realtime_factor = result.wall_s > 0 ? result.data_s / result.wall_s : 0.0;
-  result.profile_table =
-      outputs_.profiler().table(result.wall_s) +
-      fmt::format(
-          "cpu {:.2f} s / wall {:.2f} s = {:.2f} cores busy; {} frames in, {} processed, {} dropped, {} "
-          "deadline misses; real-time factor {:.2f}\n",
-          result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
-          result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
-          result.realtime_factor) +
-      closer_.profile_line() +
-      (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
+  fill_counts(result, loop_closure_ms);
   RunParts parts{config_,          dataset_,     range_.first, range_.second,         *method_,
                  outputs_,         loops_,       images_,      steps_.synchronizer(), seqs_,
                  end_of_stream_ms, std::nullopt, &closer_,     end_of_stream_time};
@@ -110,6 +91,49 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
   write_output("the evaluation (ground_truth.tum, truth_loops.csv)",
                [&] { evaluation = evaluate_run(parts, out_dir_, &truth_loops); });
   if (config_.output.trace) trace_end_of_stream("end of stream: evaluation", step_ns);
+  const std::vector<std::string> problems = check_run(result);
+  result.summary = make_run_summary(parts, result, std::move(evaluation));
+  result.summary["problems"] = problems;
+  if (const auto start = steps_.odometry_source().start())
+    result.summary["odometry_start"] = odometry_start_json(*start);
+  add_loop_oracle(result, truth_loops);
+  result.track = {range_.first,
+                  range_.second,
+                  outputs_.tracked_frames(),
+                  outputs_.tracked_poses(),
+                  outputs_.tracked_sigma_m(),
+                  outputs_.tracked_step_cov(),
+                  loops_.loops()};
+  write_trace_and_summary(result);
+}
+
+// The counts of the run and the profiler table, from the sink's counters and the replay.
+void PipelineRun::fill_counts(RunResult& result, double loop_closure_ms) const {
+  const RunCounters& counters = outputs_.counters();
+  result.frames_in = replay_.frames_in();
+  result.frames_dropped = replay_.frames_dropped();
+  result.frames_processed = counters.processed;
+  result.deadline_misses = counters.deadline_misses;
+  result.frames_ok = counters.frames_ok;
+  result.frames_warning = counters.frames_warning;
+  result.frames_error = counters.frames_error;
+  result.data_s = counters.data_s();
+  result.realtime_factor = result.wall_s > 0 ? result.data_s / result.wall_s : 0.0;
+  result.profile_table =
+      outputs_.profiler().table(result.wall_s) +
+      fmt::format(
+          "cpu {:.2f} s / wall {:.2f} s = {:.2f} cores busy; {} frames in, {} processed, {} dropped, {} "
+          "deadline misses; real-time factor {:.2f}\n",
+          result.cpu_s, result.wall_s, result.wall_s > 0 ? result.cpu_s / result.wall_s : 0.0,
+          result.frames_in, result.frames_processed, result.frames_dropped, result.deadline_misses,
+          result.realtime_factor) +
+      closer_.profile_line() +
+      (closer_.active() ? fmt::format("end of stream: loop closure {:.1f} ms\n", loop_closure_ms) : "");
+}
+
+// A run that went through its frames and got nothing usable fails loudly, outputs written; the problems
+// found (also summary.json's "problems").
+std::vector<std::string> PipelineRun::check_run(RunResult& result) const {
   // A run that went through its frames and got nothing usable fails loudly, outputs written.
   std::vector<std::string> problems;
   if (!result.failed && !result.interrupted) {
@@ -129,11 +153,12 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
     result.failed = true;
     result.error = fmt::format("{}", fmt::join(problems, "; "));
   }
-  result.summary = make_run_summary(parts, result, std::move(evaluation));
-  result.summary["problems"] = problems;
-  if (const auto start = steps_.odometry_source().start())
-    result.summary["odometry_start"] = odometry_start_json(*start);
-  // The loop oracle against this run (after the stream: one more solve of the final graph).
+  return problems;
+}
+
+// The loop oracle against this run (after the stream: one more solve of the final graph).
+void PipelineRun::add_loop_oracle(RunResult& result,
+                                  const std::vector<std::pair<std::size_t, std::size_t>>& truth_loops) {
   if (closer_.active() && config_.posegraph.enabled && !result.interrupted) {
     nlohmann::json oracle = closer_.oracle_report(outputs_.tracked_poses(), truth_loops);
     if (oracle.value("available", false)) {
@@ -149,13 +174,11 @@ void PipelineRun::close_run(RunResult& result, const EndOfStreamWork& work) {
     }
     result.summary["loop_oracle"] = std::move(oracle);
   }
-  result.track = {range_.first,
-                  range_.second,
-                  outputs_.tracked_frames(),
-                  outputs_.tracked_poses(),
-                  outputs_.tracked_sigma_m(),
-                  outputs_.tracked_step_cov(),
-                  loops_.loops()};
+}
+
+// trace.json, then summary.json last (it says which outputs are missing, when it can itself be written); a
+// run with a missing output fails.
+void PipelineRun::write_trace_and_summary(RunResult& result) {
   if (config_.output.trace) {
     outputs_.trace().name_process(fmt::format("loopgate run: {} ({}) on {}", method_->name(), method_->mode(),
                                               dataset_.root().string()));

@@ -133,6 +133,12 @@ class PipelineRun {
   // result's counters and profile, the method's files, the evaluation, the checks, trace.json and
   // summary.json.
   void close_run(RunResult& result, const EndOfStreamWork& work);
+  // The steps of close_run(), in order.
+  void fill_counts(RunResult& result, double loop_closure_ms) const;
+  std::vector<std::string> check_run(RunResult& result) const;
+  void add_loop_oracle(RunResult& result,
+                       const std::vector<std::pair<std::size_t, std::size_t>>& truth_loops);
+  void write_trace_and_summary(RunResult& result);
   // A span of the end-of-stream work on the producer's track of trace.json (output.trace), from start_ns to
   // end_ns (-1: now).
   void trace_end_of_stream(const char* name, std::int64_t start_ns, std::int64_t end_ns = -1);

@@ -52,6 +52,99 @@ std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Ve
   return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
 }
 
+namespace {
+
+// Truth from a file of pairs (eval.truth_pairs_file): frame numbers (as frames.csv shows them) -> indices
+// within the `n` evaluated frames from `first`; pairs with a frame outside them (another --frames range, a
+// rejected row) cannot be detected and are left out, counted.
+void add_truth_pairs(const RunParts& parts, std::size_t first, std::size_t n,
+                     SequenceEvaluationInput& input) {
+  const Dataset& dataset = parts.dataset;
+  std::vector<std::size_t> labels(n);
+  for (std::size_t k = 0; k < n; ++k) labels[k] = dataset.source_index(first + k);
+  const auto index_of = [&labels](std::size_t label) -> std::optional<std::size_t> {
+    const auto it = std::lower_bound(labels.begin(), labels.end(), label);
+    if (it == labels.end() || *it != label) return std::nullopt;
+    return static_cast<std::size_t>(it - labels.begin());
+  };
+  // A pair closer than the method's margin is one the run never compares: as a positive it could never be
+  // found, so it is left out too, counted and warned about.
+  const bool seqslam = parts.config.run.seqslam();
+  const char* margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
+  int margin_frames = seqslam ? parts.config.seqslam.exclusion_margin_frames : parts.config.match.margin;
+  if (seqslam && parts.config.seqslam.exclusion == "none") margin_frames = 0;  // every pair is compared
+  const auto margin = static_cast<std::size_t>(std::max(0, margin_frames));
+  std::vector<std::pair<std::size_t, std::size_t>> used;
+  std::size_t in_run = 0, too_close = 0;
+  std::optional<std::pair<std::size_t, std::size_t>> first_too_close;
+  for (const auto& [q, r] : parts.truth_pairs->pairs) {
+    const auto qi = index_of(q);
+    const auto ri = index_of(r);
+    if (!qi || !ri) continue;
+    ++in_run;
+    if (*qi - *ri < margin) {
+      ++too_close;
+      if (!first_too_close) first_too_close = {q, r};
+      continue;
+    }
+    used.emplace_back(*qi, *ri);
+  }
+  if (too_close > 0) {
+    spdlog::warn(
+        "eval: {} of the {} pairs of {} in the run are closer than {} = {} frames (first: query {}, "
+        "reference {}): the run never compares such a pair, so they are left out of the evaluation",
+        too_close, in_run, parts.config.eval.truth_pairs_file, margin_key, margin, first_too_close->first,
+        first_too_close->second);
+  }
+  input.pairs_truth = {{"pairs_file", parts.config.eval.truth_pairs_file},
+                       {"pairs_file_rows", parts.truth_pairs->rows},
+                       {"pairs", parts.truth_pairs->pairs.size()},
+                       {"pairs_in_run", in_run},
+                       {"pairs_closer_than_margin", too_close},
+                       {"margin_key", margin_key}};
+  input.pairs = std::move(used);
+  input.frame_count = n;
+}
+
+// How the truth depends on the rule (compare prints these): positives in 3-D and in the ground plane, and
+// before eval.min_travel_m took out the revisits without travel (hovering, standing still).
+void add_truth_rule_counts(const Dataset& dataset, const SequenceEvaluationInput& input,
+                           nlohmann::json& truth_json) {
+  const auto positives = [&](const std::string& plane, double min_travel_m) {
+    GroundTruthConfig truth = input.truth;
+    truth.plane = plane;
+    truth.min_travel_m = min_travel_m;
+    return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
+  };
+  const std::string horizontal = horizontal_plane(dataset, input.p_w);
+  truth_json["positives_3d"] = positives("xyz", input.truth.min_travel_m);
+  truth_json["horizontal_plane"] = horizontal;
+  truth_json["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
+  truth_json["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
+}
+
+// The gate's coverage of the true loops: which of them the method's candidate areas held.
+void add_gate_coverage(const RunParts& parts, const MethodEvaluation& method,
+                       const SequenceEvaluationInput& input, SequenceEvaluation& evaluation,
+                       std::size_t first, std::size_t n) {
+  const std::size_t processed = parts.outputs.frames_through();
+  std::vector<std::int64_t> seq_of_index(n, -1);
+  for (std::size_t seq = 0; seq < processed; ++seq) {
+    const std::size_t k = parts.seqs.frame(static_cast<std::int64_t>(seq)) - first;
+    if (k < n) seq_of_index[k] = static_cast<std::int64_t>(seq);
+  }
+  const auto processed_frame = [&](std::size_t q) { return seq_of_index[q] >= 0; };
+  const auto covered = [&](std::size_t q, std::size_t r) {
+    return method.covers(seq_of_index[q], seq_of_index[r]);
+  };
+  evaluation.json["gate_coverage"] =
+      input.pairs
+          ? gate_coverage_json(evaluation.truth, parts.config.match.margin, processed_frame, covered)
+          : gate_coverage_json(input.p_w, input.truth, parts.config.match.margin, processed_frame, covered);
+}
+
+}  // namespace
+
 nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& out_dir,
                             std::vector<std::pair<std::size_t, std::size_t>>* truth_loops_out) {
   const Dataset& dataset = parts.dataset;
@@ -73,54 +166,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
     }
     truth_tum.close();
   }
-  if (parts.truth_pairs) {
-    // Frame numbers (as frames.csv shows them) -> indices within the evaluated frames; pairs with a frame
-    // outside them (another --frames range, a rejected row) cannot be detected and are left out, counted.
-    std::vector<std::size_t> labels(n);
-    for (std::size_t k = 0; k < n; ++k) labels[k] = dataset.source_index(first + k);
-    const auto index_of = [&labels](std::size_t label) -> std::optional<std::size_t> {
-      const auto it = std::lower_bound(labels.begin(), labels.end(), label);
-      if (it == labels.end() || *it != label) return std::nullopt;
-      return static_cast<std::size_t>(it - labels.begin());
-    };
-    // A pair closer than the method's margin is one the run never compares: as a positive it could never be
-    // found, so it is left out too, counted and warned about.
-    const bool seqslam = parts.config.run.seqslam();
-    const char* margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
-    int margin_frames = seqslam ? parts.config.seqslam.exclusion_margin_frames : parts.config.match.margin;
-    if (seqslam && parts.config.seqslam.exclusion == "none") margin_frames = 0;  // every pair is compared
-    const auto margin = static_cast<std::size_t>(std::max(0, margin_frames));
-    std::vector<std::pair<std::size_t, std::size_t>> used;
-    std::size_t in_run = 0, too_close = 0;
-    std::optional<std::pair<std::size_t, std::size_t>> first_too_close;
-    for (const auto& [q, r] : parts.truth_pairs->pairs) {
-      const auto qi = index_of(q);
-      const auto ri = index_of(r);
-      if (!qi || !ri) continue;
-      ++in_run;
-      if (*qi - *ri < margin) {
-        ++too_close;
-        if (!first_too_close) first_too_close = {q, r};
-        continue;
-      }
-      used.emplace_back(*qi, *ri);
-    }
-    if (too_close > 0) {
-      spdlog::warn(
-          "eval: {} of the {} pairs of {} in the run are closer than {} = {} frames (first: query {}, "
-          "reference {}): the run never compares such a pair, so they are left out of the evaluation",
-          too_close, in_run, parts.config.eval.truth_pairs_file, margin_key, margin, first_too_close->first,
-          first_too_close->second);
-    }
-    input.pairs_truth = {{"pairs_file", parts.config.eval.truth_pairs_file},
-                         {"pairs_file_rows", parts.truth_pairs->rows},
-                         {"pairs", parts.truth_pairs->pairs.size()},
-                         {"pairs_in_run", in_run},
-                         {"pairs_closer_than_margin", too_close},
-                         {"margin_key", margin_key}};
-    input.pairs = std::move(used);
-    input.frame_count = n;
-  }
+  if (parts.truth_pairs) add_truth_pairs(parts, first, n, input);
   const EvalConfig& eval = parts.config.eval;
   input.truth.radius_m = eval.truth_radius_m;
   input.truth.gap_frames = eval.truth_gap_frames;
@@ -138,22 +184,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   input.ranked = method.ranked ? within_range(*method.ranked) : input.loops;
   input.score_order = method.score_order;
   SequenceEvaluation evaluation = evaluate_sequence(input);
-  if (!input.pairs) {
-    // How the truth depends on the rule (compare prints these): positives in 3-D and in the ground plane, and
-    // before eval.min_travel_m took out the revisits without travel (hovering, standing still).
-    const auto positives = [&](const std::string& plane, double min_travel_m) {
-      GroundTruthConfig truth = input.truth;
-      truth.plane = plane;
-      truth.min_travel_m = min_travel_m;
-      return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
-    };
-    const std::string horizontal = horizontal_plane(dataset, input.p_w);
-    nlohmann::json& truth = evaluation.json["truth"];
-    truth["positives_3d"] = positives("xyz", input.truth.min_travel_m);
-    truth["horizontal_plane"] = horizontal;
-    truth["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
-    truth["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
-  }
+  if (!input.pairs) add_truth_rule_counts(dataset, input, evaluation.json["truth"]);
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
   for (const auto& [q, r] : evaluation.truth_pairs) {
     if (truth_loops_out) truth_loops_out->emplace_back(first + q, first + r);
@@ -168,22 +199,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
                                            {"why", "the run stopped before the end of the range"}};
   }
 
-  if (method.covers) {
-    const std::size_t processed = parts.outputs.frames_through();
-    std::vector<std::int64_t> seq_of_index(n, -1);
-    for (std::size_t seq = 0; seq < processed; ++seq) {
-      const std::size_t k = parts.seqs.frame(static_cast<std::int64_t>(seq)) - first;
-      if (k < n) seq_of_index[k] = static_cast<std::int64_t>(seq);
-    }
-    const auto processed_frame = [&](std::size_t q) { return seq_of_index[q] >= 0; };
-    const auto covered = [&](std::size_t q, std::size_t r) {
-      return method.covers(seq_of_index[q], seq_of_index[r]);
-    };
-    evaluation.json["gate_coverage"] =
-        input.pairs
-            ? gate_coverage_json(evaluation.truth, parts.config.match.margin, processed_frame, covered)
-            : gate_coverage_json(input.p_w, input.truth, parts.config.match.margin, processed_frame, covered);
-  }
+  if (method.covers) add_gate_coverage(parts, method, input, evaluation, first, n);
   return evaluation.json;
 }
 
