@@ -145,6 +145,15 @@ struct OutputConfig {
   void validate() const;
 };
 
+// eval.plane: the distances of the ground truth in the x-z plane (KITTI's camera frame), x-y, 3-D, or "auto"
+// (x-z for the KITTI layout, 3-D otherwise).
+enum class TruthPlane { kAuto, kXz, kXy, kXyz };
+inline constexpr EnumName<TruthPlane> kTruthPlaneNames[] = {
+    {TruthPlane::kAuto, "auto"}, {TruthPlane::kXz, "xz"}, {TruthPlane::kXy, "xy"}, {TruthPlane::kXyz, "xyz"}};
+constexpr std::span<const EnumName<TruthPlane>> enum_names(TruthPlane) {
+  return kTruthPlaneNames;
+}
+
 // Evaluation of the detections against the dataset's ground truth (when it has one), docs/evaluation.md.
 struct EvalConfig {
   // Ground-truth loops: query i is positive when some j <= i - truth_gap_frames lies within
@@ -152,7 +161,7 @@ struct EvalConfig {
   // "auto" (xz for the KITTI layout, xyz otherwise).
   double truth_radius_m = 2.0;
   int truth_gap_frames = 20;
-  std::string plane = "auto";
+  TruthPlane plane = TruthPlane::kAuto;
   // r_accept: a detection (i, j) is a true positive when the ground-truth positions of i and j are at
   // most this far apart (in `plane`); 0 = truth_radius_m.
   double accept_radius_m = 0.0;

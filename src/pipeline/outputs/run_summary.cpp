@@ -170,7 +170,9 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   const EvalConfig& eval = parts.config.eval;
   input.truth.radius_m = eval.truth_radius_m;
   input.truth.gap_frames = eval.truth_gap_frames;
-  input.truth.plane = eval.plane != "auto" ? eval.plane : dataset.layout() == "kitti" ? "xz" : "xyz";
+  input.truth.plane = eval.plane != TruthPlane::kAuto ? std::string(enum_name(eval.plane))
+                      : dataset.layout() == "kitti"   ? "xz"
+                                                      : "xyz";
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
   input.truth.min_travel_m = eval.min_travel_m;
   const MethodEvaluation method = parts.method.evaluation();
