@@ -35,7 +35,7 @@
 #include "io/file_guard.hpp"
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
-#include "pipeline/loop_closer.hpp"
+#include "pipeline/loops/correct_after_run.hpp"
 #include "pipeline/method_registry.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"

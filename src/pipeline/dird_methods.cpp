@@ -15,7 +15,7 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
-#include "pipeline/loop_matching.hpp"
+#include "pipeline/loops/loop_matching.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/match/row_assembler.hpp"
 #include "stages/match/sequence_matcher.hpp"

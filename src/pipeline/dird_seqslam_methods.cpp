@@ -20,7 +20,7 @@
 #include "pipeline/dird_distances.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "stages/match/contrast_search.hpp"
 #include "stages/match/row_assembler.hpp"
 

@@ -17,7 +17,7 @@
 #include "pipeline/csv_row.hpp"
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_record.hpp"
-#include "pipeline/loop_closer.hpp"
+#include "pipeline/loops/loop_closer.hpp"
 #include "pipeline/run_clock.hpp"
 #include "pipeline/run_counters.hpp"
 #include "pipeline/stage_profiler.hpp"

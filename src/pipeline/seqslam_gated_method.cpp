@@ -27,7 +27,7 @@
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/seqslam/seqslam_gated.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"

@@ -11,7 +11,7 @@
 
 #include "pipeline/detection_method.hpp"
 #include "pipeline/frame_steps.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"
 

@@ -32,7 +32,7 @@
 #include "pipeline/dird_distances.hpp"
 #include "pipeline/frame_steps.hpp"
 #include "pipeline/gated_cells.hpp"
-#include "pipeline/loop_matching.hpp"
+#include "pipeline/loops/loop_matching.hpp"
 #include "stages/dird/dird_online_scale.hpp"
 #include "stages/dird/dird_similarity.hpp"
 #include "stages/dird/dird_standardize.hpp"

@@ -26,7 +26,7 @@
 #include "io/dataset.hpp"
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/run_resources.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/dird/dird_codes.hpp"
