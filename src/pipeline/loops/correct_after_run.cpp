@@ -1,12 +1,12 @@
 #include "pipeline/loops/correct_after_run.hpp"
 
 #include <chrono>
-#include <stdexcept>
 
 #include "core/error.hpp"
 #include "pipeline/loops/loop_closer.hpp"
 #include "pipeline/loops/loop_timing.hpp"
 #include "pipeline/pipeline.hpp"
+#include "pipeline/pipeline_config.hpp"
 
 namespace loopgate {
 
@@ -15,8 +15,11 @@ using loop_internal::ms_since;
 nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& dataset, const RunTrack& track,
                                  const std::filesystem::path& run_dir) {
   const auto start = std::chrono::steady_clock::now();
-  LoopCloser closer(config, dataset, track.first_frame, track.last_frame, true);
-  if (!closer.active()) throw std::logic_error("correct_after_run: verify.enabled is false");
+  // LoopCorrection::kAfterRun: the run streamed without verification; its loops are verified here, with the
+  // verify and posegraph sections of `config`.
+  PipelineConfig verifying = config;
+  verifying.verify.enabled = true;
+  LoopCloser closer(verifying, dataset, track.first_frame, track.last_frame, true);
   for (std::size_t k = 0; k < track.tracked_frames.size(); ++k)
     closer.record_pose(track.tracked_frames[k], track.tracked_poses[k].T_w_b, track.tracked_sigma_m[k],
                        k < track.tracked_step_cov.size() ? track.tracked_step_cov[k] : std::nullopt);
