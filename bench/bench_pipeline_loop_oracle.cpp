@@ -1,6 +1,6 @@
-// The floor of loop correction on a route (pipeline/loop_oracle.hpp, which every run with ground truth and a
-// pose graph reports in summary.json's loop_oracle): a finished run's odometry in the pose graph the loop
-// closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance - at every
+// The floor of loop correction on a route (pipeline/loops/loop_oracle.hpp, which every run with ground truth
+// and a pose graph reports in summary.json's loop_oracle): a finished run's odometry in the pose graph the
+// loop closer builds, with PERFECT loop edges - the ground-truth relative pose, tight covariance - at every
 // ground-truth revisit (truth_loops.csv, one edge per query frame every --every frames). The ATE printed is
 // over the graph's nodes. Prints figures; not a timed benchmark.
 //
@@ -30,7 +30,7 @@
 #include "io/dataset.hpp"
 #include "io/g2o_file.hpp"
 #include "io/trajectory_io.hpp"
-#include "pipeline/loop_oracle.hpp"
+#include "pipeline/loops/loop_oracle.hpp"
 #include "pipeline/outputs/run_metrics.hpp"
 
 namespace {

@@ -289,6 +289,27 @@ TEST(GeometricVerifier, TracksTheLoopIntoANightImageWhereOrbFails) {
   EXPECT_NE(no.reason.find("; tracked: "), std::string::npos) << no.reason;
 }
 
+// After a long loop the odometry's rotation from j to i carries its heading drift: started where that
+// rotation moves j's points, the tracking misses them by tens of pixels and the loop is lost. The second
+// start, j's points where they are (i sees the place as j did), verifies it, and the reason says which start
+// failed first.
+TEST(GeometricVerifier, TracksFromTheImagesWhenTheOdometrysRotationHasDrifted) {
+  Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(0.5, 0.1, -0.2, 2 * kPi / 180));
+  s.i.image = at_night(s.i.image, 5);
+  const GeometricVerifier verifier(VerifyConfig{}, s.camera);
+  const Eigen::Matrix3d R_true = (s.j.T_w_b * s.T_j_i).linear();
+  const Eigen::Matrix3d R_drifted =
+      R_true * Eigen::AngleAxisd(15 * kPi / 180, Eigen::Vector3d::UnitY()).matrix();
+  const VerifyResult r = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image), s.j.T_w_b,
+                                         verifier.detect(s.n.image), s.n.T_w_b, &R_drifted);
+  ASSERT_TRUE(r.verified) << r.reason;
+  EXPECT_TRUE(r.tracked);
+  // The drifted start alone did not verify it (the premise of the second start).
+  EXPECT_NE(r.reason.find("; from the images' rotation, after; tracked: "), std::string::npos) << r.reason;
+  EXPECT_LT((r.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15);
+  EXPECT_EQ(verify_reason_key(r.reason), "verified_by_tracking");
+}
+
 TEST(GeometricVerifier, SkipsTinyImagesAndMissingCalibrationWithAReason) {
   CameraCalibration thumbs = calibration(Eigen::Isometry3d::Identity());
   thumbs.width_px = 64;

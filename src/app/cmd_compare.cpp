@@ -35,7 +35,9 @@
 #include "io/file_guard.hpp"
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
-#include "pipeline/loop_closer.hpp"
+#include "pipeline/loops/correct_after_run.hpp"
+#include "pipeline/loops/loop_closer.hpp"
+#include "pipeline/loops/loop_correction_policy.hpp"
 #include "pipeline/methods/method_registry.hpp"
 #include "pipeline/odometry_factory.hpp"
 #include "pipeline/pipeline.hpp"
@@ -135,7 +137,8 @@ std::vector<std::string> split_methods(const std::string& text) {
 }
 
 // The shared configuration made into one method's (validated again: the mode changes what must hold).
-PipelineConfig method_config(const PipelineConfig& base, const std::string& method) {
+PipelineConfig method_config(const PipelineConfig& base, const std::string& method,
+                             LoopCorrection correction) {
   const MethodEntry& m = find_method(method);
   PipelineConfig config = base;
   config.run.mode = m.mode;
@@ -144,12 +147,13 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
   if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
-  // Geometric verification and the pose graph compare the trajectory, not the detectors: off here,
+  // Geometric verification and the pose graph compare the trajectory, not the detectors: the stream runs
+  // without them unless the policy verifies while streaming (compare's, LoopCorrection::kAfterRun, does not),
   // so every column times the same loop-detection work (a full method's thousands of loops would each be
-  // verified); `run` with the config runs them.
-  config.verify.enabled = false;
-  // gate.feedback needs the verified loops while the run streams: off with verification.
-  config.gate.feedback = false;
+  // verified); the loops are verified after the run (correct_trajectory).
+  config.verify.enabled = verifies_while_streaming(correction);
+  // gate.feedback needs the verified loops while the run streams.
+  if (!config.verify.enabled) config.gate.feedback = false;
   config.validate();
   return config;
 }
@@ -160,8 +164,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
 // enables verification; a failure is reported there, it does not stop the compare.
 void correct_trajectory(const PipelineConfig& base, const std::string& method, const Dataset& dataset,
                         const RunResult& result, const fs::path& run_dir, json& summary) {
-  PipelineConfig config = method_config(base, method);
-  config.verify.enabled = true;
+  const PipelineConfig config = method_config(base, method, LoopCorrection::kAfterRun);
   try {
     json fields = correct_after_run(config, dataset, result.track, run_dir);
     const json* before = find_path(summary, {"trajectory_accuracy", "rmse_m"});
@@ -245,7 +248,8 @@ int compare_two_sequences(const CompareOptions& options) {
   json compare = json::object();
   std::vector<std::string> ran;
   for (const std::string& method : methods) {
-    const PipelineConfig config = method_config(base, method);
+    const PipelineConfig config =
+        method_config(base, method, LoopCorrection::kOff);  // two sequences: no loop correction
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
     const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const TwoSequenceResult result =
@@ -324,18 +328,20 @@ int compare_command(const CompareOptions& options) {
     methods = full;
   }
 
+  // The loop-correction policy compare hands to its runs: verified and corrected after each run.
+  const LoopCorrection correction = compare_loop_correction(base.verify.enabled);
   std::map<std::string, json> summaries;
   json compare = json::object();
   bool failed = false;
   for (const std::string& method : methods) {
-    const PipelineConfig config = method_config(base, method);
+    const PipelineConfig config = method_config(base, method, correction);
     spdlog::info("compare: running {} into {}", method, (out_dir / method).string());
     const OutputLock method_lock(out_dir / method, "loopgate compare, method " + method);
     const RunResult result =
-        run_pipeline(config, *dataset, out_dir / method, signals.flag(), base.verify.enabled);
+        run_pipeline(config, *dataset, out_dir / method, signals.flag(), corrects_after_run(correction));
     std::fputs(fmt::format("[{}]\n{}", method, result.profile_table).c_str(), stderr);
     summaries[method] = result.summary;
-    if (base.verify.enabled && !result.failed && !result.interrupted)
+    if (corrects_after_run(correction) && !result.failed && !result.interrupted)
       correct_trajectory(base, method, *dataset, result, out_dir / method, summaries[method]);
     compare[method] = summaries[method];
     if (result.failed) {

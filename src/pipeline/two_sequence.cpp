@@ -27,7 +27,7 @@
 #include "io/provenance.hpp"
 #include "io/writers.hpp"
 #include "pipeline/graph/run_resources.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/methods/seqslam_batch.hpp"
 #include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_extractor.hpp"

@@ -12,7 +12,7 @@
 #include "core/thread_cpu_time.hpp"
 #include "io/dataset.hpp"
 #include "pipeline/frame/frame_steps.hpp"
-#include "pipeline/loop_matching.hpp"
+#include "pipeline/loops/loop_matching.hpp"
 #include "pipeline/methods/descriptor_store.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/gated_cells.hpp"

@@ -17,7 +17,7 @@
 #include <vector>
 
 #include "pipeline/frame/frame_steps.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/dird_distances.hpp"
 #include "pipeline/methods/gated_cells.hpp"

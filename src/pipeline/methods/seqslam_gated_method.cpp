@@ -25,7 +25,7 @@
 
 #include "parallel/parallel_handoff.hpp"
 #include "pipeline/frame/frame_steps.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/gated_cells.hpp"
 #include "pipeline/methods/seqslam_batch.hpp"

@@ -10,7 +10,7 @@
 #include <stdexcept>
 
 #include "pipeline/frame/frame_steps.hpp"
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/seqslam_batch.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"

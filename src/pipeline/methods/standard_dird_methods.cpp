@@ -29,7 +29,7 @@
 #include "io/dataset.hpp"
 #include "parallel/parallel_handoff.hpp"
 #include "pipeline/frame/frame_steps.hpp"
-#include "pipeline/loop_matching.hpp"
+#include "pipeline/loops/loop_matching.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/dird_distances.hpp"
 #include "pipeline/methods/gated_cells.hpp"

@@ -17,7 +17,7 @@
 #include "pipeline/frame/csv_row.hpp"
 #include "pipeline/frame/frame_record.hpp"
 #include "pipeline/frame/run_clock.hpp"
-#include "pipeline/loop_closer.hpp"
+#include "pipeline/loops/loop_closer.hpp"
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/outputs/run_counters.hpp"
 #include "pipeline/outputs/stage_profiler.hpp"

@@ -17,7 +17,7 @@
 namespace loopgate {
 
 // A finished run's odometry and loops, for correcting its trajectory after the run (compare's loop
-// correction, correct_after_run in loop_closer.hpp).
+// correction, correct_after_run in loops/correct_after_run.hpp).
 struct RunTrack {
   std::size_t first_frame = 0, last_frame = 0;  // the run's frame range [first, last)
   std::vector<std::size_t> tracked_frames;      // the frame of each tracked pose

@@ -406,49 +406,79 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
   // be normalised into texture.
   const double noise_n = noise_sigma(fn.image);
   const double cleanest = std::max(1.0, std::min({noise_i, noise_j, noise_n}));
-  const Pyramid pyramid_i = normalised_pyramid(fi.image, noise_i, cleanest);
-  std::vector<cv::Point2f> from_j;
-  std::vector<cv::Point2f> from_n;
-  std::vector<Eigen::Vector3d> points_j;
-  std::vector<Eigen::Vector3d> points_n;
+  TrackSources sources;
+  sources.pyramid_i = normalised_pyramid(fi.image, noise_i, cleanest);
+  sources.pyramid_j = normalised_pyramid(fj.image, noise_j, cleanest);
+  sources.pyramid_n = normalised_pyramid(fn.image, noise_n, cleanest);
+  sources.T_w_cj = T_w_cj;
+  sources.T_cn_cj = T_cn_cj;
   for (const int row : point_rows) {
     const auto a = static_cast<std::size_t>(row);
-    from_j.push_back(fj.keypoints[a].pt);
-    from_n.push_back(fn.keypoints[static_cast<std::size_t>(jn[a])].pt);
-    points_j.push_back(p_cj[a]);
-    points_n.push_back(T_cn_cj * p_cj[a]);
+    sources.from_j.push_back(fj.keypoints[a].pt);
+    sources.from_n.push_back(fn.keypoints[static_cast<std::size_t>(jn[a])].pt);
+    sources.points_j.push_back(p_cj[a]);
+    sources.points_n.push_back(T_cn_cj * p_cj[a]);
   }
-  const TrackedPose by_j = track_into_i(normalised_pyramid(fj.image, noise_j, cleanest), pyramid_i, from_j,
-                                        points_j, T_w_cj, centre_n_in_j, R_w_bi, threshold);
+  // Two starts for the tracking: where the odometry's rotation from j to i moves j's points, then where they
+  // are. The odometry's relative rotation carries its heading drift from j to i (a few degrees after a long
+  // loop: tens of pixels), the second start none: the place descriptor matched i to j because i sees the
+  // place much as j did. The second runs only when the first does not verify the loop.
+  std::string notes;
+  const Eigen::Matrix3d* starts[] = {R_w_bi, nullptr};
+  for (const Eigen::Matrix3d* start : starts) {
+    const bool first = notes.empty();
+    if (start == nullptr && R_w_bi == nullptr && !first) break;  // the same start again
+    std::string note;
+    VerifyResult tracked = track_from_j_and_n(sources, start, threshold, vetoed, note);
+    if (tracked.verified) {
+      tracked.points = result.points;
+      if (!notes.empty()) tracked.reason += "; from the images' rotation, after" + notes;
+      return tracked;
+    }
+    notes += (first ? "; tracked: " : "; tracked from the images' rotation: ") + note;
+  }
+  result.reason += notes;
+  return result;
+}
+
+VerifyResult GeometricVerifier::track_from_j_and_n(const TrackSources& s, const Eigen::Matrix3d* R_w_bi,
+                                                   double threshold,
+                                                   const std::function<bool(VerifyResult&)>& vetoed,
+                                                   std::string& note) const {
+  const Eigen::Isometry3d& T_b_c = camera_->calibration().T_b_c;
+  const Eigen::Isometry3d T_w_cn = s.T_w_cj * s.T_cn_cj.inverse();
+  const Eigen::Vector3d centre_n_in_j = s.T_cn_cj.inverse().translation();
+  const TrackedPose by_j = track_into_i(s.pyramid_j, s.pyramid_i, s.from_j, s.points_j, s.T_w_cj,
+                                        centre_n_in_j, R_w_bi, threshold);
   if (!by_j.result.verified) {
-    result.reason += "; tracked: " + by_j.note;
-    return result;
+    note = by_j.note;
+    return by_j.result;
   }
-  const TrackedPose by_n = track_into_i(normalised_pyramid(fn.image, noise_n, cleanest), pyramid_i, from_n,
-                                        points_n, T_w_cn, T_cn_cj.translation(), R_w_bi, threshold);
+  const TrackedPose by_n = track_into_i(s.pyramid_n, s.pyramid_i, s.from_n, s.points_n, T_w_cn,
+                                        s.T_cn_cj.translation(), R_w_bi, threshold);
   // A street's repeated facades can lure the tracking to the look-alike at the starting point, so that i
   // appears to stand where the tracking started: from j at j, from n at n. Tracked right, the two agree
   // on where i is; they may differ by 3 sigma of the difference of two edges (3 sqrt(2) sigma_position_m).
   VerifyResult tracked = by_j.result;
   const double max_apart_m = 3.0 * std::sqrt(2.0) * config_.sigma_position_m;
   if (!by_n.result.verified) {
-    result.reason += "; tracked: " + by_j.note + "; not from j's neighbour: " + by_n.note;
-    return result;
+    tracked.verified = false;
+    note = by_j.note + "; not from j's neighbour: " + by_n.note;
+    return tracked;
   }
-  const Eigen::Isometry3d T_bj_bn = T_b_c * T_cn_cj.inverse() * T_b_c.inverse();
+  const Eigen::Isometry3d T_bj_bn = T_b_c * s.T_cn_cj.inverse() * T_b_c.inverse();
   const double apart_m = (tracked.T_j_i.translation() - (T_bj_bn * by_n.result.T_j_i).translation()).norm();
   if (!(apart_m <= max_apart_m)) {
-    result.reason +=
-        fmt::format("; tracked: {}; from j and from its neighbour i is {:.2f} m apart > {:.2f} m", by_j.note,
-                    apart_m, max_apart_m);
-    return result;
+    tracked.verified = false;
+    note = fmt::format("{}; from j and from its neighbour i is {:.2f} m apart > {:.2f} m", by_j.note, apart_m,
+                       max_apart_m);
+    return tracked;
   }
   if (vetoed(tracked)) {
-    result.reason += fmt::format("; tracked: {}, {}", by_j.note, tracked.reason);
-    return result;
+    note = fmt::format("{}, {}", by_j.note, tracked.reason);
+    return tracked;
   }
   tracked.tracked = true;
-  tracked.points = result.points;
   tracked.reason =
       fmt::format("verified by tracking ({}; from j's neighbour {:.2f} m apart)", by_j.note, apart_m);
   return tracked;

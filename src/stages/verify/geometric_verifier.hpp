@@ -213,6 +213,21 @@ class GeometricVerifier {
                            std::vector<cv::Point2f> uv_src, const std::vector<Eigen::Vector3d>& p_csrc,
                            const Eigen::Isometry3d& T_w_csrc, const Eigen::Vector3d& c_other,
                            const Eigen::Matrix3d* R_w_bi, double threshold) const;
+  // What the tracking fallback tracks: j's triangulated points (their pixels in j and in its neighbour n,
+  // their positions in camera j and in camera n) and the three images' normalised pyramids.
+  struct TrackSources {
+    Pyramid pyramid_i, pyramid_j, pyramid_n;
+    std::vector<cv::Point2f> from_j, from_n;
+    std::vector<Eigen::Vector3d> points_j, points_n;
+    Eigen::Isometry3d T_w_cj = Eigen::Isometry3d::Identity();
+    Eigen::Isometry3d T_cn_cj = Eigen::Isometry3d::Identity();
+  };
+  // The tracking fallback from one start (R_w_bi: the odometry's rotation of i, or nullptr: j's points
+  // where they are): i's pose tracked from j, confirmed from n, then `vetoed` (the odometry check). Verified,
+  // or not with `note` saying why.
+  VerifyResult track_from_j_and_n(const TrackSources& sources, const Eigen::Matrix3d* R_w_bi,
+                                  double threshold, const std::function<bool(VerifyResult&)>& vetoed,
+                                  std::string& note) const;
   // The KLT pyramid of normalise_illumination(grey) smoothed from its `noise` to `noise_target`.
   Pyramid normalised_pyramid(const cv::Mat& grey, double noise, double noise_target) const;
   // PnP RANSAC on the correspondences, refined on its inliers: fills `result` (verified, or the reason).

@@ -1,10 +1,10 @@
-#include "pipeline/loop_matching.hpp"
+#include "pipeline/loops/loop_matching.hpp"
 
 #include <spdlog/fmt/fmt.h>
 
 #include <stdexcept>
 
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 #include "stages/match/match_outcome.hpp"
 
 namespace loopgate {

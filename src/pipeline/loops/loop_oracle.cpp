@@ -1,4 +1,4 @@
-#include "pipeline/loop_oracle.hpp"
+#include "pipeline/loops/loop_oracle.hpp"
 
 #include <spdlog/fmt/fmt.h>
 

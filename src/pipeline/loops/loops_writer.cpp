@@ -1,4 +1,4 @@
-#include "pipeline/loops_writer.hpp"
+#include "pipeline/loops/loops_writer.hpp"
 
 #include <string>
 #include <utility>

@@ -90,9 +90,9 @@ class LoopCloser {
   void annotate_loops(LoopsWriter& loops) const;
   // tracked poses of the run -> corrected poses (same times).
   std::vector<StampedPose> corrected(const std::vector<StampedPose>& tracked) const;
-  // The loop oracle (pipeline/loop_oracle.hpp) on the final solve's odometry graph with perfect edges at
-  // `truth_pairs` (dataset frames: query i, reference j), read against this run: ATE of the odometry, of the
-  // corrected trajectory and of the oracle's (the floor), and the share of the attainable gain this run
+  // The loop oracle (pipeline/loops/loop_oracle.hpp) on the final solve's odometry graph with perfect edges
+  // at `truth_pairs` (dataset frames: query i, reference j), read against this run: ATE of the odometry, of
+  // the corrected trajectory and of the oracle's (the floor), and the share of the attainable gain this run
   // reached, (odometry - corrected) / (odometry - oracle), null when the oracle gains under 10% of the
   // odometry's ATE. After finish(), after the stream: it costs one more solve of the final graph ("ms").
   nlohmann::json oracle_report(const std::vector<StampedPose>& tracked,
@@ -263,14 +263,5 @@ class LoopCloser {
   std::vector<Eigen::Isometry3d> node_poses_;
   std::vector<PoseGraphEdge> final_edges_;  // the final graph's edges (node indices into nodes_)
 };
-
-struct RunTrack;
-
-// compare's loop correction: a finished run's loops verified and its pose graph solved after the run, outside
-// its timing (the same LoopCloser, fed the run's poses and loops in order, so the files are those a run with
-// verify.enabled writes). Writes loop_edges.csv and trajectory_corrected.tum into run_dir and returns
-// summary_fields() plus "ms" (the wall time of the correction). `config.verify.enabled` must be true.
-nlohmann::json correct_after_run(const PipelineConfig& config, const Dataset& dataset, const RunTrack& track,
-                                 const std::filesystem::path& run_dir);
 
 }  // namespace loopgate
