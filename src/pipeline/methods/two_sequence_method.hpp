@@ -107,8 +107,9 @@ class TwoSequenceMethod {
   virtual TwoSequenceMatches match(TwoSequenceRun& run, const TwoSequenceInput& input) = 0;
 };
 
-// The two-sequence form of run.method: dird (raw, or standardize.mode batch or causal, scale.mode online),
-// dird-seqslam and seqslam (two_sequence_dird.cpp, two_sequence_dird_seqslam.cpp, two_sequence_seqslam.cpp).
+// The two-sequence form of run.method, from its row of the method registry (method_registry.hpp): dird
+// (raw, or standardize.mode batch or causal, scale.mode online), dird-seqslam and seqslam
+// (two_sequence_dird.cpp, two_sequence_dird_seqslam.cpp, two_sequence_seqslam.cpp).
 std::unique_ptr<TwoSequenceMethod> make_two_sequence_method(const PipelineConfig& config);
 std::unique_ptr<TwoSequenceMethod> make_two_sequence_dird(const PipelineConfig& config);
 std::unique_ptr<TwoSequenceMethod> make_two_sequence_dird_seqslam(const PipelineConfig& config);

@@ -16,6 +16,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
+#include "pipeline/method_registry.hpp"
 #include "pipeline/methods/two_sequence_method.hpp"
 #include "pipeline/seqslam_batch.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"
@@ -126,12 +127,14 @@ std::unique_ptr<TwoSequenceMethod> make_two_sequence_seqslam(const PipelineConfi
 }
 
 std::unique_ptr<TwoSequenceMethod> make_two_sequence_method(const PipelineConfig& config) {
-  switch (config.run.method) {
-    case Detector::kSeqSlam: return make_two_sequence_seqslam(config);
-    case Detector::kDirdSeqSlam: return make_two_sequence_dird_seqslam(config);
-    case Detector::kDird: break;
+  // The detector's row of mode full: a two-sequence run has no gate, and DIRD's rows share one form that
+  // standardises as standardize.mode says (batch included).
+  const MethodEntry* entry = find_method_entry(enum_name(config.run.method), "full", "off");
+  if (entry == nullptr || entry->two_sequence == nullptr) {
+    throw ConfigError("run.method: '" + std::string(enum_name(config.run.method)) +
+                      "' has no two-sequence form (two-sequence methods: " + method_entry_names(true) + ")");
   }
-  return make_two_sequence_dird(config);
+  return entry->two_sequence(config);
 }
 
 }  // namespace loopgate
