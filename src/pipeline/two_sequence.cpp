@@ -39,7 +39,6 @@ class TwoSequenceWiring final : public TwoSequenceRun {
   TwoSequenceWiring(const PipelineConfig& config, const std::atomic<bool>* stop)
       : config_(config), stop_(stop), trace_on_(config.output.trace) {}
 
-  const PipelineConfig& config() const override { return config_; }
   std::int64_t now_ns() const override { return clock_.now_ns(); }
   void phase(const char* name, std::int64_t from_ns) override { span(name, "phase", from_ns, 0); }
   void parallel(std::size_t count, const std::function<void(std::size_t)>& body,

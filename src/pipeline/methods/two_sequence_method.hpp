@@ -32,11 +32,10 @@ class Dataset;
 
 enum class SequenceSide { kReference, kQuery };
 
-// What the run lends a method while it matches: the configuration, the run's parallel loop and its trace.
+// What the run lends a method while it matches: the run's parallel loop, its clock and its trace.
 class TwoSequenceRun {
  public:
   virtual ~TwoSequenceRun() = default;
-  virtual const PipelineConfig& config() const = 0;
   // Runs body(k) for k in [0, count) on the run's threads, in blocks (a span each on trace.json when
   // `blocks` names them). Each body writes only its own outputs, so the result does not depend on the
   // thread count. A second stop signal aborts (Interrupted).
