@@ -63,7 +63,7 @@ TEST(MethodRegistry, SeqSlamRowsRefuseGateFeedbackAndNameTheirMargin) {
   for (const MethodEntry& m : kMethods) {
     EXPECT_EQ(m.streams_loops, m.detector != Detector::kSeqSlam) << m.name;
     EXPECT_EQ(m.margin == MarginKey::kSeqSlamExclusion, m.detector == Detector::kSeqSlam) << m.name;
-    EXPECT_EQ(m.two_sequence, m.mode == RunMode::kFull) << m.name;
+    EXPECT_EQ(m.two_sequence != nullptr, m.mode == RunMode::kFull) << m.name;
   }
 }
 

@@ -18,6 +18,8 @@
 #include "core/stop_request.hpp"
 #include "io/config.hpp"
 #include "io/dataset.hpp"
+#include "pipeline/methods/method_registry.hpp"
+#include "pipeline/methods/two_sequence_method.hpp"
 #include "pipeline/two_sequence.hpp"
 #include "pipeline_fake_dataset.hpp"
 #include "stages/dird/dird_extractor.hpp"
@@ -363,6 +365,55 @@ TEST(PipelineTwoSequence, EveryMethodWritesTheSharedColumnsAndAnUnreadableQueryA
     EXPECT_EQ(summary["aligned"]["loops_within_tolerance"].get<std::size_t>() +
                   summary["aligned"]["loops_beyond_tolerance"].get<std::size_t>(),
               result.loops);
+  }
+}
+
+// The two-sequence form a run uses is its registry row's: every full row has one, of its own detector (DIRD's
+// raw and standardised rows share DIRD's), and no gated row has one (two sequences have no poses).
+TEST(PipelineTwoSequence, EveryFullRowOfTheRegistryBuildsTheFormOfItsDetector) {
+  for (const MethodEntry& m : kMethods) {
+    SCOPED_TRACE(m.name);
+    if (m.mode == RunMode::kGated) {
+      EXPECT_EQ(m.two_sequence, nullptr);
+      continue;
+    }
+    ASSERT_NE(m.two_sequence, nullptr);
+    PipelineConfig config = dird_config();
+    config.run.method = m.detector;
+    EXPECT_STREQ(m.two_sequence(config)->name(), enum_name(m.detector).data());
+    EXPECT_STREQ(make_two_sequence_method(config)->name(), enum_name(m.detector).data());
+  }
+}
+
+// The parallel loop hands out blocks of queries to the run's workers, each writing only its own rows: one
+// thread and three give the same files, for DIRD's two passes over the pairs (the online scale, then the
+// similarities on standardised codes) and for dird-seqslam's distances in query blocks (compact codes).
+TEST(PipelineTwoSequence, DirdAndDirdSeqSlamOutputsDoNotDependOnTheThreadCount) {
+  const RevisitDataset reference(kPeriod, 1, 7);
+  const RevisitDataset query(kPeriod, 1, 8);
+  for (const Detector method : {Detector::kDird, Detector::kDirdSeqSlam}) {
+    SCOPED_TRACE(std::string(enum_name(method)));
+    std::map<int, std::filesystem::path> outs;
+    for (const int threads : {1, 3}) {
+      PipelineConfig config = dird_config();
+      config.run.method = method;
+      config.run.threads = threads;
+      config.eval.aligned_tolerance_frames = 1;
+      config.standardize.mode = "causal";
+      config.standardize.warm_up = 20;
+      config.scale.mode = "online";
+      config.scale.min_distances = 1000;
+      config.dird_seqslam.codes.code = DirdCode::kSign;
+      outs[threads] = testing::make_temp_dir("pipeline-two-seq-threads");
+      const TwoSequenceResult result = run_two_sequences(config, reference, query, outs[threads]);
+      EXPECT_GT(result.loops, 0u);
+    }
+    for (const char* file : {"frames.csv", "loops.csv", "truth_loops.csv"})
+      EXPECT_EQ(read_file(outs[1] / file), read_file(outs[3] / file)) << file;
+    const auto summary1 = nlohmann::json::parse(read_file(outs[1] / "summary.json"));
+    const auto summary3 = nlohmann::json::parse(read_file(outs[3] / "summary.json"));
+    EXPECT_EQ(summary1["evaluation"], summary3["evaluation"]);
+    EXPECT_EQ(summary1.value("scale", nlohmann::json()), summary3.value("scale", nlohmann::json()));
   }
 }
 

@@ -1,27 +1,23 @@
 // Two-sequence mode (docs/detection.md § Two sequences): a reference sequence against a query sequence
 // (e.g. Nordland summer vs winter), appearance only. Every image of both is described (in parallel,
-// `run.threads` workers), S is computed for every (reference r, query q) pair with no safety margin, and
-// the query rows feed the streaming SequenceMatcher in its two-sequence mode (same DP and NMS as the
-// single-sequence run; i = query frame, j = reference frame).
+// `run.threads` workers) by the two-sequence form of run.method (methods/two_sequence_method.hpp: dird,
+// dird-seqslam, seqslam), which then matches every query frame against the whole reference with no safety
+// margin, using the stage objects of its single-sequence run (i = query frame, j = reference frame).
 //
-// Outputs in `out_dir`:
-//   frames.csv  one row per query frame: its best reference match (the largest DP value of the frame)
-//               and score, accepted or not, and the detection status and reason;
+// Outputs in `out_dir` (outputs/two_sequence_outputs.hpp):
+//   frames.csv  one row per query frame: its best reference match and score, accepted or not, and the
+//               detection status and reason;
 //   loops.csv   i,j,t_i,t_j,score (i query frame, j reference frame);
 //   summary.json configuration echo, counts, stage times, peak RSS, and with eval.aligned_tolerance_frames
 //               >= 0 the share of loops / best matches within that many frames of the same index.
 // run.frames (A:B) selects the same index range of both sequences. Images that fail to decode are
 // recorded (frame status "error") and take part in no pair (SeqSLAM: they take part as all-zero images).
 //
-// run.method selects the method: "dird" (above) or "seqslam" (docs/detection.md § SeqSLAM: both sequences
-// preprocessed in parallel, the difference matrix reference rows x query columns, contrast enhancement and
-// sequence search, with exclusion "none" whatever seqslam.exclusion says, logged; frames.csv gives every
-// query's best reference match and its ratio, accepted or not; loops.csv the accepted ones, score = ratio).
-// summary.json has "mode": "two-sequence", "method", "score_order" (DIRD higher_is_better, SeqSLAM
-// lower_is_better) and "evaluation" (evaluate_aligned below; {"available": false} when
-// eval.aligned_tolerance_frames < 0; AlignedSequences and evaluate_aligned are in
-// eval/run_evaluation.hpp); with a tolerance, truth_loops.csv lists the aligned pairs (i query,
-// j reference frame).
+// SeqSLAM (docs/detection.md § SeqSLAM) uses exclusion "none" whatever seqslam.exclusion says (logged).
+// summary.json has "mode": "two-sequence", "method", "score_order" (DIRD and dird-seqslam higher_is_better,
+// SeqSLAM lower_is_better) and "evaluation" (evaluate_aligned; {"available": false} when
+// eval.aligned_tolerance_frames < 0; AlignedSequences and evaluate_aligned are in eval/run_evaluation.hpp);
+// with a tolerance, truth_loops.csv lists the aligned pairs (i query, j reference frame).
 #pragma once
 
 #include <atomic>

@@ -10,6 +10,7 @@
 #include "io/dataset.hpp"
 #include "parallel/parallel_handoff.hpp"
 #include "pipeline/frame/frame_steps.hpp"
+#include "pipeline/methods/coded_distance.hpp"
 #include "stages/dird/dird_similarity.hpp"
 
 namespace loopgate {
@@ -130,14 +131,7 @@ bool DirdDistances::code(std::size_t seq) {
 
 double DirdDistances::distance(std::size_t a, std::size_t b) const {
   if (compact_) return compact_->distance(a, b);
-  if (!standardizer_) {
-    return dird_.l2_metric() ? l2_distance(codes_[a], codes_[b])
-                             : static_cast<double>(l1_distance(codes_[a], codes_[b]));
-  }
-  if (standardize_.cosine()) {
-    return standard_cosine_distance(codes_[a], norms_[a], codes_[b], norms_[b]);
-  }
-  return static_cast<double>(l1_distance(codes_[a], codes_[b]));
+  return coded_distance(dird_, standardize_, codes_[a], norms_[a], codes_[b], norms_[b]);
 }
 
 nlohmann::json DirdDistances::summary() const {

@@ -14,6 +14,7 @@
 
 #include "io/config.hpp"
 #include "pipeline/methods/detection_method.hpp"
+#include "pipeline/methods/two_sequence_method.hpp"
 #include "pipeline/pipeline_config.hpp"
 
 namespace loopgate {
@@ -29,6 +30,8 @@ constexpr std::span<const EnumName<MarginKey>> enum_names(MarginKey) {
 
 // Builds the method's object for one run (detection_method.hpp).
 using MethodFactory = std::unique_ptr<DetectionMethod> (*)(const MethodContext&);
+// Builds its two-sequence form for one run (methods/two_sequence_method.hpp).
+using TwoSequenceFactory = std::unique_ptr<TwoSequenceMethod> (*)(const PipelineConfig&);
 
 struct MethodEntry {
   const char* name;         // run.method / compare --methods name
@@ -38,29 +41,30 @@ struct MethodEntry {
   const char* what;         // one line for --help, compare and the docs
   bool streams_loops;       // loops are decided while the stream runs (gate.feedback can use them)
   MarginKey margin;         // the key of the frames a loop's two frames must be apart
-  bool two_sequence;        // has a two-sequence form (--reference --query: no poses, so no gate)
-  MethodFactory make;       // the stage objects it composes, as one DetectionMethod
+  // Its two-sequence form (--reference --query: no poses, so no gate); nullptr when it has none.
+  TwoSequenceFactory two_sequence;
+  MethodFactory make;  // the stage objects it composes, as one DetectionMethod
 };
 
 inline constexpr MethodEntry kMethods[] = {
     {"full", Detector::kDird, RunMode::kFull, "off", "DIRD on every frame (the paper's baseline)", true,
-     MarginKey::kMatchMargin, true, make_dird_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird, make_dird_full},
     {"gated", Detector::kDird, RunMode::kGated, "off", "DIRD in the pose gate's candidate areas (the paper)",
-     true, MarginKey::kMatchMargin, false, make_dird_gated},
+     true, MarginKey::kMatchMargin, nullptr, make_dird_gated},
     {"seqslam", Detector::kSeqSlam, RunMode::kFull, "off", "SeqSLAM on every frame", false,
-     MarginKey::kSeqSlamExclusion, true, make_seqslam},
+     MarginKey::kSeqSlamExclusion, make_two_sequence_seqslam, make_seqslam},
     {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas", false,
-     MarginKey::kSeqSlamExclusion, false, make_seqslam_gated},
+     MarginKey::kSeqSlamExclusion, nullptr, make_seqslam_gated},
     {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame", true,
-     MarginKey::kMatchMargin, true, make_standard_dird_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird, make_standard_dird_full},
     {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas",
-     true, MarginKey::kMatchMargin, false, make_standard_dird_gated},
+     true, MarginKey::kMatchMargin, nullptr, make_standard_dird_gated},
     {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
      "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame", true,
-     MarginKey::kMatchMargin, true, make_dird_seqslam_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird_seqslam, make_dird_seqslam_full},
     {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
      "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)", true,
-     MarginKey::kMatchMargin, false, make_dird_seqslam_gated},
+     MarginKey::kMatchMargin, nullptr, make_dird_seqslam_gated},
 };
 
 // The row named `name`, or nullptr.
