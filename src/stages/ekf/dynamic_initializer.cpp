@@ -400,6 +400,37 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
   return out;
 }
 
+// The covariance the filter starts from: the alignment's own (its normal equations at the solution, scaled by
+// the residuals), carried to the state at the last image with its cross terms, rows [attitude as the
+// filter's body perturbation, velocity (world), gyro bias, accelerometer bias], columns the alignment's
+// unknowns [v0, g, ba, dbg] (b0). Gravity's direction turns the world by phi = z x (R_w dg) / |g| (tilt),
+// which also turns the velocity; dbg turns the last rotation by J_R_bg dbg. The floors of the config are
+// added (tilt and velocity: the pre-integration taken as exact; yaw: unobservable, set to zero).
+Eigen::Matrix<double, 12, 12> joint_start_covariance(const AlignOutput& al, const AlignInput& in,
+                                                     const Eigen::Matrix3d& R_w, const Eigen::Matrix3d& R_n,
+                                                     const Eigen::Vector3d& v_n,
+                                                     const Eigen::Matrix<double, 3, 9>& J_vn,
+                                                     const EkfConfig& config) {
+  const std::size_t n = in.T_s.size();
+  const Eigen::Matrix3d R_w_bn = R_w * R_n;
+  const Eigen::Matrix3d dphi_dg = skew(Eigen::Vector3d::UnitZ()) * R_w / in.gravity_mps2;
+  Eigen::Matrix<double, 12, kAlignDim> J = Eigen::Matrix<double, 12, kAlignDim>::Zero();
+  J.block<3, 3>(0, 3) = R_w_bn.transpose() * dphi_dg;
+  J.block<3, 3>(0, 9) = in.J_R_bg[n - 1];
+  J.block<3, 9>(3, 0) = R_w * J_vn;
+  J.block<3, 3>(3, 3) -= skew(R_w * v_n) * dphi_dg;
+  J.block<3, 3>(6, 9).setIdentity();
+  J.block<3, 3>(9, 6).setIdentity();
+  Eigen::Matrix<double, 12, 12> P = J * al.cov * J.transpose();
+  const double tilt2 = std::pow(config.dynamic_init_min_sigma_tilt_rad, 2);
+  const Eigen::Vector3d rot_floor_world(tilt2, tilt2, std::pow(config.init_sigma_yaw_rad, 2));
+  P.block<3, 3>(0, 0) += R_w_bn.transpose() * rot_floor_world.asDiagonal() * R_w_bn;
+  P.block<3, 3>(3, 3) += Eigen::Matrix3d::Identity() * std::pow(config.dynamic_init_min_sigma_vel_mps, 2);
+  P.block<3, 3>(6, 6) +=
+      Eigen::Matrix3d::Identity() * std::pow(config.dynamic_init_min_sigma_gyro_bias_radps, 2);
+  return 0.5 * (P + P.transpose());
+}
+
 }  // namespace
 
 DynamicInitializer::DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c,
@@ -862,6 +893,7 @@ std::optional<InitialState> DynamicInitializer::try_align() {
   const double min_bg2 =
       config_.dynamic_init_min_sigma_gyro_bias_radps * config_.dynamic_init_min_sigma_gyro_bias_radps;
   out.gyro_bias_cov = al->cov.block<3, 3>(9, 9) + Eigen::Matrix3d::Identity() * min_bg2;
+  out.joint_cov = joint_start_covariance(*al, in, R_w, R_n, v_n, J_vn, config_);
   out.scale = translation_m;
   out.window_s = span_s;
   out.detail = fmt(
