@@ -182,6 +182,23 @@ TEST(EkfDynamicInitializer, StartInMotionFindsGravityVelocityBiasAndScale) {
   EXPECT_GT(s.rot_cov_world.diagonal().minCoeff(), 0.0);
   EXPECT_LT(s.vel_cov_m2ps2.diagonal().maxCoeff(), 1.0);
   EXPECT_GT(s.gyro_bias_cov.diagonal().minCoeff(), 0.0);
+  // The joint covariance the filter starts from: symmetric positive definite, and the true error of the
+  // start [tilt, velocity, gyro bias, accelerometer bias] lies within it (Mahalanobis distance below the
+  // 99.9% point of chi-square with 12 degrees of freedom, 32.9): a start neither wrong nor over-confident.
+  ASSERT_TRUE(s.joint_cov.has_value());
+  const Eigen::Matrix<double, 12, 12>& P = *s.joint_cov;
+  EXPECT_TRUE(P.isApprox(P.transpose()));
+  const Eigen::LLT<Eigen::Matrix<double, 12, 12>> llt(P);
+  ASSERT_EQ(llt.info(), Eigen::Success);
+  Eigen::Matrix<double, 12, 1> err;
+  // R_est = R_true Exp(theta): Exp(theta) turns the estimated up (IMU frame) onto the true one.
+  const Eigen::AngleAxisd theta(Eigen::Quaterniond::FromTwoVectors(
+      R_est.transpose() * Eigen::Vector3d::UnitZ(), R_true.transpose() * Eigen::Vector3d::UnitZ()));
+  err.segment<3>(0) = theta.angle() * theta.axis();
+  err.segment<3>(3) = R_est * (v_est_b - v_true_b);
+  err.segment<3>(6) = s.state.gyro_bias_radps - sc.gyro_bias;
+  err.segment<3>(9) = s.state.accel_bias_mps2 - sc.accel_bias;
+  EXPECT_LT(err.dot(llt.solve(err)), 32.9) << "error " << err.transpose() << " | " << s.detail;
   EXPECT_FALSE(s.detail.empty());
 }
 

@@ -30,6 +30,12 @@ struct InitialState {
   Eigen::Matrix3d rot_cov_world = Eigen::Matrix3d::Identity() * 1e-4;
   Eigen::Matrix3d vel_cov_m2ps2 = Eigen::Matrix3d::Identity() * 1e-2;
   Eigen::Matrix3d gyro_bias_cov = Eigen::Matrix3d::Identity() * 1e-4;
+  // The dynamic start's joint covariance of [attitude (body perturbation), velocity (world), gyro bias,
+  // accelerometer bias], with the cross terms the alignment leaves between them (a tilt and a horizontal
+  // accelerometer bias, the velocity and gravity's direction): the filter starts from it instead of the
+  // blocks above, so that a correction of one moves the others as the data say. nullopt: the blocks above,
+  // and the accelerometer bias from its prior.
+  std::optional<Eigen::Matrix<double, 12, 12>> joint_cov;
   double scale = 1.0;     // dynamic: the metric scale found for the up-to-scale structure (1 otherwise)
   double window_s = 0.0;  // seconds of data the decision used
   std::string detail;     // the numbers behind the decision, for the log and summary.json

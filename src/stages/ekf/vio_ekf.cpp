@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <exception>
@@ -97,6 +98,15 @@ void VioEkf::initialize_from(const InitialState& init) {
   P0.block<3, 3>(ImuErrorIndex::kGyroBias, ImuErrorIndex::kGyroBias) = init.gyro_bias_cov;
   P0.block<3, 3>(ImuErrorIndex::kAccelBias, ImuErrorIndex::kAccelBias) =
       std::pow(config_.init_sigma_accel_bias_mps2, 2) * I3;
+  if (init.joint_cov) {
+    constexpr std::array<int, 4> kBlocks{ImuErrorIndex::kTheta, ImuErrorIndex::kVel, ImuErrorIndex::kGyroBias,
+                                         ImuErrorIndex::kAccelBias};
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) {
+        P0.block<3, 3>(kBlocks[r], kBlocks[c]) = init.joint_cov->block<3, 3>(3 * r, 3 * c);
+      }
+    }
+  }
   filter_.initialize(state, P0);
   few_feature_frames_ = 0;
   previous_anchored_.reset();
