@@ -1,8 +1,10 @@
 // Descriptor standardisation (dird_standardize.hpp) on one core: the cost per descriptor of the statistics
 // and of standardising (batch and streaming), and the cost per pair of the distances: raw L1 vs int8-code
 // L1 (the same psadbw kernel) vs int8-code cosine vs float z-score L1 / cosine vs the compact codes of
-// dird_codes.hpp (sign: Hamming, ternary: popcount dot; the dispatched AVX2 kernel and the portable one).
-// Every iteration is one descriptor or one pair, so the reported time is per descriptor / per pair.
+// dird_codes.hpp (sign: Hamming, ternary and int2: popcount dots; the dispatched kernel, AVX-512 or AVX2, and
+// the portable one), pair by pair and as one frame's row over the set.
+// Every iteration is one descriptor or one pair (BM_RowCompact: one row of 4541 pairs), so the reported time
+// is per descriptor / per pair (per row).
 // Distances run over a KITTI-00-sized set of 4541 descriptors (raw / codes 15.7 MB, floats 62.8 MB: the
 // database a query is compared with) and over 2 descriptors (everything in L1 cache).
 // Medians: build/release/bench_dird_standardize --benchmark_repetitions=5 --benchmark_report_aggregates_only
@@ -11,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "stages/dird/dird_codes.hpp"
@@ -231,7 +234,8 @@ const loopgate::CompactCodeMatrix& compact_set(loopgate::DirdCode code) {
   };
   static const loopgate::CompactCodeMatrix sign = make(loopgate::DirdCode::kSign);
   static const loopgate::CompactCodeMatrix ternary = make(loopgate::DirdCode::kTernary);
-  return code == loopgate::DirdCode::kSign ? sign : ternary;
+  static const loopgate::CompactCodeMatrix int2 = make(loopgate::DirdCode::kInt2);
+  return code == loopgate::DirdCode::kSign ? sign : (code == loopgate::DirdCode::kTernary ? ternary : int2);
 }
 void BM_PairSignHamming(benchmark::State& state) {
   const auto& m = compact_set(loopgate::DirdCode::kSign);
@@ -240,6 +244,29 @@ void BM_PairSignHamming(benchmark::State& state) {
 void BM_PairTernaryDot(benchmark::State& state) {
   const auto& m = compact_set(loopgate::DirdCode::kTernary);
   run_pairs(state, [&](std::size_t a, std::size_t b) { return m.distance(a, b); });
+}
+void BM_PairInt2Dot(benchmark::State& state) {
+  const auto& m = compact_set(loopgate::DirdCode::kInt2);
+  run_pairs(state, [&](std::size_t a, std::size_t b) { return m.distance(a, b); });
+}
+// The distance row of one frame: the query against every frame of the set in one pass over the contiguous
+// code matrix (CompactCodeMatrix::distances, what the pipeline runs per block); time per pair.
+void BM_RowCompact(benchmark::State& state) {
+  const auto code = static_cast<loopgate::DirdCode>(state.range(0));
+  const auto& m = compact_set(code);
+  static const std::vector<std::uint8_t> coded(kDatabase, 1);
+  std::vector<double> row(kDatabase);
+  std::size_t query = 0;
+  for (auto _ : state) {
+    m.distances(query, 0, kDatabase, coded.data(), row.data());
+    benchmark::DoNotOptimize(row.data());
+    query = query + 1 == kDatabase ? 0 : query + 1;
+  }
+  state.SetItemsProcessed(static_cast<std::int64_t>(state.iterations()) *
+                          static_cast<std::int64_t>(kDatabase));
+  state.SetLabel(std::string(loopgate::enum_name(code)) + ", " +
+                 std::string(loopgate::enum_name(loopgate::best_popcount_kernel())) +
+                 " kernel; per pair = time / " + std::to_string(kDatabase));
 }
 // The portable popcount kernel on the same sign codes (its own copy, as contiguous words).
 void BM_PairSignHammingPortable(benchmark::State& state) {
@@ -259,6 +286,12 @@ void BM_PairSignHammingPortable(benchmark::State& state) {
 BENCHMARK(BM_PairSignHamming)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairSignHammingPortable)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairTernaryDot)->Arg(2)->Arg(kDatabase)->ArgName("set");
+BENCHMARK(BM_PairInt2Dot)->Arg(2)->Arg(kDatabase)->ArgName("set");
+BENCHMARK(BM_RowCompact)
+    ->Arg(static_cast<int>(loopgate::DirdCode::kSign))
+    ->Arg(static_cast<int>(loopgate::DirdCode::kTernary))
+    ->Arg(static_cast<int>(loopgate::DirdCode::kInt2))
+    ->ArgName("code");
 BENCHMARK(BM_PairRawL1)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairCodeL1)->Arg(2)->Arg(kDatabase)->ArgName("set");
 BENCHMARK(BM_PairCodeCosine)->Arg(2)->Arg(kDatabase)->ArgName("set");

@@ -197,12 +197,13 @@ TEST(PipelineDirdSeqSlam, TakesItsDescriptorsFromItsOwnSection) {
   EXPECT_THROW(load_config<PipelineConfig>("", {"dird_seqslam.resize=bicubic"}), ConfigError);
 }
 
-// Compact codes: a full run's rows are the reference's int8 codes turned into sign / ternary codes and
-// compared by their distance, searched in batch; the summary names the code.
+// Compact codes: a full run's rows are the reference's int8 codes turned into sign / ternary / int2 codes
+// and compared by their distance, searched in batch (the run codes from the raw descriptor and the cuts of
+// its snapshots: the same bits); the summary names the code.
 TEST(PipelineDirdSeqSlam, CompactCodesAreTheReferenceCodesReducedAndCompared) {
   const RevisitDataset dataset(kPeriod, kLaps);
   const std::size_t frames = kPeriod * kLaps;
-  for (const DirdCode code : {DirdCode::kTernary, DirdCode::kSign}) {
+  for (const DirdCode code : {DirdCode::kTernary, DirdCode::kSign, DirdCode::kInt2}) {
     PipelineConfig config = seqslam_config(RunMode::kFull);
     config.dird_seqslam.codes.code = code;
     const auto out = testing::make_temp_dir("pipeline-dseq-compact");
@@ -225,9 +226,11 @@ TEST(PipelineDirdSeqSlam, CompactCodesAreTheReferenceCodesReducedAndCompared) {
       for (std::size_t j = 0; j + margin <= i; ++j) {
         const std::uint64_t* a = bits.data() + i * words;
         const std::uint64_t* b = bits.data() + j * words;
-        rows[i].push_back({static_cast<std::int64_t>(j),
-                           code == DirdCode::kSign ? sign_code_distance(a, b)
-                                                   : ternary_code_distance(a, nonzero[i], b, nonzero[j])});
+        const double distance = code == DirdCode::kSign ? sign_code_distance(a, b)
+                                : code == DirdCode::kTernary
+                                    ? ternary_code_distance(a, nonzero[i], b, nonzero[j])
+                                    : int2_code_distance(a, nonzero[i], b, nonzero[j]);
+        rows[i].push_back({static_cast<std::int64_t>(j), distance});
       }
     }
     const ContrastOutput expected = reference_search(rows, config);

@@ -211,7 +211,7 @@ struct DirdSeqSlamConfig {
   // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
   // of section standardize.
   std::string standardize = "causal";
-  DirdCodeConfig codes;  // keys code, ternary_threshold_sigma (docs/detection.md § Compact codes)
+  DirdCodeConfig codes;  // keys code, ternary_threshold_sigma, int2_threshold_sigma (docs/codes.md)
   ContrastSearchConfig search;
 
   template <class Self, class V>

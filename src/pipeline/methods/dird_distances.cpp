@@ -26,13 +26,17 @@ DirdDistances::DirdDistances(const MethodContext& context, const DirdConfig& dir
       norms_(context.capacity, 0.0),
       coded_(context.capacity, 0),
       code_config_(codes) {
+  if (codes.compact() && !standardize.enabled())
+    throw std::invalid_argument("DirdDistances: a compact code needs the standardisation");
   if (standardize.enabled()) {
-    standardizer_.emplace(observations_config(standardize));
+    if (codes.compact()) {
+      coder_.emplace(observations_config(standardize), codes);
+    } else {
+      standardizer_.emplace(observations_config(standardize));
+    }
     observe_every_ = static_cast<std::size_t>(standardize.observe_every);
   }
   if (codes.compact()) {
-    if (!standardizer_)
-      throw std::invalid_argument("DirdDistances: a compact code needs the standardisation");
     compact_.emplace(codes, standardize.clamp_sigma, context.capacity);
     pending_.resize(context.capacity);
   }
@@ -53,8 +57,12 @@ void DirdDistances::describe(std::size_t seq, const cv::Mat* image) {
 
 void DirdDistances::begin_frame(std::size_t seq) {
   if (observed_frame(seq) && valid(seq)) {
-    standardizer_->observe(static_cast<std::int64_t>(seq), raw(seq));
-    if (standardizer_->ready() && !waiting_.empty()) {
+    if (coder_) {
+      coder_->observe(static_cast<std::int64_t>(seq), raw(seq));
+    } else {
+      standardizer_->observe(static_cast<std::int64_t>(seq), raw(seq));
+    }
+    if (statistics_ready() && !waiting_.empty()) {
       for (const std::size_t k : waiting_) code(k);
       waiting_.clear();
     }
@@ -83,6 +91,10 @@ std::size_t DirdDistances::distance_range(std::size_t seq, std::size_t j_begin, 
   distances_.assign(count, std::numeric_limits<double>::quiet_NaN());
   const auto block_distances = [&](std::size_t block) {
     const std::size_t begin = block * kBlock, end = std::min(count, begin + kBlock);
+    if (compact_) {  // one pass over the block's rows of the code matrix
+      compact_->distances(seq, j_begin + begin, j_begin + end, coded_.data(), distances_.data() + begin);
+      return;
+    }
     for (std::size_t k = begin; k < end; ++k) {
       const std::size_t j = j_begin + k;
       if (coded_[j]) distances_[k] = distance(seq, j);
@@ -107,14 +119,12 @@ std::size_t DirdDistances::distance_range(std::size_t seq, std::size_t j_begin, 
 bool DirdDistances::code(std::size_t seq) {
   if (coded_[seq]) return true;
   if (!valid(seq)) return false;
-  if (!standardizer_) {
+  if (!standardized()) {
     codes_[seq] = raw_.descriptor(seq);
-  } else if (compact_ && standardizer_->ready()) {
-    Descriptor standard;
-    standardizer_->standardize(static_cast<std::int64_t>(seq), raw(seq), standard);
-    compact_->set(seq, standard);
+  } else if (compact_ && coder_->ready()) {
+    compact_->set(seq, *coder_, static_cast<std::int64_t>(seq), raw(seq));
     pending_[seq].reset();
-  } else if (!standardizer_->ready()) {
+  } else if (!statistics_ready()) {
     if (std::find(waiting_.begin(), waiting_.end(), seq) == waiting_.end()) {
       waiting_.push_back(seq);
       ++frames_before_statistics_;
@@ -135,14 +145,15 @@ double DirdDistances::distance(std::size_t a, std::size_t b) const {
 }
 
 nlohmann::json DirdDistances::summary() const {
-  if (!standardizer_) return nlohmann::json::object();
+  if (!standardized()) return nlohmann::json::object();
   if (compact_) {
     return {{"standardize",
              {{"mode", standardize_.mode},
               {"code", enum_name(code_config_.code)},
               {"code_bytes", compact_->bytes_per_code()},
-              {"observations", standardizer_->observations()},
-              {"snapshots", standardizer_->snapshots()},
+              {"observations", coder_->observations()},
+              {"snapshots", coder_->snapshots()},
+              {"snapshot_bytes", coder_->snapshot_bytes()},
               {"frames_coded", frames_coded_},
               {"frames_before_statistics", frames_before_statistics_}}}};
   }

@@ -39,9 +39,9 @@ class DirdDistances {
   DirdDistances(const MethodContext& context, const DirdConfig& dird, const StandardizeConfig& standardize,
                 const DirdCodeConfig& codes = {});
 
-  bool standardized() const { return standardizer_.has_value(); }
+  bool standardized() const { return standardizer_.has_value() || coder_.has_value(); }
   // Frames whose raw descriptor feeds the statistics.
-  bool observed_frame(std::size_t seq) const { return standardizer_ && seq % observe_every_ == 0; }
+  bool observed_frame(std::size_t seq) const { return standardized() && seq % observe_every_ == 0; }
 
   // Describe node (parallel): the raw descriptor of `seq`, or none when there is no image.
   void describe(std::size_t seq, const cv::Mat* image);
@@ -69,6 +69,7 @@ class DirdDistances {
   // (then it waits for them).
   bool code(std::size_t seq);
   double distance(std::size_t a, std::size_t b) const;
+  bool statistics_ready() const { return coder_ ? coder_->ready() : standardizer_->ready(); }
   // The raw descriptor of a described frame not yet dropped.
   const Descriptor& raw(std::size_t seq) const;
 
@@ -76,12 +77,13 @@ class DirdDistances {
   DirdConfig dird_;
   StandardizeConfig standardize_;
   DirdExtractor extractor_;
-  DescriptorStore raw_;                  // written by describe (parallel), published
-  std::unique_ptr<Descriptor[]> codes_;  // match node only
-  std::vector<double> norms_;            // match node only
-  std::vector<std::uint8_t> coded_;      // match node only
-  std::optional<CausalStandardizer> standardizer_;
+  DescriptorStore raw_;                             // written by describe (parallel), published
+  std::unique_ptr<Descriptor[]> codes_;             // match node only
+  std::vector<double> norms_;                       // match node only
+  std::vector<std::uint8_t> coded_;                 // match node only
+  std::optional<CausalStandardizer> standardizer_;  // int8 codes
   DirdCodeConfig code_config_;
+  std::optional<CausalCompactCoder> coder_;   // compact codes: the statistics kept as cuts
   std::optional<CompactCodeMatrix> compact_;  // match node only
   // Compact codes: the raw descriptors until coded (written by describe before the store's publish, read
   // after its state; the store's own slots stay unwritten).

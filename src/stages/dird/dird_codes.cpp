@@ -8,30 +8,42 @@
 #include <string>
 
 #include "core/error.hpp"
-#include "stages/dird/dird_standardize.hpp"
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
-#define LOOPGATE_CODES_AVX2_DISPATCH 1
+#define LOOPGATE_CODES_SIMD_DISPATCH 1
 #endif
 
 namespace loopgate {
 
-void DirdCodeConfig::validate() const {
-  if (!(std::isfinite(ternary_threshold_sigma) && ternary_threshold_sigma > 0.0 &&
-        ternary_threshold_sigma <= 4.0)) {
-    throw ConfigError("dird_seqslam.ternary_threshold_sigma: must be in (0, 4] standard deviations (got " +
-                      std::to_string(ternary_threshold_sigma) + ")");
+namespace {
+
+void require_sigma(const char* key, double sigma) {
+  if (!(std::isfinite(sigma) && sigma > 0.0 && sigma <= 4.0)) {
+    throw ConfigError(std::string("dird_seqslam.") + key + ": must be in (0, 4] standard deviations (got " +
+                      std::to_string(sigma) + ")");
   }
+}
+
+}  // namespace
+
+void DirdCodeConfig::validate() const {
+  require_sigma("ternary_threshold_sigma", ternary_threshold_sigma);
+  require_sigma("int2_threshold_sigma", int2_threshold_sigma);
 }
 
 std::size_t code_words(DirdCode code) {
   switch (code) {
     case DirdCode::kSign: return kCodePlaneWords;
-    case DirdCode::kTernary: return 2 * kCodePlaneWords;
+    case DirdCode::kTernary:
+    case DirdCode::kInt2: return 2 * kCodePlaneWords;
     case DirdCode::kInt8: break;
   }
   return 0;
+}
+
+int code_threshold(double sigma, double clamp_sigma) {
+  return std::max(1, static_cast<int>(std::lround(kStandardCodeMax * sigma / clamp_sigma)));
 }
 
 std::int32_t make_compact_code(const DirdCodeConfig& config, double clamp_sigma, const Descriptor& standard,
@@ -45,25 +57,37 @@ std::int32_t make_compact_code(const DirdCodeConfig& config, double clamp_sigma,
     }
     return static_cast<std::int32_t>(kDirdBytes);
   }
-  // Ternary: |code| >= the threshold in code units (at least 1, so code 0 is never a plus or a minus).
-  const int threshold = std::max(
-      1, static_cast<int>(std::lround(kStandardCodeMax * config.ternary_threshold_sigma / clamp_sigma)));
-  std::uint64_t* plus = out;
-  std::uint64_t* minus = out + kCodePlaneWords;
-  std::int32_t nonzero = 0;
+  // Thresholds in code units (at least 1, so code 0 is never a plus, a minus or a large magnitude).
+  const bool ternary = config.code == DirdCode::kTernary;
+  const int threshold =
+      code_threshold(ternary ? config.ternary_threshold_sigma : config.int2_threshold_sigma, clamp_sigma);
+  std::uint64_t* first = out;                     // ternary: plus; int2: sign
+  std::uint64_t* second = out + kCodePlaneWords;  // ternary: minus; int2: magnitude
+  std::int32_t count = 0;
   for (std::size_t k = 0; k < kDirdBytes; ++k) {
     const int c = static_cast<int>(standard[k]) - kStandardCodeZero;
     const std::uint64_t bit = std::uint64_t{1} << (k % 64);
-    if (c >= threshold) {
-      plus[k / 64] |= bit;
-      ++nonzero;
-    } else if (c <= -threshold) {
-      minus[k / 64] |= bit;
-      ++nonzero;
+    if (ternary) {
+      if (c >= threshold) {
+        first[k / 64] |= bit;
+        ++count;
+      } else if (c <= -threshold) {
+        second[k / 64] |= bit;
+        ++count;
+      }
+    } else {
+      if (c > 0) first[k / 64] |= bit;
+      if (c >= threshold || c <= -threshold) {
+        second[k / 64] |= bit;
+        ++count;
+      }
     }
   }
-  return nonzero;
+  return count;
 }
+
+// ---------------------------------------------------------------------------------------------------------
+// Kernels
 
 std::int32_t hamming_words_portable(const std::uint64_t* a, const std::uint64_t* b, std::size_t words) {
   std::int32_t sum = 0;
@@ -86,9 +110,28 @@ std::int32_t ternary_dot_portable(const std::uint64_t* a, const std::uint64_t* b
 
 namespace {
 
-#if defined(LOOPGATE_CODES_AVX2_DISPATCH)
-// Bit counts of the 32 bytes of x: a 16-entry table of nibble counts looked up with pshufb for the low and
-// the high nibble of every byte.
+std::int32_t int2_pair_term_portable(const std::uint64_t* a, const std::uint64_t* b,
+                                     std::size_t plane_words) {
+  const std::uint64_t* as = a;
+  const std::uint64_t* am = a + plane_words;
+  const std::uint64_t* bs = b;
+  const std::uint64_t* bm = b + plane_words;
+  std::int32_t both = 0, d = 0, d_one = 0, d_both = 0;
+  for (std::size_t k = 0; k < plane_words; ++k) {
+    const std::uint64_t differ = as[k] ^ bs[k];
+    const std::uint64_t mab = am[k] & bm[k];
+    both += std::popcount(mab);
+    d += std::popcount(differ);
+    d_one += std::popcount(differ & am[k]) + std::popcount(differ & bm[k]);
+    d_both += std::popcount(differ & mab);
+  }
+  return 4 * both - 2 * d - 4 * d_one - 8 * d_both;
+}
+
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+// ---- AVX2: bit counts of the 32 bytes of x by a 16-entry table of nibble counts looked up with pshufb for
+// the low and the high nibble of every byte; psadbw against zero adds the byte counts (at most 8 each) into
+// the 64-bit lanes: no overflow at any length.
 __attribute__((target("avx2"))) inline __m256i byte_popcounts(__m256i x) {
   const __m256i table = _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2,
                                          3, 1, 2, 2, 3, 2, 3, 3, 4);
@@ -96,6 +139,10 @@ __attribute__((target("avx2"))) inline __m256i byte_popcounts(__m256i x) {
   const __m256i lo = _mm256_and_si256(x, low_mask);
   const __m256i hi = _mm256_and_si256(_mm256_srli_epi16(x, 4), low_mask);
   return _mm256_add_epi8(_mm256_shuffle_epi8(table, lo), _mm256_shuffle_epi8(table, hi));
+}
+
+__attribute__((target("avx2"))) inline __m256i lane_counts(__m256i x) {
+  return _mm256_sad_epu8(byte_popcounts(x), _mm256_setzero_si256());
 }
 
 // Sum of the four 64-bit lanes.
@@ -109,21 +156,16 @@ __attribute__((target("avx2"))) inline __m256i load(const std::uint64_t* p) {
   return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(p));
 }
 
-// psadbw against zero adds the byte counts (at most 8 each) into the 64-bit lanes: no overflow at any length.
 __attribute__((target("avx2"))) std::int32_t hamming_words_avx2(const std::uint64_t* a,
                                                                 const std::uint64_t* b, std::size_t words) {
-  const __m256i zero = _mm256_setzero_si256();
   __m256i acc = _mm256_setzero_si256();
-  for (std::size_t k = 0; k < words; k += 4) {
-    const __m256i counts = byte_popcounts(_mm256_xor_si256(load(a + k), load(b + k)));
-    acc = _mm256_add_epi64(acc, _mm256_sad_epu8(counts, zero));
-  }
+  for (std::size_t k = 0; k < words; k += 4)
+    acc = _mm256_add_epi64(acc, lane_counts(_mm256_xor_si256(load(a + k), load(b + k))));
   return static_cast<std::int32_t>(lane_sum(acc));
 }
 
 __attribute__((target("avx2"))) std::int32_t ternary_dot_avx2(const std::uint64_t* a, const std::uint64_t* b,
                                                               std::size_t plane_words) {
-  const __m256i zero = _mm256_setzero_si256();
   __m256i same_acc = _mm256_setzero_si256();
   __m256i opposite_acc = _mm256_setzero_si256();
   for (std::size_t k = 0; k < plane_words; k += 4) {
@@ -131,82 +173,516 @@ __attribute__((target("avx2"))) std::int32_t ternary_dot_avx2(const std::uint64_
     const __m256i bp = load(b + k), bm = load(b + plane_words + k);
     const __m256i same = _mm256_or_si256(_mm256_and_si256(ap, bp), _mm256_and_si256(am, bm));
     const __m256i opposite = _mm256_or_si256(_mm256_and_si256(ap, bm), _mm256_and_si256(am, bp));
-    same_acc = _mm256_add_epi64(same_acc, _mm256_sad_epu8(byte_popcounts(same), zero));
-    opposite_acc = _mm256_add_epi64(opposite_acc, _mm256_sad_epu8(byte_popcounts(opposite), zero));
+    same_acc = _mm256_add_epi64(same_acc, lane_counts(same));
+    opposite_acc = _mm256_add_epi64(opposite_acc, lane_counts(opposite));
   }
   return static_cast<std::int32_t>(lane_sum(same_acc) - lane_sum(opposite_acc));
 }
 
+__attribute__((target("avx2"))) std::int32_t int2_pair_term_avx2(const std::uint64_t* a,
+                                                                 const std::uint64_t* b,
+                                                                 std::size_t plane_words) {
+  __m256i both = _mm256_setzero_si256(), d = both, d_one = both, d_both = both;
+  for (std::size_t k = 0; k < plane_words; k += 4) {
+    const __m256i am = load(a + plane_words + k), bm = load(b + plane_words + k);
+    const __m256i differ = _mm256_xor_si256(load(a + k), load(b + k));
+    const __m256i mab = _mm256_and_si256(am, bm);
+    both = _mm256_add_epi64(both, lane_counts(mab));
+    d = _mm256_add_epi64(d, lane_counts(differ));
+    d_one = _mm256_add_epi64(d_one, lane_counts(_mm256_and_si256(differ, am)));
+    d_one = _mm256_add_epi64(d_one, lane_counts(_mm256_and_si256(differ, bm)));
+    d_both = _mm256_add_epi64(d_both, lane_counts(_mm256_and_si256(differ, mab)));
+  }
+  return static_cast<std::int32_t>(4 * lane_sum(both) - 2 * lane_sum(d) - 4 * lane_sum(d_one) -
+                                   8 * lane_sum(d_both));
+}
+
+// ---- AVX-512 (VPOPCNTDQ): eight words per step; a last step of four words through a masked load.
+// GCC 12's avx512fintrin.h builds _mm512_setzero_si512 and the masked loads from an "undefined" vector that
+// -Wuninitialized reports (GCC bug 105593, a false positive): silenced for these kernels only.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#define LOOPGATE_AVX512_TARGET __attribute__((target("avx512f,avx512vpopcntdq")))
+
+LOOPGATE_AVX512_TARGET inline __m512i load8(const std::uint64_t* p, std::size_t k, std::size_t words) {
+  if (k + 8 <= words) return _mm512_loadu_si512(p + k);
+  return _mm512_maskz_loadu_epi64(static_cast<__mmask8>(0x0f), p + k);
+}
+
+LOOPGATE_AVX512_TARGET std::int32_t hamming_words_avx512(const std::uint64_t* a, const std::uint64_t* b,
+                                                         std::size_t words) {
+  __m512i acc = _mm512_setzero_si512();
+  for (std::size_t k = 0; k < words; k += 8)
+    acc =
+        _mm512_add_epi64(acc, _mm512_popcnt_epi64(_mm512_xor_si512(load8(a, k, words), load8(b, k, words))));
+  return static_cast<std::int32_t>(_mm512_reduce_add_epi64(acc));
+}
+
+LOOPGATE_AVX512_TARGET std::int32_t ternary_dot_avx512(const std::uint64_t* a, const std::uint64_t* b,
+                                                       std::size_t plane_words) {
+  __m512i same_acc = _mm512_setzero_si512(), opposite_acc = same_acc;
+  const std::uint64_t* am_ = a + plane_words;
+  const std::uint64_t* bm_ = b + plane_words;
+  for (std::size_t k = 0; k < plane_words; k += 8) {
+    const __m512i ap = load8(a, k, plane_words), am = load8(am_, k, plane_words);
+    const __m512i bp = load8(b, k, plane_words), bm = load8(bm_, k, plane_words);
+    const __m512i same = _mm512_or_si512(_mm512_and_si512(ap, bp), _mm512_and_si512(am, bm));
+    const __m512i opposite = _mm512_or_si512(_mm512_and_si512(ap, bm), _mm512_and_si512(am, bp));
+    same_acc = _mm512_add_epi64(same_acc, _mm512_popcnt_epi64(same));
+    opposite_acc = _mm512_add_epi64(opposite_acc, _mm512_popcnt_epi64(opposite));
+  }
+  return static_cast<std::int32_t>(_mm512_reduce_add_epi64(same_acc) - _mm512_reduce_add_epi64(opposite_acc));
+}
+
+LOOPGATE_AVX512_TARGET std::int32_t int2_pair_term_avx512(const std::uint64_t* a, const std::uint64_t* b,
+                                                          std::size_t plane_words) {
+  // One accumulator of the weighted counts: 4 |mab| - 2 |d| - 4 |d&ma| - 4 |d&mb| - 8 |d&mab| per lane.
+  __m512i acc = _mm512_setzero_si512();
+  const std::uint64_t* am_ = a + plane_words;
+  const std::uint64_t* bm_ = b + plane_words;
+  for (std::size_t k = 0; k < plane_words; k += 8) {
+    const __m512i am = load8(am_, k, plane_words), bm = load8(bm_, k, plane_words);
+    const __m512i differ = _mm512_xor_si512(load8(a, k, plane_words), load8(b, k, plane_words));
+    const __m512i mab = _mm512_and_si512(am, bm);
+    const __m512i plus = _mm512_slli_epi64(_mm512_popcnt_epi64(mab), 2);
+    const __m512i minus = _mm512_add_epi64(
+        _mm512_slli_epi64(_mm512_popcnt_epi64(differ), 1),
+        _mm512_add_epi64(
+            _mm512_slli_epi64(_mm512_add_epi64(_mm512_popcnt_epi64(_mm512_and_si512(differ, am)),
+                                               _mm512_popcnt_epi64(_mm512_and_si512(differ, bm))),
+                              2),
+            _mm512_slli_epi64(_mm512_popcnt_epi64(_mm512_and_si512(differ, mab)), 3)));
+    acc = _mm512_add_epi64(acc, _mm512_sub_epi64(plus, minus));
+  }
+  return static_cast<std::int32_t>(_mm512_reduce_add_epi64(acc));
+}
+
+#pragma GCC diagnostic pop
+
 const bool kHasAvx2 = __builtin_cpu_supports("avx2");
+const bool kHasAvx512 = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vpopcntdq");
 #endif
 
 void require_multiple_of_4(std::size_t words) {
   if (words % 4 != 0) throw std::invalid_argument("compact code kernels: words must be a multiple of 4");
 }
 
+void require_available(PopcountKernel kernel) {
+  if (!popcount_kernel_available(kernel)) {
+    throw std::invalid_argument(std::string("compact code kernels: this CPU does not run the ") +
+                                std::string(enum_name(kernel)) + " kernel");
+  }
+}
+
+const PopcountKernel kBest = [] {
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kHasAvx512) return PopcountKernel::kAvx512;
+  if (kHasAvx2) return PopcountKernel::kAvx2;
+#endif
+  return PopcountKernel::kPortable;
+}();
+
 }  // namespace
 
-std::int32_t hamming_words(const std::uint64_t* a, const std::uint64_t* b, std::size_t words) {
+PopcountKernel best_popcount_kernel() {
+  return kBest;
+}
+
+bool popcount_kernel_available(PopcountKernel kernel) {
+  switch (kernel) {
+    case PopcountKernel::kPortable: return true;
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+    case PopcountKernel::kAvx2: return kHasAvx2;
+    case PopcountKernel::kAvx512: return kHasAvx512;
+#else
+    default: return false;
+#endif
+  }
+  return false;
+}
+
+bool compact_codes_use_avx2() {
+  return kBest != PopcountKernel::kPortable;
+}
+
+std::int32_t hamming_words(const std::uint64_t* a, const std::uint64_t* b, std::size_t words,
+                           PopcountKernel kernel) {
   require_multiple_of_4(words);
-#if defined(LOOPGATE_CODES_AVX2_DISPATCH)
-  if (kHasAvx2) return hamming_words_avx2(a, b, words);
+  require_available(kernel);
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kernel == PopcountKernel::kAvx512) return hamming_words_avx512(a, b, words);
+  if (kernel == PopcountKernel::kAvx2) return hamming_words_avx2(a, b, words);
 #endif
   return hamming_words_portable(a, b, words);
 }
 
-std::int32_t ternary_dot(const std::uint64_t* a, const std::uint64_t* b, std::size_t plane_words) {
+std::int32_t ternary_dot(const std::uint64_t* a, const std::uint64_t* b, std::size_t plane_words,
+                         PopcountKernel kernel) {
   require_multiple_of_4(plane_words);
-#if defined(LOOPGATE_CODES_AVX2_DISPATCH)
-  if (kHasAvx2) return ternary_dot_avx2(a, b, plane_words);
+  require_available(kernel);
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kernel == PopcountKernel::kAvx512) return ternary_dot_avx512(a, b, plane_words);
+  if (kernel == PopcountKernel::kAvx2) return ternary_dot_avx2(a, b, plane_words);
 #endif
   return ternary_dot_portable(a, b, plane_words);
 }
 
-bool compact_codes_use_avx2() {
-#if defined(LOOPGATE_CODES_AVX2_DISPATCH)
-  return kHasAvx2;
-#else
-  return false;
+std::int32_t int2_pair_term(const std::uint64_t* a, const std::uint64_t* b, std::size_t plane_words,
+                            PopcountKernel kernel) {
+  require_multiple_of_4(plane_words);
+  require_available(kernel);
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kernel == PopcountKernel::kAvx512) return int2_pair_term_avx512(a, b, plane_words);
+  if (kernel == PopcountKernel::kAvx2) return int2_pair_term_avx2(a, b, plane_words);
 #endif
+  return int2_pair_term_portable(a, b, plane_words);
 }
 
+std::int32_t hamming_words(const std::uint64_t* a, const std::uint64_t* b, std::size_t words) {
+  return hamming_words(a, b, words, kBest);
+}
+
+std::int32_t ternary_dot(const std::uint64_t* a, const std::uint64_t* b, std::size_t plane_words) {
+  return ternary_dot(a, b, plane_words, kBest);
+}
+
+namespace {
+
+// The distances of every code from its kernel's integers (one definition for the pair and the row paths).
+inline double cosine_from(double dot, double norm2_a, double norm2_b) {
+  const double c = dot / std::sqrt(norm2_a * norm2_b);
+  return 1.0 - std::clamp(c, -1.0, 1.0);
+}
+
+inline double sign_distance_of(std::int32_t hamming) {
+  return 2.0 * hamming / static_cast<double>(kDirdBytes);
+}
+
+inline double ternary_distance_of(std::int32_t dot, std::int32_t nonzero_a, std::int32_t nonzero_b) {
+  if (nonzero_a == 0 || nonzero_b == 0) return 1.0;
+  return cosine_from(dot, static_cast<double>(nonzero_a), static_cast<double>(nonzero_b));
+}
+
+inline double int2_norm2(std::int32_t magnitude) {
+  return static_cast<double>(kDirdBytes) + 8.0 * magnitude;
+}
+
+inline double int2_distance_of(std::int32_t pair_term, std::int32_t magnitude_a, std::int32_t magnitude_b) {
+  const std::int64_t dot = static_cast<std::int64_t>(kDirdBytes) +
+                           2 * static_cast<std::int64_t>(magnitude_a) +
+                           2 * static_cast<std::int64_t>(magnitude_b) + pair_term;
+  return cosine_from(static_cast<double>(dot), int2_norm2(magnitude_a), int2_norm2(magnitude_b));
+}
+
+}  // namespace
+
 double sign_code_distance(const std::uint64_t* a, const std::uint64_t* b) {
-  return 2.0 * hamming_words(a, b, kCodePlaneWords) / static_cast<double>(kDirdBytes);
+  return sign_distance_of(hamming_words(a, b, kCodePlaneWords));
 }
 
 double ternary_code_distance(const std::uint64_t* a, std::int32_t nonzero_a, const std::uint64_t* b,
                              std::int32_t nonzero_b) {
   if (nonzero_a == 0 || nonzero_b == 0) return 1.0;
-  const double dot = ternary_dot(a, b, kCodePlaneWords);
-  const double c = dot / std::sqrt(static_cast<double>(nonzero_a) * static_cast<double>(nonzero_b));
-  return 1.0 - std::clamp(c, -1.0, 1.0);
+  return ternary_distance_of(ternary_dot(a, b, kCodePlaneWords), nonzero_a, nonzero_b);
 }
+
+double int2_code_distance(const std::uint64_t* a, std::int32_t magnitude_a, const std::uint64_t* b,
+                          std::int32_t magnitude_b) {
+  return int2_distance_of(int2_pair_term(a, b, kCodePlaneWords, kBest), magnitude_a, magnitude_b);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// Coding from the raw descriptor
+
+std::size_t code_cuts(DirdCode code) {
+  switch (code) {
+    case DirdCode::kSign: return 1;
+    case DirdCode::kTernary: return 2;
+    case DirdCode::kInt2: return 3;
+    case DirdCode::kInt8: break;
+  }
+  return 0;
+}
+
+namespace {
+
+// For every dimension k, the first raw byte x in [0, 256] for which fires(k, code of x) holds, the predicate
+// monotonic in x (false then true); 256 when none. A search in lockstep over all dimensions, each step one
+// Standardization::apply of a probe descriptor: the codes are those of apply itself.
+template <class Fires>
+void first_firing(const Standardization& statistics, Fires fires,
+                  std::array<std::uint16_t, kDirdBytes>& first) {
+  std::array<std::uint16_t, kDirdBytes> lo{}, hi{};
+  hi.fill(256);
+  Descriptor probe, codes;
+  for (int step = 0; step < 9; ++step) {
+    for (std::size_t k = 0; k < kDirdBytes; ++k)
+      probe[k] = static_cast<std::uint8_t>(std::min<int>(255, (lo[k] + hi[k]) / 2));
+    statistics.apply(probe, codes);
+    for (std::size_t k = 0; k < kDirdBytes; ++k) {
+      if (lo[k] >= hi[k]) continue;
+      const int mid = (lo[k] + hi[k]) / 2;  // < 256 while lo < hi
+      if (fires(codes[k] - static_cast<int>(kStandardCodeZero)))
+        hi[k] = static_cast<std::uint16_t>(mid);
+      else
+        lo[k] = static_cast<std::uint16_t>(mid + 1);
+    }
+  }
+  for (std::size_t k = 0; k < kDirdBytes; ++k) first[k] = lo[k];
+}
+
+}  // namespace
+
+void make_code_cuts(const Standardization& statistics, const DirdCodeConfig& config, std::uint8_t* out) {
+  const std::size_t cuts = code_cuts(config.code);
+  if (cuts == 0) throw std::invalid_argument("make_code_cuts: int8 is not a compact code");
+  const double clamp_sigma = statistics.clamp_sigma();
+  std::array<std::uint16_t, kDirdBytes> first{};
+  // above cut u: the bit fires for x > u, u = first firing byte - 1 (the code of byte 0 is <= 0 < the
+  // threshold: first >= 1, so u in [0, 255], 255 = never).
+  const auto above = [&](int threshold, std::uint8_t* cut) {
+    first_firing(
+        statistics, [threshold](int c) { return c >= threshold; }, first);
+    for (std::size_t k = 0; k < kDirdBytes; ++k) cut[k] = static_cast<std::uint8_t>(first[k] - 1);
+  };
+  // below cut w: the bit fires for x < w, w = first byte whose code is above -threshold (the code of byte
+  // 255 is >= 0: w <= 255; 0 = never).
+  const auto below = [&](int threshold, std::uint8_t* cut) {
+    first_firing(
+        statistics, [threshold](int c) { return c > -threshold; }, first);
+    for (std::size_t k = 0; k < kDirdBytes; ++k) cut[k] = static_cast<std::uint8_t>(first[k]);
+  };
+  switch (config.code) {
+    case DirdCode::kSign: above(1, out); break;
+    case DirdCode::kTernary: {
+      const int t = code_threshold(config.ternary_threshold_sigma, clamp_sigma);
+      above(t, out);
+      below(t, out + kDirdBytes);
+      break;
+    }
+    case DirdCode::kInt2: {
+      const int t = code_threshold(config.int2_threshold_sigma, clamp_sigma);
+      above(1, out);
+      above(t, out + kDirdBytes);
+      below(t, out + 2 * kDirdBytes);
+      break;
+    }
+    case DirdCode::kInt8: break;
+  }
+}
+
+namespace {
+
+// The bits of one plane: bit k = raw[k] > above[k] (above given), or raw[k] < below[k] (below given), or
+// either. Portable: one dimension at a time.
+void plane_portable(const Descriptor& raw, const std::uint8_t* above, const std::uint8_t* below,
+                    std::uint64_t* out) {
+  std::memset(out, 0, kCodePlaneWords * sizeof(std::uint64_t));
+  for (std::size_t k = 0; k < kDirdBytes; ++k) {
+    const bool fires = (above && raw[k] > above[k]) || (below && raw[k] < below[k]);
+    if (fires) out[k / 64] |= std::uint64_t{1} << (k % 64);
+  }
+}
+
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+// 32 dimensions at a time: unsigned byte comparisons as signed ones after flipping the top bit, movemask
+// to 32 bits.
+__attribute__((target("avx2"))) void plane_avx2(const Descriptor& raw, const std::uint8_t* above,
+                                                const std::uint8_t* below, std::uint64_t* out) {
+  std::memset(out, 0, kCodePlaneWords * sizeof(std::uint64_t));
+  const __m256i flip = _mm256_set1_epi8(static_cast<char>(0x80));
+  auto* out32 = reinterpret_cast<std::uint32_t*>(out);
+  static_assert(kDirdBytes % 32 == 0);
+  for (std::size_t k = 0; k < kDirdBytes; k += 32) {
+    const __m256i x =
+        _mm256_xor_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(raw.data() + k)), flip);
+    __m256i fires = _mm256_setzero_si256();
+    if (above) {
+      const __m256i u =
+          _mm256_xor_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(above + k)), flip);
+      fires = _mm256_or_si256(fires, _mm256_cmpgt_epi8(x, u));
+    }
+    if (below) {
+      const __m256i w =
+          _mm256_xor_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(below + k)), flip);
+      fires = _mm256_or_si256(fires, _mm256_cmpgt_epi8(w, x));
+    }
+    std::uint32_t bits = static_cast<std::uint32_t>(_mm256_movemask_epi8(fires));
+    std::memcpy(out32 + k / 32, &bits, sizeof bits);  // little-endian: bit k of the plane
+  }
+}
+#endif
+
+std::int32_t plane_count(const std::uint64_t* plane) {
+  std::int32_t n = 0;
+  for (std::size_t k = 0; k < kCodePlaneWords; ++k) n += std::popcount(plane[k]);
+  return n;
+}
+
+}  // namespace
+
+std::int32_t code_from_cuts(DirdCode code, const std::uint8_t* cuts, const Descriptor& raw,
+                            std::uint64_t* out, PopcountKernel kernel) {
+  require_available(kernel);
+  auto plane = plane_portable;
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kernel != PopcountKernel::kPortable) plane = plane_avx2;
+#endif
+  switch (code) {
+    case DirdCode::kSign: plane(raw, cuts, nullptr, out); return static_cast<std::int32_t>(kDirdBytes);
+    case DirdCode::kTernary:
+      plane(raw, cuts, nullptr, out);
+      plane(raw, nullptr, cuts + kDirdBytes, out + kCodePlaneWords);
+      return plane_count(out) + plane_count(out + kCodePlaneWords);
+    case DirdCode::kInt2:
+      plane(raw, cuts, nullptr, out);
+      plane(raw, cuts + kDirdBytes, cuts + 2 * kDirdBytes, out + kCodePlaneWords);
+      return plane_count(out + kCodePlaneWords);
+    case DirdCode::kInt8: break;
+  }
+  throw std::invalid_argument("code_from_cuts: int8 is not a compact code");
+}
+
+std::int32_t code_from_cuts(DirdCode code, const std::uint8_t* cuts, const Descriptor& raw,
+                            std::uint64_t* out) {
+  return code_from_cuts(code, cuts, raw, out, kBest);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// CausalCompactCoder
+
+CausalCompactCoder::CausalCompactCoder(const StandardizeConfig& observations, const DirdCodeConfig& codes)
+    : config_(observations),
+      codes_(codes),
+      schedule_(observations),
+      moments_(observations.window),
+      cut_bytes_(code_cuts(codes.code) * kDirdBytes) {
+  codes_.validate();
+  if (cut_bytes_ == 0) throw std::invalid_argument("CausalCompactCoder: int8 is not a compact code");
+}
+
+void CausalCompactCoder::observe(std::int64_t frame, const Descriptor& raw) {
+  const bool snapshot = schedule_.observe(frame, moments_.added() + 1);
+  moments_.add(raw);
+  if (!snapshot) return;
+  auto cuts = std::make_unique<std::uint8_t[]>(cut_bytes_);
+  make_code_cuts(Standardization(moments_, config_), codes_, cuts.get());
+  cuts_.push_back(std::move(cuts));
+}
+
+std::int32_t CausalCompactCoder::code(std::int64_t frame, const Descriptor& raw, std::uint64_t* out) {
+  const std::size_t index = schedule_.standardize(frame, moments_.added());
+  return code_from_cuts(codes_.code, cuts_[index].get(), raw, out);
+}
+
+// ---------------------------------------------------------------------------------------------------------
+// CompactCodeMatrix
 
 CompactCodeMatrix::CompactCodeMatrix(const DirdCodeConfig& config, double clamp_sigma, std::size_t capacity)
     : config_(config),
       clamp_sigma_(clamp_sigma),
       capacity_(capacity),
       words_(code_words(config.code)),
+      kernel_(best_popcount_kernel()),
       bits_(new std::uint64_t[capacity * words_]),
-      nonzero_(new std::int32_t[config.code == DirdCode::kTernary ? capacity : 0]) {
+      count_(new std::int32_t[config.code == DirdCode::kSign ? 0 : capacity]) {
   config_.validate();
   if (words_ == 0) throw std::invalid_argument("CompactCodeMatrix: int8 is not a compact code");
 }
 
-void CompactCodeMatrix::set(std::size_t seq, const Descriptor& standard) {
+std::uint64_t* CompactCodeMatrix::row(std::size_t seq) {
   if (seq >= capacity_) {
     throw std::out_of_range("CompactCodeMatrix: seq " + std::to_string(seq) + " beyond capacity " +
                             std::to_string(capacity_));
   }
-  const std::int32_t nonzero = make_compact_code(config_, clamp_sigma_, standard, bits_.get() + seq * words_);
-  if (config_.code == DirdCode::kTernary) nonzero_[seq] = nonzero;
+  return bits_.get() + seq * words_;
+}
+
+void CompactCodeMatrix::set(std::size_t seq, const Descriptor& standard) {
+  const std::int32_t count = make_compact_code(config_, clamp_sigma_, standard, row(seq));
+  if (config_.code != DirdCode::kSign) count_[seq] = count;
+}
+
+void CompactCodeMatrix::set(std::size_t seq, CausalCompactCoder& coder, std::int64_t frame,
+                            const Descriptor& raw) {
+  const std::int32_t count = coder.code(frame, raw, row(seq));
+  if (config_.code != DirdCode::kSign) count_[seq] = count;
 }
 
 double CompactCodeMatrix::distance(std::size_t a, const CompactCodeMatrix& other, std::size_t b) const {
   const std::uint64_t* ca = bits_.get() + a * words_;
   const std::uint64_t* cb = other.bits_.get() + b * other.words_;
-  if (config_.code == DirdCode::kSign) return sign_code_distance(ca, cb);
-  return ternary_code_distance(ca, nonzero_[a], cb, other.nonzero_[b]);
+  switch (config_.code) {
+    case DirdCode::kSign: return sign_distance_of(hamming_words(ca, cb, kCodePlaneWords, kernel_));
+    case DirdCode::kTernary: {
+      if (count_[a] == 0 || other.count_[b] == 0) return 1.0;
+      return ternary_distance_of(ternary_dot(ca, cb, kCodePlaneWords, kernel_), count_[a], other.count_[b]);
+    }
+    case DirdCode::kInt2:
+      return int2_distance_of(int2_pair_term(ca, cb, kCodePlaneWords, kernel_), count_[a], other.count_[b]);
+    case DirdCode::kInt8: break;
+  }
+  return 1.0;
+}
+
+namespace {
+
+// One pass over rows [j_begin, j_end) of a matrix: `pair` is the kernel of one (query, row) pair, inlined
+// into the loop with the query's words staying in cache.
+template <class Pair>
+inline void row_pass(const std::uint64_t* bits, std::size_t words, std::size_t j_begin, std::size_t j_end,
+                     const std::uint8_t* coded, double* out, Pair pair) {
+  for (std::size_t j = j_begin; j < j_end; ++j) {
+    if (coded[j]) out[j - j_begin] = pair(bits + j * words, j);
+  }
+}
+
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+LOOPGATE_AVX512_TARGET void row_avx512(DirdCode code, const std::uint64_t* bits, std::size_t words,
+                                       const std::int32_t* count, std::size_t a, std::size_t j_begin,
+                                       std::size_t j_end, const std::uint8_t* coded, double* out) {
+  const std::uint64_t* q = bits + a * words;
+  switch (code) {
+    case DirdCode::kSign:
+      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t) {
+        return sign_distance_of(hamming_words_avx512(q, c, kCodePlaneWords));
+      });
+      break;
+    case DirdCode::kTernary:
+      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t j) {
+        if (count[a] == 0 || count[j] == 0) return 1.0;
+        return ternary_distance_of(ternary_dot_avx512(q, c, kCodePlaneWords), count[a], count[j]);
+      });
+      break;
+    case DirdCode::kInt2:
+      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t j) {
+        return int2_distance_of(int2_pair_term_avx512(q, c, kCodePlaneWords), count[a], count[j]);
+      });
+      break;
+    case DirdCode::kInt8: break;
+  }
+}
+#pragma GCC diagnostic pop
+#endif
+
+}  // namespace
+
+void CompactCodeMatrix::distances(std::size_t a, std::size_t j_begin, std::size_t j_end,
+                                  const std::uint8_t* coded, double* out) const {
+  if (a >= capacity_ || j_end > capacity_)
+    throw std::out_of_range("CompactCodeMatrix::distances: beyond capacity");
+#if defined(LOOPGATE_CODES_SIMD_DISPATCH)
+  if (kernel_ == PopcountKernel::kAvx512) {
+    row_avx512(config_.code, bits_.get(), words_, count_.get(), a, j_begin, j_end, coded, out);
+    return;
+  }
+#endif
+  row_pass(bits_.get(), words_, j_begin, j_end, coded, out,
+           [&](const std::uint64_t*, std::size_t j) { return distance(a, *this, j); });
 }
 
 }  // namespace loopgate

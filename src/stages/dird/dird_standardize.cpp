@@ -231,39 +231,62 @@ namespace {
 constexpr std::int64_t kNoFrame = std::numeric_limits<std::int64_t>::min();
 }
 
-CausalStandardizer::CausalStandardizer(const StandardizeConfig& config)
-    : config_(config), moments_(config.window), last_observed_(kNoFrame), horizon_(kNoFrame) {
-  config_.validate();
+CausalSchedule::CausalSchedule(const StandardizeConfig& config)
+    : warm_up_(config.warm_up),
+      refresh_every_(config.refresh_every),
+      last_observed_(kNoFrame),
+      horizon_(kNoFrame) {
+  config.validate();
 }
 
-void CausalStandardizer::observe(std::int64_t frame, const Descriptor& raw) {
+bool CausalSchedule::observe(std::int64_t frame, std::int64_t observations) {
   if (frame <= last_observed_ || frame <= horizon_) {
     throw std::invalid_argument("CausalStandardizer::observe: frame " + std::to_string(frame) +
                                 " is not after every frame observed or standardised before");
   }
-  moments_.add(raw);
   last_observed_ = frame;
-  const std::int64_t m = moments_.added();
-  if (m >= config_.warm_up && (m - config_.warm_up) % config_.refresh_every == 0) {
-    snapshots_.push_back({frame, Standardization(moments_, config_)});
+  if (observations >= warm_up_ && (observations - warm_up_) % refresh_every_ == 0) {
+    frames_.push_back(frame);
+    return true;
+  }
+  return false;
+}
+
+std::size_t CausalSchedule::snapshot_for(std::int64_t frame, std::int64_t observations) const {
+  if (frames_.empty()) {
+    throw std::logic_error("CausalStandardizer: statistics not ready (" + std::to_string(observations) +
+                           " of " + std::to_string(warm_up_) + " warm-up observations)");
+  }
+  // First snapshot with a frame > p; the one before it is the latest with frame <= p.
+  const auto after = std::upper_bound(frames_.begin(), frames_.end(), frame);
+  return after == frames_.begin() ? 0 : static_cast<std::size_t>(std::prev(after) - frames_.begin());
+}
+
+std::size_t CausalSchedule::standardize(std::int64_t frame, std::int64_t observations) {
+  const std::size_t index = snapshot_for(frame, observations);
+  horizon_ = std::max(horizon_, frame);
+  return index;
+}
+
+CausalStandardizer::CausalStandardizer(const StandardizeConfig& config)
+    : config_(config), schedule_(config), moments_(config.window) {}
+
+void CausalStandardizer::observe(std::int64_t frame, const Descriptor& raw) {
+  // The order check first: a rejected observation changes nothing.
+  if (schedule_.observe(frame, moments_.added() + 1)) {
+    moments_.add(raw);
+    snapshots_.push_back(Standardization(moments_, config_));
+  } else {
+    moments_.add(raw);
   }
 }
 
 const Standardization& CausalStandardizer::statistics_for(std::int64_t frame) const {
-  if (snapshots_.empty()) {
-    throw std::logic_error("CausalStandardizer: statistics not ready (" + std::to_string(observations()) +
-                           " of " + std::to_string(config_.warm_up) + " warm-up observations)");
-  }
-  // First snapshot with a frame > p; the one before it is the latest with frame <= p.
-  const auto after = std::upper_bound(snapshots_.begin(), snapshots_.end(), frame,
-                                      [](std::int64_t p, const Snapshot& s) { return p < s.frame; });
-  return after == snapshots_.begin() ? snapshots_.front().statistics : std::prev(after)->statistics;
+  return snapshots_[schedule_.snapshot_for(frame, moments_.added())];
 }
 
 void CausalStandardizer::standardize(std::int64_t frame, const Descriptor& raw, Descriptor& codes) {
-  const Standardization& statistics = statistics_for(frame);
-  horizon_ = std::max(horizon_, frame);
-  statistics.apply(raw, codes);
+  snapshots_[schedule_.standardize(frame, moments_.added())].apply(raw, codes);
 }
 
 Descriptor CausalStandardizer::standardize(std::int64_t frame, const Descriptor& raw) {

@@ -67,7 +67,8 @@ struct StandardizeConfig {
   double min_stddev = 1.0;          // floor of every dimension's standard deviation, in descriptor bytes
   std::int64_t warm_up = 50;        // causal: observations before the statistics are used (>= 2)
   std::int64_t window = 100;        // causal: statistics of the last `window` observations; 0 = all of them
-  std::int64_t refresh_every = 10;  // causal: a snapshot every N observations (27.6 KB each, all kept)
+  std::int64_t refresh_every = 10;  // causal: a snapshot every N observations (all kept: 27.6 KB each for
+                                    // int8 codes, the compact codes' cuts 3.5-10.4 KB)
   // causal, single sequence: the frames observed for the statistics are those with seq % observe_every == 0
   // (full and gated runs alike, so both give every frame the same codes); a gated run describes them at
   // their own time even outside the candidate areas. warm_up, window and refresh_every are then spans of
@@ -168,6 +169,30 @@ Standardization standardization_of(std::span<const Descriptor> descriptors, cons
 std::vector<Descriptor> standardize_batch(std::span<const Descriptor> descriptors,
                                           const StandardizeConfig& config);
 
+// The bookkeeping of the causal rule (top of this file), whatever a snapshot holds: which observation
+// completes a snapshot, which snapshot a frame is standardised with, and the order checks.
+class CausalSchedule {
+ public:
+  explicit CausalSchedule(const StandardizeConfig& config);
+
+  // Frame `frame` observed as observation number `observations` (1-based). Returns whether it completes a
+  // snapshot (the caller keeps one). Throws std::invalid_argument unless frame > every frame observed or
+  // standardised before.
+  bool observe(std::int64_t frame, std::int64_t observations);
+  bool ready() const { return !frames_.empty(); }
+  // Index of the snapshot frame p is standardised with (not moving the horizon); throws std::logic_error
+  // naming the observations made when !ready().
+  std::size_t snapshot_for(std::int64_t frame, std::int64_t observations) const;
+  // snapshot_for(), and the horizon moved to p.
+  std::size_t standardize(std::int64_t frame, std::int64_t observations);
+  std::size_t snapshots() const { return frames_.size(); }
+
+ private:
+  std::int64_t warm_up_, refresh_every_;
+  std::vector<std::int64_t> frames_;  // frame that completed each snapshot, ascending
+  std::int64_t last_observed_, horizon_;
+};
+
 // Streaming, causal statistics of one sequence (the rule at the top of this file). Not thread-safe: one
 // serial owner (e.g. the pipeline's serial match node); the Standardization it hands out is immutable.
 class CausalStandardizer {
@@ -178,7 +203,7 @@ class CausalStandardizer {
   // observed or standardised before.
   void observe(std::int64_t frame, const Descriptor& raw);
   // warm_up observations made: standardize() may be called.
-  bool ready() const { return !snapshots_.empty(); }
+  bool ready() const { return schedule_.ready(); }
   // The statistics frame p is standardised with; throws std::logic_error when !ready().
   const Standardization& statistics_for(std::int64_t frame) const;
   // Codes of frame p (statistics_for(p)); moves the horizon to p. Throws std::logic_error when !ready().
@@ -190,16 +215,10 @@ class CausalStandardizer {
   const StandardizeConfig& config() const { return config_; }
 
  private:
-  struct Snapshot {
-    std::int64_t frame = 0;  // frame of the observation that completed it
-    Standardization statistics;
-  };
   StandardizeConfig config_;
+  CausalSchedule schedule_;
   DescriptorMoments moments_;
-  std::vector<Snapshot> snapshots_;  // ascending frame
-  std::int64_t last_observed_ = 0;
-  std::int64_t horizon_ = 0;
-  bool any_frame_ = false;  // last_observed_ / horizon_ valid
+  std::vector<Standardization> snapshots_;  // in the schedule's order
 };
 
 // Distances on codes. L1: l1_distance() of dird_similarity.hpp on the coded Descriptors (SAD).

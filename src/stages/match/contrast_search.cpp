@@ -23,8 +23,8 @@ std::string str(double v) {
 std::vector<DistanceEntry> sorted_row(std::int64_t i, std::span<const DistanceEntry> row,
                                       ContrastSequenceSearch::Mode mode, int margin) {
   std::vector<DistanceEntry> sorted(row.begin(), row.end());
-  std::sort(sorted.begin(), sorted.end(),
-            [](const DistanceEntry& a, const DistanceEntry& b) { return a.j < b.j; });
+  const auto by_j = [](const DistanceEntry& a, const DistanceEntry& b) { return a.j < b.j; };
+  if (!std::is_sorted(sorted.begin(), sorted.end(), by_j)) std::sort(sorted.begin(), sorted.end(), by_j);
   for (std::size_t k = 0; k < sorted.size(); ++k) {
     const DistanceEntry& e = sorted[k];
     if (e.j < 0) throw std::invalid_argument(fmt::format("contrast search row {}: reference {} < 0", i, e.j));
@@ -169,33 +169,48 @@ void ContrastSequenceSearch::push(std::int64_t i, std::span<const DistanceEntry>
   pending_.push_back(verdict);
   ++next_frame_;
 
-  // Lines ending in row i: per velocity, the best one (sum over k of z(i - k, j - off[k])).
+  // Lines ending in row i: per velocity, the best one (sum over k of z(i - k, j - off[k])). The endpoints
+  // are taken in blocks small enough for the block's line sums and the rows' stretches to stay in cache
+  // across the L rows and the velocities; per endpoint the sum runs over k in the same order as without
+  // blocks, and the endpoints in ascending order, so the results are the same.
   const ZRow& current = rows_.back();
   const auto width = static_cast<std::int64_t>(current.z.size());
   const auto L = static_cast<std::size_t>(sequence_length_);
-  for (std::size_t v = 0; v < velocities_.size(); ++v) {
-    if (defined == 0) break;
-    const std::vector<std::int64_t>& off = offsets_[v];
-    line_sum_.assign(static_cast<std::size_t>(width), 0.0);
-    for (std::size_t k = 0; k < L; ++k) {
-      const ZRow* r = row_at(i - static_cast<std::int64_t>(k));
-      if (r == nullptr || r->z.empty()) continue;
-      // endpoints j = current.j_lo + e read r at j - off[k]: e in [e0, e1)
-      const std::int64_t shift = current.j_lo - off[k] - r->j_lo;  // index into r of endpoint e = e + shift
-      const std::int64_t e0 = std::max<std::int64_t>(0, -shift);
-      const std::int64_t e1 = std::min<std::int64_t>(width, static_cast<std::int64_t>(r->z.size()) - shift);
-      const float* src = r->z.data() + shift;
-      for (std::int64_t e = e0; e < e1; ++e) line_sum_[static_cast<std::size_t>(e)] += src[e];
-    }
-    std::int64_t best_e = -1;
-    double best = -std::numeric_limits<double>::infinity();
-    for (std::int64_t e = 0; e < width; ++e) {
-      if (!current.defined[static_cast<std::size_t>(e)]) continue;
-      if (line_sum_[static_cast<std::size_t>(e)] > best) {
-        best = line_sum_[static_cast<std::size_t>(e)];
-        best_e = e;
+  const std::size_t V = velocities_.size();
+  constexpr std::int64_t kBlock = 2048;
+  std::vector<std::int64_t> best_e_v(V, -1);
+  std::vector<double> best_sum_v(V, -std::numeric_limits<double>::infinity());
+  line_sum_.resize(static_cast<std::size_t>(std::min(width, kBlock)));
+  for (std::int64_t b0 = 0; defined > 0 && b0 < width; b0 += kBlock) {
+    const std::int64_t b1 = std::min(width, b0 + kBlock);
+    for (std::size_t v = 0; v < V; ++v) {
+      const std::vector<std::int64_t>& off = offsets_[v];
+      std::fill(line_sum_.begin(), line_sum_.begin() + (b1 - b0), 0.0);
+      for (std::size_t k = 0; k < L; ++k) {
+        const ZRow* r = row_at(i - static_cast<std::int64_t>(k));
+        if (r == nullptr || r->z.empty()) continue;
+        // endpoints j = current.j_lo + e read r at j - off[k]: e in [e0, e1)
+        const std::int64_t shift = current.j_lo - off[k] - r->j_lo;  // index into r of endpoint e = e + shift
+        const std::int64_t e0 = std::max<std::int64_t>(b0, -shift);
+        const std::int64_t e1 = std::min<std::int64_t>(b1, static_cast<std::int64_t>(r->z.size()) - shift);
+        if (e0 >= e1) continue;
+        const float* src = r->z.data() + (shift + e0);
+        double* sum = line_sum_.data() + (e0 - b0);
+        for (std::int64_t n = 0; n < e1 - e0; ++n) sum[n] += src[n];
+      }
+      for (std::int64_t e = b0; e < b1; ++e) {
+        if (!current.defined[static_cast<std::size_t>(e)]) continue;
+        if (line_sum_[static_cast<std::size_t>(e - b0)] > best_sum_v[v]) {
+          best_sum_v[v] = line_sum_[static_cast<std::size_t>(e - b0)];
+          best_e_v[v] = e;
+        }
       }
     }
+  }
+  for (std::size_t v = 0; v < V; ++v) {
+    const std::vector<std::int64_t>& off = offsets_[v];
+    const std::int64_t best_e = best_e_v[v];
+    const double best = best_sum_v[v];
     if (best_e < 0) continue;
     const double score = best / static_cast<double>(L);
     const std::int64_t j_end = current.j_lo + best_e;
