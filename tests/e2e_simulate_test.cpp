@@ -80,8 +80,10 @@ TEST(E2eSimulate, SameSeedIsByteIdenticalOtherSeedDiffers) {
   const auto a = tree(root / "a");
   const auto b = tree(root / "b");
   const auto c = tree(root / "c");
-  // 40 images + cam0 data.csv/sensor.yaml + imu0 data.csv/sensor.yaml + ground truth + simulation.json.
-  EXPECT_EQ(a.size(), 46u);
+  // 40 images + cam0 data.csv/sensor.yaml + imu0 data.csv/sensor.yaml + ground truth + simulation.json +
+  // loop_truth.csv.
+  EXPECT_EQ(a.size(), 47u);
+  EXPECT_EQ(a.count("loop_truth.csv"), 1u);
   ASSERT_EQ(a.size(), b.size());
   for (const auto& [path, bytes] : a) {
     const auto it = b.find(path);

@@ -144,6 +144,13 @@ void DirdSeqSlamConfig::validate() const {
                       "' codes the standardised descriptor: needs dird_seqslam.standardize causal or batch");
   }
   search.validate();
+  viewpoint.validate();
+  if (viewpoint.enabled() && codes.compact()) {
+    throw ConfigError(
+        "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance compares int8 codes; it needs "
+        "dird_seqslam.code int8 (it is '" +
+        std::string(enum_name(codes.code)) + "')");
+  }
 }
 
 void EvalConfig::validate() const {

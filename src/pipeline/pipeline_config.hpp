@@ -14,6 +14,7 @@
 #include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_config.hpp"
 #include "stages/dird/dird_online_scale.hpp"
+#include "stages/dird/viewpoint.hpp"
 #include "stages/gate/gate_config.hpp"
 #include "stages/match/contrast_search.hpp"
 #include "stages/match/match_config.hpp"
@@ -213,6 +214,8 @@ struct DirdSeqSlamConfig {
   std::string standardize = "causal";
   DirdCodeConfig codes;  // keys code, ternary_threshold_sigma, int2_threshold_sigma (docs/codes.md)
   ContrastSearchConfig search;
+  // Viewpoint tolerance: keys viewpoint_* (stages/dird/viewpoint.hpp, docs/viewpoint.md).
+  ViewpointConfig viewpoint;
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
@@ -221,6 +224,7 @@ struct DirdSeqSlamConfig {
     v("standardize", self.standardize);
     DirdCodeConfig::fields(self.codes, v);
     ContrastSearchConfig::fields(self.search, v);
+    ViewpointConfig::fields(self.viewpoint, v);
   }
   void validate() const;
 

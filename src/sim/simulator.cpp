@@ -22,6 +22,7 @@
 #include "io/writers.hpp"
 #include "parallel/parallel_handoff.hpp"
 #include "sim/renderer.hpp"
+#include "sim/revisit.hpp"
 
 namespace loopgate::sim {
 
@@ -184,6 +185,11 @@ void LoopTruthSettings::validate() const {
 
 void SimulationConfig::validate() const {
   sections(*this, [](std::string_view, const auto& section) { section.validate(); });
+  if (route.revisit_lateral_offset_m != 0.0 && simulation.trajectory_format != "procedural") {
+    throw ConfigError(
+        "route.revisit_lateral_offset_m: needs simulation.trajectory_format procedural (it is '" +
+        simulation.trajectory_format + "': the revisits of a recorded trajectory stay as recorded)");
+  }
 }
 
 // ---------------------------------------------------------------------------------------------------------
@@ -280,6 +286,22 @@ std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& 
   return out;
 }
 
+std::vector<LoopInterval> plan_loop_truth(const SimulationPlan& plan, const LoopTruthSettings& settings) {
+  std::vector<Eigen::Isometry3d> street_T_w_c;
+  street_T_w_c.reserve(plan.frames_used);
+  for (std::size_t f = 0; f < plan.frames_used; ++f) street_T_w_c.push_back(plan.street_T_w_c(f));
+  return find_loop_truth(street_T_w_c, plan.up_w, settings);
+}
+
+void write_loop_truth_pairs(const std::filesystem::path& file, const std::vector<LoopInterval>& loops) {
+  std::ofstream out(file, std::ios::binary);
+  out << "query,reference\n";
+  for (const LoopInterval& loop : loops) {
+    for (std::int64_t j = loop.first; j <= loop.last; ++j) out << loop.query << ',' << j << '\n';
+  }
+  if (!out) throw DataError(file, "cannot write the ground-truth loop pairs");
+}
+
 // ---------------------------------------------------------------------------------------------------------
 // Planning: trajectory, frames, IMU, ground truth
 
@@ -319,6 +341,8 @@ SimulationPlan plan_simulation(SimulationConfig& config) {
   std::vector<GroundTruthState> recorded_states;  // euroc: biases for the ground truth
   if (s.trajectory_format == "procedural") {
     samples = make_procedural_route(config.route);
+    if (config.route.revisit_lateral_offset_m != 0.0)
+      plan.revisit_shift_w = apply_revisit_offset(config.route, samples);
     for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
     plan.frame_times = "the procedural route";
   } else if (s.trajectory_format == "kitti") {
@@ -480,6 +504,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
         throw DataError(out_dir, "output directory is not empty (use --force to overwrite)");
       std::filesystem::remove_all(out_dir / "mav0", ec);
       std::filesystem::remove(out_dir / "simulation.json", ec);
+      std::filesystem::remove(out_dir / kLoopTruthFile, ec);
     }
   }
 
@@ -490,7 +515,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   // World from the whole path (so that a prefix run renders the same images as the full run).
   std::vector<Eigen::Vector3d> path_w;
   path_w.reserve(plan.T_w_c.size());
-  for (const Eigen::Isometry3d& T : plan.T_w_c) path_w.push_back(T.translation());
+  for (std::size_t f = 0; f < plan.T_w_c.size(); ++f) path_w.push_back(plan.street_T_w_c(f).translation());
   const World world = build_world(config.world, path_w, plan.up_w);
   const Renderer renderer(world, plan.camera);
   spdlog::info("simulate: world '{}' with {} quads, {} structures ({} aliased)", config.world.kind,
@@ -559,9 +584,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   write_euroc_groundtruth(mav0 / "state_groundtruth_estimate0" / "data.csv", plan.ground_truth);
 
   // Ground-truth loops over the frames written.
-  const std::vector<Eigen::Isometry3d> used_T_w_c(plan.T_w_c.begin(),
-                                                  plan.T_w_c.begin() + static_cast<std::ptrdiff_t>(n));
-  const std::vector<LoopInterval> loops = find_loop_truth(used_T_w_c, plan.up_w, config.loops);
+  const std::vector<LoopInterval> loops = plan_loop_truth(plan, config.loops);
 
   SimulationSummary summary;
   summary.frames = n;
@@ -598,6 +621,12 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
     meta["parameters"]["illumination"].erase("night_model");
   }
   if (!config.world.street_ground_exact_cells) meta["parameters"]["world"].erase("street_ground_exact_cells");
+  if (config.route.revisit_lateral_offset_m == 0.0) {
+    // Echoed only when used, so that datasets without a revisit offset keep their bytes.
+    for (const char* key :
+         {"revisit_lateral_offset_m", "revisit_radius_m", "revisit_min_travel_m", "revisit_lane_change_m"})
+      meta["parameters"]["route"].erase(key);
+  }
   meta["world"] = {{"kind", config.world.kind},
                    {"quads", world.quads.size()},
                    {"structures", world.structures.size()},
@@ -670,6 +699,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
       {"intervals_columns", {"query", "first", "last"}},
       {"intervals", intervals}};
   write_json_file(out_dir / "simulation.json", meta);
+  write_loop_truth_pairs(out_dir / kLoopTruthFile, loops);
 
   summary.render_s = render_s;
   summary.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();

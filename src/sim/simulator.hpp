@@ -233,15 +233,25 @@ struct LoopInterval {
   std::int64_t first = 0;
   std::int64_t last = 0;
 };
+// The ground-truth loops as a pairs file beside simulation.json (OUT/loop_truth.csv, "query,reference"
+// 0-based frame numbers, one line per pair): what eval.truth_pairs_file reads, so that a run is scored by the
+// simulator's own truth (e.g. a revisit in another lane, whose camera positions are further apart than the
+// positions rule's eval.truth_radius_m). Throws DataError when it cannot be written.
+inline constexpr const char* kLoopTruthFile = "loop_truth.csv";
+void write_loop_truth_pairs(const std::filesystem::path& file, const std::vector<LoopInterval>& loops);
 std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& T_w_c,
                                           const Eigen::Vector3d& up_w, const LoopTruthSettings& settings);
 
 // Inputs of a simulation before rendering: frames, fitted trajectory, IMU and ground truth.
 struct SimulationPlan {
-  std::vector<Timestamp> frame_t_ns;           // all frames of the sequence (before max_frames)
-  std::string frame_times;                     // where they come from (simulation.json frames.times)
-  std::size_t frames_used = 0;                 // frames written (max_frames applied)
-  std::vector<Eigen::Isometry3d> T_w_c;        // camera pose per frame (all frames)
+  std::vector<Timestamp> frame_t_ns;     // all frames of the sequence (before max_frames)
+  std::string frame_times;               // where they come from (simulation.json frames.times)
+  std::size_t frames_used = 0;           // frames written (max_frames applied)
+  std::vector<Eigen::Isometry3d> T_w_c;  // camera pose per frame (all frames)
+  // Per frame (all frames): the lateral shift of a revisit in another lane (route.revisit_lateral_offset_m,
+  // sim/revisit.hpp) in world coordinates; empty when there is none. The street (world, loop truth) runs
+  // through T_w_c minus this shift.
+  std::vector<Eigen::Vector3d> revisit_shift_w;
   std::size_t frames_outside_trajectory = 0;   // frames (of those used) before/after the trajectory span
   std::vector<ImuSample> imu;                  // the IMU written (synthesised or passed through)
   std::vector<GroundTruthState> ground_truth;  // at the IMU times within the span and at frame times
@@ -253,6 +263,13 @@ struct SimulationPlan {
   Timestamp trajectory_end_t_ns = 0;
   std::size_t trajectory_samples = 0;
   std::size_t spline_controls = 0;
+
+  // Camera pose of frame f moved back onto the street (without the revisit's lateral shift).
+  Eigen::Isometry3d street_T_w_c(std::size_t f) const {
+    Eigen::Isometry3d T = T_w_c[f];
+    if (!revisit_shift_w.empty()) T.translation() -= revisit_shift_w[f];
+    return T;
+  }
 };
 
 // Loads the inputs named by the config, fits the trajectory, makes / reads the IMU and the ground truth.
@@ -260,6 +277,10 @@ struct SimulationPlan {
 // May update `config` (camera / imu_noise sections read from sensor.yaml files; world.seed = simulation.seed;
 // world.street_ground_exact_cells under illumination.night_model lamps).
 SimulationPlan plan_simulation(SimulationConfig& config);
+
+// The ground-truth loops of the first plan.frames_used frames, on the street: from plan.street_T_w_c(), so
+// that a revisit in another lane (route.revisit_lateral_offset_m) keeps the loop pairs of the same-lane one.
+std::vector<LoopInterval> plan_loop_truth(const SimulationPlan& plan, const LoopTruthSettings& settings);
 
 struct SimulationSummary {
   std::size_t frames = 0;

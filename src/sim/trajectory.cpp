@@ -384,6 +384,22 @@ void ProceduralRouteConfig::validate() const {
   if (!(speed_variation >= 0.0 && speed_variation < 1.0))
     throw ConfigError("speed_variation must be in [0, 1)");
   if (!(heading_wobble_period_s > 0.0)) throw ConfigError("heading_wobble_period_s must be > 0");
+  if (!(std::abs(revisit_lateral_offset_m) <= 20.0)) {
+    throw ConfigError("route.revisit_lateral_offset_m: " + std::to_string(revisit_lateral_offset_m) +
+                      " is not in [-20, 20] m (a lane is ~3.5 m wide)");
+  }
+  if (!(revisit_radius_m > 0.0 && revisit_radius_m <= 100.0)) {
+    throw ConfigError("route.revisit_radius_m: " + std::to_string(revisit_radius_m) +
+                      " is not in (0, 100] m");
+  }
+  if (!(revisit_min_travel_m >= 0.0 && std::isfinite(revisit_min_travel_m))) {
+    throw ConfigError("route.revisit_min_travel_m: " + std::to_string(revisit_min_travel_m) +
+                      " must be a finite number >= 0 m");
+  }
+  if (!(revisit_lane_change_m >= 0.0 && std::isfinite(revisit_lane_change_m))) {
+    throw ConfigError("route.revisit_lane_change_m: " + std::to_string(revisit_lane_change_m) +
+                      " must be a finite number >= 0 m");
+  }
 }
 
 namespace {

@@ -116,6 +116,15 @@ struct ProceduralRouteConfig {
   double heading_wobble_rad = 0.02;   // small steering wobble amplitude
   double heading_wobble_period_s = 7.0;
   std::int64_t start_t_ns = 0;
+  // A revisit in another lane (sim/revisit.hpp): the poses that pass a street driven before (an earlier pose
+  // within revisit_radius_m horizontally, with at least revisit_min_travel_m of path in between) are moved
+  // this far to the left of the direction of travel (negative: to the right), with a smooth lane change over
+  // revisit_lane_change_m of path before and after. 0 = off. The world and the ground-truth loops stay on
+  // the route without this offset: the offset revisit keeps the same-lane revisit's loop pairs.
+  double revisit_lateral_offset_m = 0.0;
+  double revisit_radius_m = 3.0;
+  double revisit_min_travel_m = 30.0;
+  double revisit_lane_change_m = 30.0;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is ProceduralRouteConfig or const
   // ProceduralRouteConfig).
@@ -136,6 +145,10 @@ struct ProceduralRouteConfig {
     v("heading_wobble_rad", self.heading_wobble_rad);
     v("heading_wobble_period_s", self.heading_wobble_period_s);
     v("start_t_ns", self.start_t_ns);
+    v("revisit_lateral_offset_m", self.revisit_lateral_offset_m);
+    v("revisit_radius_m", self.revisit_radius_m);
+    v("revisit_min_travel_m", self.revisit_min_travel_m);
+    v("revisit_lane_change_m", self.revisit_lane_change_m);
   }
   void validate() const;  // throws ConfigError
 };

@@ -144,6 +144,28 @@ double DirdDistances::distance(std::size_t a, std::size_t b) const {
   return coded_distance(dird_, standardize_, codes_[a], norms_[a], codes_[b], norms_[b]);
 }
 
+bool DirdDistances::code_like(std::size_t seq, const Descriptor& raw, Descriptor& code, double& norm) {
+  if (compact_) throw std::logic_error("DirdDistances::code_like: not with a compact code");
+  if (!coded_[seq]) return false;
+  norm = 0.0;
+  if (!standardizer_) {
+    code = raw;
+    return true;
+  }
+  standardizer_->standardize(static_cast<std::int64_t>(seq), raw, code);
+  if (standardize_.cosine()) norm = standard_norm(code);
+  return true;
+}
+
+double DirdDistances::distance_to(const Descriptor& code, double norm, std::size_t j) const {
+  if (!standardizer_) {
+    return dird_.l2_metric() ? l2_distance(code, codes_[j])
+                             : static_cast<double>(l1_distance(code, codes_[j]));
+  }
+  if (standardize_.cosine()) return standard_cosine_distance(code, norm, codes_[j], norms_[j]);
+  return static_cast<double>(l1_distance(code, codes_[j]));
+}
+
 nlohmann::json DirdDistances::summary() const {
   if (!standardized()) return nlohmann::json::object();
   if (compact_) {

@@ -53,6 +53,13 @@ class DirdDistances {
   std::size_t distance_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
                              std::vector<DistanceEntry>& out);
 
+  // Viewpoint tolerance (pipeline/methods/viewpoint_distances.hpp): `raw`, another descriptor of frame seq
+  // (a warped image), coded as frame seq is (same statistics); false when seq is not coded. Not with a
+  // compact code (the caller's config refuses it).
+  bool code_like(std::size_t seq, const Descriptor& raw, Descriptor& code, double& norm);
+  // The distance of such a code to coded frame j, as distance_range() computes it.
+  double distance_to(const Descriptor& code, double norm, std::size_t j) const;
+
   bool valid(std::size_t seq) const { return raw_.state(seq) == DescriptorStore::State::kValid; }
   std::size_t descriptors_computed() const { return descriptors_computed_.load(); }
   std::size_t distances_computed() const { return distances_computed_; }

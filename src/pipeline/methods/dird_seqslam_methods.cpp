@@ -21,6 +21,7 @@
 #include "pipeline/methods/detection_method.hpp"
 #include "pipeline/methods/dird_distances.hpp"
 #include "pipeline/methods/gated_cells.hpp"
+#include "pipeline/methods/viewpoint_distances.hpp"
 #include "stages/match/contrast_search.hpp"
 #include "stages/match/row_assembler.hpp"
 
@@ -123,9 +124,18 @@ DirdDistances make_distances(const MethodContext& context) {
                        c.dird_seqslam.standardization(c.standardize), c.dird_seqslam.codes);
 }
 
+// The viewpoint tolerance's warped descriptors, with the method's descriptor configuration.
+ViewpointDistances make_viewpoint(const MethodContext& context, int row_horizon_frames) {
+  const PipelineConfig& c = context.config;
+  return ViewpointDistances(context, c.dird_seqslam.descriptor(c.dird), c.dird_seqslam.viewpoint,
+                            row_horizon_frames);
+}
+
 // What the full and gated methods report alike.
-nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatching& matching) {
+nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatching& matching,
+                              const ViewpointDistances& viewpoint) {
   nlohmann::json out = matching.summary();
+  out.update(viewpoint.summary());
   out["score_order"] = "higher_is_better";
   out["descriptors_computed"] = distances.descriptors_computed();
   out["similarities_computed"] = distances.distances_computed();
@@ -143,12 +153,18 @@ MethodEvaluation method_evaluation(const ContrastMatching& matching) {
 class DirdSeqSlamFull final : public DetectionMethod {
  public:
   explicit DirdSeqSlamFull(const MethodContext& context)
-      : context_(context), distances_(make_distances(context)), matching_(context) {}
+      : context_(context),
+        distances_(make_distances(context)),
+        viewpoint_(make_viewpoint(context, 0)),
+        matching_(context) {}
   std::string name() const override { return "dird-seqslam"; }
   std::string mode() const override { return "full"; }
   bool needs_every_image() const override { return true; }
 
-  void describe(FrameRecord& r) override { distances_.describe(r.seq, r.decoded ? &r.image : nullptr); }
+  void describe(FrameRecord& r) override {
+    viewpoint_.describe(r.seq, r.decoded ? &r.image : nullptr, r.seq);
+    distances_.describe(r.seq, r.decoded ? &r.image : nullptr);
+  }
 
   void match(FrameRecord& r) override {
     const std::size_t seq = r.seq;
@@ -156,6 +172,8 @@ class DirdSeqSlamFull final : public DetectionMethod {
     row_.clear();
     const auto margin = static_cast<std::size_t>(context_.config.match.margin);
     if (seq >= margin) distances_.distance_range(seq, 0, seq - margin + 1, row_);
+    viewpoint_.refine(seq, distances_, row_, 0);
+    viewpoint_.release_before(seq + 1);
     matching_.push(static_cast<std::int64_t>(seq), row_);
   }
   void finish() override { matching_.flush(); }
@@ -163,7 +181,7 @@ class DirdSeqSlamFull final : public DetectionMethod {
   std::optional<FrameVerdict> detection(std::size_t seq) override {
     return matching_.detection(seq, distances_.valid(seq), false);
   }
-  nlohmann::json summary() const override { return method_summary(distances_, matching_); }
+  nlohmann::json summary() const override { return method_summary(distances_, matching_, viewpoint_); }
   MethodEvaluation evaluation() const override { return method_evaluation(matching_); }
   std::optional<std::pair<std::size_t, Descriptor>> example_descriptor() const override {
     return distances_.example_descriptor(matching_.first_loop_seq());
@@ -172,6 +190,7 @@ class DirdSeqSlamFull final : public DetectionMethod {
  private:
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
   DirdDistances distances_;
+  ViewpointDistances viewpoint_;
   ContrastMatching matching_;
   std::vector<DistanceEntry> row_;
 };
@@ -181,6 +200,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
   explicit DirdSeqSlamGated(const MethodContext& context)
       : context_(context),
         distances_(make_distances(context)),
+        viewpoint_(make_viewpoint(context, context.config.gate.row_horizon_frames)),
         matching_(context),
         cells_(context),
         rows_(context.config.gate.row_horizon_frames) {}
@@ -191,15 +211,23 @@ class DirdSeqSlamGated final : public DetectionMethod {
 
   void describe(FrameRecord& r) override {
     describe_frames(r, cells_.describe_list(r.seq), context_,
-                    [this](std::size_t k, const cv::Mat* image) { distances_.describe(k, image); });
+                    [this, &r](std::size_t k, const cv::Mat* image) {
+                      viewpoint_.describe(k, image, r.seq);
+                      distances_.describe(k, image);
+                    });
   }
 
   void match(FrameRecord& r) override {
     distances_.begin_frame(r.seq);
     for (const CellSpan& span : cells_.take_cells(r.seq)) {
+      std::vector<DistanceEntry>& row = rows_.row(span.i);
+      const std::size_t first = row.size();
       distances_.distance_range(static_cast<std::size_t>(span.i), static_cast<std::size_t>(span.j0),
-                                static_cast<std::size_t>(span.j1) + 1, rows_.row(span.i));
+                                static_cast<std::size_t>(span.j1) + 1, row);
+      viewpoint_.refine(static_cast<std::size_t>(span.i), distances_, row, first);
     }
+    if (r.seq > static_cast<std::size_t>(context_.config.gate.row_horizon_frames))
+      viewpoint_.release_before(r.seq - static_cast<std::size_t>(context_.config.gate.row_horizon_frames));
     match_end_seq_ = r.seq + 1;
     rows_.advance(static_cast<std::int64_t>(r.seq),
                   [this](std::int64_t i, const std::vector<DistanceEntry>& row) { matching_.push(i, row); });
@@ -227,7 +255,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
                        [this](std::int64_t k) { return distances_.valid(static_cast<std::size_t>(k)); });
   }
   nlohmann::json summary() const override {
-    nlohmann::json out = method_summary(distances_, matching_);
+    nlohmann::json out = method_summary(distances_, matching_, viewpoint_);
     out.update(cells_.summary(match_end_seq_));
     return out;
   }
@@ -243,6 +271,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
  private:
   const MethodContext context_;  // references to the run's objects (a copy: the struct is a temporary)
   DirdDistances distances_;
+  ViewpointDistances viewpoint_;
   ContrastMatching matching_;
   PoseGatedCells cells_;
   BasicRowAssembler<DistanceEntry> rows_;
