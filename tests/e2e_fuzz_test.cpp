@@ -6,7 +6,9 @@
 // deleted or duplicated, the file cut short) and each mutant is read by the real reader function in a forked
 // child (the manifest and the summary by the programs that read them, scripts/batch.py and loopgate
 // aggregate, run from the child). The property: the child exits normally (the input read, or refused with an
-// exception), never by a signal, never after the time limit, and nothing is written in the input folder.
+// exception), never by a signal, never after the time limit, and it writes nowhere but its --out: the child
+// runs with its working directory, TMPDIR and HOME set to empty folders that must stay empty, and the whole
+// scratch tree (the input folders included) must be as it was, except the aggregate's --out folder.
 //
 // In the suite it runs for LOOPGATE_FUZZ_SECONDS (default 40) split over the targets; by hand, e.g.
 //   LOOPGATE_FUZZ_SECONDS=1200 LOOPGATE_FUZZ_SEED=7 build/release/e2e_fuzz_test
@@ -162,12 +164,31 @@ class Mutator {
 
 enum class Outcome { kRead, kRefused, kCrash, kHang };
 
-// Runs read(dir) in a forked child; kHang after timeout (the child is killed).
-Outcome run_child(const Target& target, const fs::path& dir, std::chrono::milliseconds timeout) {
+// Where a child may not write: its working directory, TMPDIR and HOME, all empty folders under sandbox.
+struct Sandbox {
+  fs::path cwd, tmp, home;
+  explicit Sandbox(const fs::path& root) : cwd(root / "cwd"), tmp(root / "tmp"), home(root / "home") {
+    for (const fs::path& p : {cwd, tmp, home}) fs::create_directories(p);
+  }
+  // The files found in the three folders (empty when nothing was written there).
+  std::vector<std::string> written() const {
+    std::vector<std::string> out;
+    for (const fs::path& p : {cwd, tmp, home})
+      for (const auto& entry : fs::recursive_directory_iterator(p)) out.push_back(entry.path().string());
+    return out;
+  }
+};
+
+// Runs read(dir) in a forked child inside the sandbox; kHang after timeout (the child is killed).
+Outcome run_child(const Target& target, const fs::path& dir, const Sandbox& sandbox,
+                  std::chrono::milliseconds timeout) {
   const pid_t pid = ::fork();
   if (pid == 0) {
     int code = 0;
     try {
+      if (::chdir(sandbox.cwd.c_str()) != 0) ::_exit(4);
+      ::setenv("TMPDIR", sandbox.tmp.c_str(), 1);
+      ::setenv("HOME", sandbox.home.c_str(), 1);
       target.read(dir);
     } catch (const std::exception&) {
       code = 3;
@@ -380,6 +401,7 @@ TEST(E2eFuzz, MutatedInputsAreReadOrRefusedNeverCrashOrHang) {
   const fs::path findings = findings_env && *findings_env ? fs::path(findings_env) : scratch / "findings";
   spdlog::set_level(spdlog::level::off);  // the children's warnings would flood the log
   const std::vector<Target> all = targets(scratch);
+  const Sandbox sandbox(scratch / "sandbox");
   const auto per_target = std::chrono::duration<double>(seconds / static_cast<double>(all.size()));
   std::size_t tried = 0, read = 0, refused = 0, crashes = 0, hangs = 0;
   std::vector<std::string> found;
@@ -388,14 +410,27 @@ TEST(E2eFuzz, MutatedInputsAreReadOrRefusedNeverCrashOrHang) {
     const fs::path dir = scratch / target.name;
     for (const auto& [name, bytes] : target.others) write_bytes(dir / name, bytes);
     write_bytes(dir / target.file, target.seed);
-    const auto before = listing(dir);
+    // Everything in the scratch tree but the folders a run may write: findings and the aggregate's --out.
+    const auto scratch_listing = [&] {
+      auto all_files = listing(scratch);
+      std::erase_if(all_files, [&](const auto& entry) {
+        return entry.first.starts_with((scratch / "aggregate-out").string()) ||
+               entry.first.starts_with(findings.string());
+      });
+      return all_files;
+    };
+    const auto before = scratch_listing();
     std::size_t n = 0;
     const auto start = std::chrono::steady_clock::now();
     while (std::chrono::steady_clock::now() - start < per_target) {
       // The seed itself first, then mutants of the seed.
       const std::string input = n == 0 ? target.seed : mutator.mutate(target.seed);
       write_bytes(dir / target.file, input);
-      const Outcome outcome = run_child(target, dir, std::chrono::milliseconds(10000));
+      const Outcome outcome = run_child(target, dir, sandbox, std::chrono::milliseconds(10000));
+      for (const std::string& file : sandbox.written()) {
+        ADD_FAILURE() << target.name << ": input " << n << " wrote " << file << " outside its --out";
+        fs::remove_all(file);
+      }
       ++n;
       if (outcome == Outcome::kRead) ++read;
       if (outcome == Outcome::kRefused) ++refused;
@@ -412,7 +447,7 @@ TEST(E2eFuzz, MutatedInputsAreReadOrRefusedNeverCrashOrHang) {
     }
     tried += n;
     write_bytes(dir / target.file, target.seed);
-    EXPECT_EQ(listing(dir), before) << target.name << ": a reader wrote into its input folder";
+    EXPECT_EQ(scratch_listing(), before) << target.name << ": a reader wrote outside its --out";
     std::printf("fuzz %-24s %6zu inputs\n", target.name.c_str(), n);
   }
   std::printf(
