@@ -19,7 +19,7 @@
 #include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "pipeline/methods/method_registry.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "pipeline/two_sequence.hpp"
 #include "pipeline_fake_dataset.hpp"
 #include "stages/dird/dird_extractor.hpp"
@@ -482,6 +482,24 @@ TEST(PipelineTwoSequence, NoToleranceNoEvaluation) {
   EXPECT_FALSE(result.summary.contains("aligned"));
   EXPECT_FALSE(std::filesystem::exists(out / "truth_loops.csv"));
   EXPECT_EQ(read_csv(out / "frames.csv").size(), 40u);
+}
+
+TEST(PipelineTwoSequence, ViewpointToleranceIsRefusedNotIgnored) {
+  // The viewpoint tolerance lives in the single-sequence dird-seqslam: a two-sequence run refuses it
+  // before writing anything rather than running without it.
+  const RevisitDataset reference(20, 1, 0);
+  const RevisitDataset query(20, 1, 1);
+  PipelineConfig config = dird_config();
+  config.run.method = Detector::kDirdSeqSlam;
+  config.dird_seqslam.viewpoint.lateral_m = 3.5;
+  const auto out = testing::make_temp_dir("pipeline-two-seq-viewpoint");
+  try {
+    (void)run_two_sequences(config, reference, query, out);
+    FAIL() << "dird_seqslam.viewpoint_lateral_m=3.5 accepted in a two-sequence run";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("dird_seqslam.viewpoint_lateral_m"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(out / "summary.json"));
 }
 
 TEST(PipelineTwoSequence, BadMethodIsAConfigErrorNamingRunMethod) {

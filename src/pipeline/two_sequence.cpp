@@ -1,6 +1,6 @@
 // The wiring of a two-sequence run: the checks, the run clock, the trace, the parallel loop, the description
-// of both sequences through the method's two-sequence form (methods/two_sequence_method.hpp), its matches,
-// and the outputs (outputs/two_sequence_outputs.hpp). Nothing here depends on which method runs.
+// of both sequences through the method's two-sequence form (methods/two_sequence/two_sequence_method.hpp),
+// its matches, and the outputs (outputs/two_sequence_outputs.hpp). Nothing here depends on which method runs.
 #include "pipeline/two_sequence.hpp"
 
 #include <spdlog/fmt/fmt.h>
@@ -24,7 +24,7 @@
 #include "parallel/parallel_handoff.hpp"
 #include "pipeline/frame/run_clock.hpp"
 #include "pipeline/graph/run_resources.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "pipeline/outputs/two_sequence_outputs.hpp"
 
 namespace loopgate {
@@ -138,6 +138,12 @@ AlignedSequences checked_ranges(const PipelineConfig& config, const Dataset& ref
     throw ConfigError(
         "eval.truth_pairs_file: pairs of frame numbers within one sequence (single-sequence runs); two "
         "sequences are evaluated with eval.aligned_tolerance_frames");
+  }
+  if (config.dird_seqslam.viewpoint.enabled()) {
+    throw ConfigError(
+        "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance works inside a single-sequence run only; "
+        "a "
+        "two-sequence run (--reference/--query) does not apply it: set it to 0");
   }
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");

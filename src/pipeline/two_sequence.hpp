@@ -1,6 +1,6 @@
 // Two-sequence mode (docs/detection.md § Two sequences): a reference sequence against a query sequence
 // (e.g. Nordland summer vs winter), appearance only. Every image of both is described (in parallel,
-// `run.threads` workers) by the two-sequence form of run.method (methods/two_sequence_method.hpp: dird,
+// `run.threads` workers) by the two-sequence form of run.method (methods/two_sequence/two_sequence_method.hpp: dird,
 // dird-seqslam, seqslam), which then matches every query frame against the whole reference with no safety
 // margin, using the stage objects of its single-sequence run (i = query frame, j = reference frame).
 //

@@ -14,7 +14,7 @@
 
 #include "io/config.hpp"
 #include "pipeline/methods/detection_method.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "pipeline/pipeline_config.hpp"
 
 namespace loopgate {
@@ -30,7 +30,7 @@ constexpr std::span<const EnumName<MarginKey>> enum_names(MarginKey) {
 
 // Builds the method's object for one run (detection_method.hpp).
 using MethodFactory = std::unique_ptr<DetectionMethod> (*)(const MethodContext&);
-// Builds its two-sequence form for one run (methods/two_sequence_method.hpp).
+// Builds its two-sequence form for one run (methods/two_sequence/two_sequence_method.hpp).
 using TwoSequenceFactory = std::unique_ptr<TwoSequenceMethod> (*)(const PipelineConfig&);
 
 struct MethodEntry {

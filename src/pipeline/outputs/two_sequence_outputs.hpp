@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "eval/run_evaluation.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 
 namespace loopgate {
 

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_standardize.hpp"
 

@@ -18,7 +18,7 @@
 #include "io/writers.hpp"
 #include "pipeline/methods/method_registry.hpp"
 #include "pipeline/methods/seqslam_batch.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "stages/seqslam/seqslam_outcome.hpp"
 
 namespace loopgate {

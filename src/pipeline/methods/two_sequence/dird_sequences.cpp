@@ -1,4 +1,4 @@
-#include "pipeline/methods/dird_sequences.hpp"
+#include "pipeline/methods/two_sequence/dird_sequences.hpp"
 
 #include <spdlog/fmt/fmt.h>
 

@@ -12,8 +12,8 @@
 #include "io/dataset.hpp"
 #include "io/writers.hpp"
 #include "pipeline/methods/coded_distance.hpp"
-#include "pipeline/methods/dird_sequences.hpp"
-#include "pipeline/methods/two_sequence_method.hpp"
+#include "pipeline/methods/two_sequence/dird_sequences.hpp"
+#include "pipeline/methods/two_sequence/two_sequence_method.hpp"
 #include "stages/dird/dird_codes.hpp"
 #include "stages/match/contrast_search.hpp"
 
