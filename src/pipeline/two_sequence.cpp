@@ -139,12 +139,6 @@ AlignedSequences checked_ranges(const PipelineConfig& config, const Dataset& ref
         "eval.truth_pairs_file: pairs of frame numbers within one sequence (single-sequence runs); two "
         "sequences are evaluated with eval.aligned_tolerance_frames");
   }
-  if (config.dird_seqslam.viewpoint.enabled()) {
-    throw ConfigError(
-        "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance works inside a single-sequence run only; "
-        "a "
-        "two-sequence run (--reference/--query) does not apply it: set it to 0");
-  }
   for (const Dataset* dataset : {&reference, &query}) {
     if (dataset->frame_count() == 0) throw DataError(dataset->root(), "dataset has no frames");
     if (!dataset->has_images()) throw DataError(dataset->root(), "two-sequence mode needs images");

@@ -31,7 +31,16 @@ class DirdSeqSlamTwoSequence final : public TwoSequenceMethod {
       : config_(config),
         dird_(config.dird_seqslam.descriptor(config.dird)),
         standardize_(config.dird_seqslam.standardization(config.standardize)),
-        sequences_(dird_) {}
+        sequences_(dird_) {
+    // The viewpoint tolerance warps query-row frames inside a single-sequence run; this form has no such
+    // row, so it refuses the setting rather than running without it.
+    if (config.dird_seqslam.viewpoint.enabled()) {
+      throw ConfigError(
+          "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance works inside a single-sequence run "
+          "only; "
+          "a two-sequence run (--reference/--query) does not apply it: set it to 0");
+    }
+  }
 
   const char* name() const override { return "dird-seqslam"; }
   const char* score_order() const override { return "higher_is_better"; }
