@@ -9,12 +9,15 @@
 # on a static start and 5 s on a start in motion, >= 95% of frames tracked from the start, ATE auto / ATE
 # ground truth <= 1.25, rendered MH_05 ATE <= 0.30 m.
 #
-# usage: scripts/ekf_init_table.sh [--quick] [--reuse-renders DIR] [--only REGEX] OUT_DIR
+# usage: scripts/ekf_init_table.sh [--quick] [--reuse-renders DIR] [--only REGEX] [--table-only] OUT_DIR
 #   --quick            the long variants shortened (MH_05 mid-flight 30 s, V1_01 rendered 600 frames, KITTI
 #                      sub-ranges 600 frames, kitti00 seed 2 600 frames); the plain presets stay whole
 #   --reuse-renders D  take D/ROW (a render made earlier, e.g. by another checkout) instead of rendering it,
 #                      only when the first 20 frames rendered now are byte-identical to it (images and IMU)
 #   --only REGEX       only the rows whose name matches
+#   --table-only       no rendering or running: the table from the runs already in OUT_DIR
+# A render in OUT_DIR/sim/ROW is reused only when it was made with the same simulate arguments
+# (OUT_DIR/sim/ROW.args), so a --quick and a full call may share OUT_DIR.
 # Environment: LOOPGATE (binary; default build/release/loopgate of this checkout), LOOPGATE_SHARED_DATA
 # (default ../shared/data beside this checkout), PYTHON (default /usr/bin/python3).
 # Exit status: 0 when every row rendered and ran (targets may be missed: that is a result, in the table);
@@ -28,6 +31,7 @@ data=${LOOPGATE_SHARED_DATA:-$repo/../shared/data}
 py=${PYTHON:-/usr/bin/python3}
 
 quick=0
+table_only=0
 reuse=""
 only=""
 out=""
@@ -36,13 +40,14 @@ while [ $# -gt 0 ]; do
     --quick) quick=1 ;;
     --reuse-renders) reuse=$2; shift ;;
     --only) only=$2; shift ;;
-    -h|--help) sed -n '2,22p' "$0"; exit 0 ;;
+    --table-only) table_only=1 ;;
+    -h|--help) sed -n '2,25p' "$0"; exit 0 ;;
     -*) echo "ekf_init_table.sh: unknown option $1" >&2; exit 1 ;;
     *) out=$1 ;;
   esac
   shift
 done
-[ -n "$out" ] || { echo "usage: ekf_init_table.sh [--quick] [--reuse-renders DIR] [--only REGEX] OUT_DIR" >&2; exit 1; }
+[ -n "$out" ] || { echo "usage: ekf_init_table.sh [--quick] [--reuse-renders DIR] [--only REGEX] [--table-only] OUT_DIR" >&2; exit 1; }
 [ -x "$lg" ] || { echo "ekf_init_table.sh: no loopgate binary at $lg (build it or set LOOPGATE)" >&2; exit 1; }
 [ -x "$py" ] || { echo "ekf_init_table.sh: no python at $py (set PYTHON)" >&2; exit 1; }
 [ -d "$data" ] || { echo "ekf_init_table.sh: no shared data folder at $data (set LOOPGATE_SHARED_DATA)" >&2; exit 1; }
@@ -149,14 +154,17 @@ for r in "${rows[@]}"; do
   echo "== $name: $desc" >&2
   flags=""
   [ "$name" = euroc-mh05 ] && flags=--mh05
-  if [[ $args == real* ]]; then
+  if [ $table_only = 1 ]; then
+    true
+  elif [[ $args == real* ]]; then
     dataset=${args#real }
   else
     dataset=$out/sim/$name
-    if ! [ -f "$dataset/simulation.json" ]; then
+    read -r -a sim_args <<<"${args//@IN@/$out/inputs/$name}"
+    if ! [ -f "$dataset/simulation.json" ] || [ "$(cat "$dataset.args" 2>/dev/null)" != "${sim_args[*]}" ]; then
+      rm -rf "$dataset" "$dataset.args"
       prepare "$name" >"$out/inputs/$name.log" 2>&1 ||
         { echo "| $name | $desc | input files failed: $(tail -1 "$out/inputs/$name.log") |" >>"$table"; status=1; continue; }
-      read -r -a sim_args <<<"${args//@IN@/$out/inputs/$name}"
       if ! try_reuse "$name" "$dataset" "${sim_args[@]}"; then
         rm -rf "$dataset"
         if ! nice "$lg" simulate "${sim_args[@]}" --out "$dataset" >"$out/sim/$name.log" 2>&1; then
@@ -167,9 +175,11 @@ for r in "${rows[@]}"; do
           continue
         fi
       fi
+      echo "${sim_args[*]}" >"$dataset.args"
     fi
   fi
   for mode in auto ground_truth; do
+    [ $table_only = 1 ] && break
     run=$out/runs/$name-$mode
     extra=()
     [ $mode = ground_truth ] && extra=(--set ekf.init_mode=ground_truth)
