@@ -192,67 +192,105 @@ std::optional<InitialState> DynamicInitializer::try_align() {
     status_ = fmt("only %zu images in %.2f s", n, span_s);
     return std::nullopt;
   }
-  Attempt at;
-  at.span_s = span_s;
-  if (!choose_sfm_pair(&at) || !measure_excitation(&at) || !relative_pose(&at) || !pose_all_images(&at) ||
-      !estimate_gyro_bias(&at)) {
-    return std::nullopt;
+  // The attempt runs on the images from its SfM pair's first image on: those before it share too few tracks
+  // with any later image to enter the structure from motion. When the structure cannot be carried through
+  // every later image (tracks that end before the newest image), the start moves to a later image.
+  std::string structure_failure;
+  for (std::size_t start = 0; start + 2 < n;) {
+    Attempt at;
+    const std::optional<std::size_t> first = choose_sfm_pair(start, span_s, &at);
+    if (!first) break;
+    std::deque<Frame> trimmed;
+    if (*first > 0) trimmed.assign(window_.begin() + static_cast<std::ptrdiff_t>(*first), window_.end());
+    at.frames = *first > 0 ? &trimmed : &window_;
+    at.span_s = ns_to_s(at.frames->back().t_ns - at.frames->front().t_ns);
+    integrate_all(&at);
+    if (!measure_excitation(&at)) return std::nullopt;
+    if (!relative_pose(&at) || !pose_all_images(&at)) {
+      if (structure_failure.empty()) structure_failure = status_;
+      start = *first + 1;
+      continue;
+    }
+    if (!estimate_gyro_bias(&at)) return std::nullopt;
+    build_align_input(&at);
+    return finish(at);
   }
-  build_align_input(&at);
-  return finish(at);
+  if (!structure_failure.empty()) status_ = structure_failure + "; no later start of the window did better";
+  return std::nullopt;
 }
 
 void DynamicInitializer::integrate_all(Attempt* at) const {
-  const std::size_t n = window_.size();
+  const std::deque<Frame>& win = *at->frames;
+  const std::size_t n = win.size();
   at->pre.resize(n);
   for (std::size_t k = 1; k < n; ++k) {
-    at->pre[k] = preintegrate(window_[k].imu, window_[k - 1].t_ns, window_[k].t_ns, at->bg);
+    at->pre[k] = preintegrate(win[k].imu, win[k - 1].t_ns, win[k].t_ns, at->bg);
   }
 }
 
-bool DynamicInitializer::choose_sfm_pair(Attempt* at) {
+std::optional<std::size_t> DynamicInitializer::choose_sfm_pair(std::size_t start, double span_s,
+                                                               Attempt* at) {
+  // The SfM pair: the oldest image that shares at least dynamic_init_min_features tracks with a later image
+  // at dynamic_init_min_parallax_px of rotation-compensated parallax, and that later image with the largest
+  // such parallax. Starting from the oldest image keeps the window as long as the tracks allow; where tracks
+  // live shorter than the window (fast motion, small images), the window starts later.
   const std::size_t n = window_.size();
-  // Pre-integration with a zero gyro bias.
-  at->bg.setZero();
-  integrate_all(at);
-  // SfM pair: the oldest image and the one with the largest rotation-compensated parallax.
-  const FeatureMap& f0 = window_.front().features;
-  std::size_t best = 0;
-  double best_parallax = -1.0;
-  std::size_t best_common = 0;
-  std::size_t max_common = 0;
-  for (std::size_t k = 1; k < n; ++k) {
-    const FeatureMap& fk = window_[k].features;
-    const auto [par, common] = pair_parallax_px(f0, fk, rotation_fit(f0, fk), focal_px_);
-    max_common = std::max(max_common, common);
-    if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
-    if (par > best_parallax) {
-      best_parallax = par;
-      best = k;
-      best_common = common;
+  std::size_t max_common_oldest = 0;
+  double best_parallax_oldest = -1.0;
+  std::size_t best_common_oldest = 0;
+  std::size_t best_oldest = 0;
+  for (std::size_t a = start; a + 2 < n; ++a) {
+    const FeatureMap& fa = window_[a].features;
+    std::size_t best = 0;
+    double best_parallax = -1.0;
+    std::size_t best_common = 0;
+    std::size_t max_common = 0;
+    for (std::size_t k = a + 1; k < n; ++k) {
+      const FeatureMap& fk = window_[k].features;
+      const auto [par, common] = pair_parallax_px(fa, fk, rotation_fit(fa, fk), focal_px_);
+      max_common = std::max(max_common, common);
+      if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
+      if (par > best_parallax) {
+        best_parallax = par;
+        best = k;
+        best_common = common;
+      }
+    }
+    if (a == start) {
+      max_common_oldest = max_common;
+      best_parallax_oldest = best_parallax;
+      best_common_oldest = best_common;
+      best_oldest = best;
+    }
+    if (best != 0 && best_parallax >= config_.dynamic_init_min_parallax_px) {
+      at->best = best - a;
+      return a;
     }
   }
-  if (best == 0) {
-    status_ = fmt("features: at most %zu seen in the oldest image and another of the window < %d", max_common,
-                  config_.dynamic_init_min_features);
-    return false;
+  if (best_oldest == 0) {
+    status_ = fmt(
+        "features: at most %zu seen in image %zu and another of the window < %d (no later image of the "
+        "window has both with another at %.1f px of parallax)",
+        max_common_oldest, start, config_.dynamic_init_min_features, config_.dynamic_init_min_parallax_px);
+  } else {
+    status_ =
+        fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images %zu-%zu over %.2f s; no "
+            "later "
+            "image of the window does better)",
+            best_parallax_oldest, config_.dynamic_init_min_parallax_px, best_common_oldest, start,
+            best_oldest, span_s);
   }
-  if (best_parallax < config_.dynamic_init_min_parallax_px) {
-    status_ = fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images 0-%zu over %.2f s)",
-                  best_parallax, config_.dynamic_init_min_parallax_px, best_common, best, at->span_s);
-    return false;
-  }
-  at->best = best;
-  return true;
+  return std::nullopt;
 }
 
 bool DynamicInitializer::measure_excitation(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
   // IMU excitation: the accelerometer's variation over the window.
-  const std::size_t n = window_.size();
+  const std::size_t n = win.size();
   Eigen::Vector3d acc_mean = Eigen::Vector3d::Zero();
   std::size_t acc_count = 0;
   for (std::size_t k = 1; k < n; ++k) {
-    for (const ImuSample& s : window_[k].imu) {
+    for (const ImuSample& s : win[k].imu) {
       acc_mean += s.accel_mps2;
       ++acc_count;
     }
@@ -260,7 +298,7 @@ bool DynamicInitializer::measure_excitation(Attempt* at) {
   acc_mean /= static_cast<double>(std::max<std::size_t>(acc_count, 1));
   double acc_var = 0.0;
   for (std::size_t k = 1; k < n; ++k) {
-    for (const ImuSample& s : window_[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
+    for (const ImuSample& s : win[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
   }
   at->acc_std = std::sqrt(acc_var / static_cast<double>(std::max<std::size_t>(acc_count, 1)));
   if (at->acc_std < config_.dynamic_init_min_accel_std_mps2) {
@@ -272,12 +310,13 @@ bool DynamicInitializer::measure_excitation(Attempt* at) {
 }
 
 bool DynamicInitializer::relative_pose(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
   // Essential matrix and relative pose of the pair, then its inliers triangulated.
-  const std::size_t n = window_.size();
+  const std::size_t n = win.size();
   const std::size_t best = at->best;
   const double focal = focal_px_;
-  const FeatureMap& f0 = window_.front().features;
-  const FeatureMap& fb = window_[best].features;
+  const FeatureMap& f0 = win.front().features;
+  const FeatureMap& fb = win[best].features;
   std::vector<std::uint64_t> pair_ids;
   std::vector<cv::Point2d> pts0;
   std::vector<cv::Point2d> pts1;
@@ -332,14 +371,15 @@ bool DynamicInitializer::relative_pose(Attempt* at) {
 }
 
 void DynamicInitializer::triangulate_new(std::size_t k, Attempt* at) const {
+  const std::deque<Frame>& win = *at->frames;
   // Tracks of image k not triangulated yet, from their observations in the (posed) images before k.
-  for (const auto& [id, x] : window_[k].features) {
+  for (const auto& [id, x] : win[k].features) {
     if (at->points.contains(id)) continue;
     std::vector<Eigen::Isometry3d> poses;
     std::vector<Eigen::Vector2d> xy;
     for (std::size_t j = 0; j < k; ++j) {
-      const auto it = window_[j].features.find(id);
-      if (it == window_[j].features.end()) continue;
+      const auto it = win[j].features.find(id);
+      if (it == win[j].features.end()) continue;
       poses.push_back(at->T_ck_c0[j]);
       xy.push_back(it->second);
     }
@@ -355,12 +395,13 @@ void DynamicInitializer::triangulate_new(std::size_t k, Attempt* at) const {
 }
 
 bool DynamicInitializer::pose_all_images(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
   // PnP of the other images outwards from the pair, each starting from its neighbour's pose.
-  const std::size_t n = window_.size();
+  const std::size_t n = win.size();
   for (std::size_t k = 1; k < n; ++k) {
     if (k == at->best) continue;
     if (k > at->best) triangulate_new(k, at);
-    if (!pnp(window_[k].features, at->points, at->max_reproj, at->T_ck_c0[k - 1], &at->T_ck_c0[k])) {
+    if (!pnp(win[k].features, at->points, at->max_reproj, at->T_ck_c0[k - 1], &at->T_ck_c0[k])) {
       status_ = fmt("PnP failed for image %zu of %zu (%zu triangulated points; pair 0-%zu)", k, n,
                     at->points.size(), at->best);
       return false;
@@ -372,7 +413,7 @@ bool DynamicInitializer::pose_all_images(Attempt* at) {
     std::unordered_map<std::uint64_t, std::pair<std::vector<Eigen::Isometry3d>, std::vector<Eigen::Vector2d>>>
         tracks;
     for (std::size_t k = 0; k < n; ++k) {
-      for (const auto& [id, x] : window_[k].features) {
+      for (const auto& [id, x] : win[k].features) {
         tracks[id].first.push_back(at->T_ck_c0[k]);
         tracks[id].second.push_back(x);
       }
@@ -384,7 +425,7 @@ bool DynamicInitializer::pose_all_images(Attempt* at) {
       if (triangulate(obs.first, obs.second, 2.0 * at->max_reproj, &p)) at->points[id] = p;
     }
     for (std::size_t k = 1; k < n; ++k) {
-      if (!pnp(window_[k].features, at->points, at->max_reproj, at->T_ck_c0[k], &at->T_ck_c0[k])) {
+      if (!pnp(win[k].features, at->points, at->max_reproj, at->T_ck_c0[k], &at->T_ck_c0[k])) {
         status_ = fmt("PnP (refinement) failed for image %zu of %zu (%zu points)", k, n, at->points.size());
         return false;
       }
@@ -394,7 +435,8 @@ bool DynamicInitializer::pose_all_images(Attempt* at) {
 }
 
 bool DynamicInitializer::estimate_gyro_bias(Attempt* at) {
-  const std::size_t n = window_.size();
+  const std::deque<Frame>& win = *at->frames;
+  const std::size_t n = win.size();
   const Eigen::Matrix3d R_b_c = T_i_c_.linear();
   // Up-to-scale unit: the translation between the first and the last camera.
   at->R_c0_bk.resize(n);
@@ -430,8 +472,9 @@ bool DynamicInitializer::estimate_gyro_bias(Attempt* at) {
 }
 
 void DynamicInitializer::build_align_input(Attempt* at) const {
+  const std::deque<Frame>& win = *at->frames;
   // Alignment with the gyro's rotations: velocity, gravity and accelerometer bias in b0.
-  const std::size_t n = window_.size();
+  const std::size_t n = win.size();
   AlignInput& in = at->in;
   in.R_b_c = T_i_c_.linear();
   in.p_b_c = T_i_c_.translation();
@@ -457,8 +500,8 @@ void DynamicInitializer::build_align_input(Attempt* at) const {
   for (const auto& [id, point] : at->points) {
     std::vector<std::pair<std::size_t, Eigen::Vector2d>> obs;
     for (std::size_t k = 0; k < n; ++k) {
-      const auto it = window_[k].features.find(id);
-      if (it != window_[k].features.end()) obs.emplace_back(k, it->second);
+      const auto it = win[k].features.find(id);
+      if (it != win[k].features.end()) obs.emplace_back(k, it->second);
     }
     if (obs.size() < 3) continue;
     in.tracks.push_back(std::move(obs));
@@ -472,7 +515,8 @@ void DynamicInitializer::build_align_input(Attempt* at) const {
 }
 
 std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
-  const std::size_t n = window_.size();
+  const std::deque<Frame>& win = *at.frames;
+  const std::size_t n = win.size();
   const AlignInput& in = at.in;
   const double focal = focal_px_;
   std::string why;
@@ -531,14 +575,13 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
 
   InitialState out;
   out.method = InitMethod::kDynamic;
-  out.state.t_ns = window_.back().t_ns;
+  out.state.t_ns = win.back().t_ns;
   out.state.q_w_i = Eigen::Quaterniond(R_w * R_n).normalized();
   out.state.p_w_m.setZero();
   out.state.v_w_mps = R_w * v_n;
   out.state.gyro_bias_radps = bg_refined;
   out.state.accel_bias_mps2 = ba;
-  if (!window_.back().imu.empty())
-    out.state.omega_i_radps = window_.back().imu.back().gyro_radps - bg_refined;
+  if (!win.back().imu.empty()) out.state.omega_i_radps = win.back().imu.back().gyro_radps - bg_refined;
   // Covariances: those of the least squares (scaled by their residuals), floored by the config.
   const double sigma_tilt = std::max(config_.dynamic_init_min_sigma_tilt_rad,
                                      std::sqrt(std::max(al->cov.block<3, 3>(3, 3).trace() / 2.0, 0.0)) / G);

@@ -58,10 +58,11 @@ class DynamicInitializer {
 
   // One alignment attempt over the window: what each step hands to the next.
   struct Attempt {
+    const std::deque<Frame>* frames = nullptr;  // the images it uses: the window, or its newest part
     double span_s = 0.0;
     std::vector<Preintegrated> pre;  // per image k >= 1: the IMU from image k-1 to k, under the gyro bias bg
     Eigen::Vector3d bg = Eigen::Vector3d::Zero();
-    std::size_t best = 0;  // the SfM pair: image 0 and this one
+    std::size_t best = 0;  // the SfM pair: image 0 of `frames` and this one
     double acc_std = 0.0;
     double vision_parallax = 0.0;
     double max_reproj = 0.0;                                    // normalised
@@ -77,7 +78,9 @@ class DynamicInitializer {
 
   std::optional<InitialState> try_align();
   void integrate_all(Attempt* at) const;
-  bool choose_sfm_pair(Attempt* at);
+  // The index in the window (from `start` on) of the first image the attempt uses (its SfM pair in
+  // at->best), or nothing (status_ says why).
+  std::optional<std::size_t> choose_sfm_pair(std::size_t start, double span_s, Attempt* at);
   bool measure_excitation(Attempt* at);
   bool relative_pose(Attempt* at);
   void triangulate_new(std::size_t k, Attempt* at) const;
