@@ -113,85 +113,184 @@ std::optional<InitialState> DynamicInitializer::add_frame(const InitFrame& frame
   return result;
 }
 
+namespace {
+
+// Median rotation-compensated parallax (px) of the features seen in both images, and their number: the
+// bearing of each feature of image a is rotated by R_b_a into image b and compared with its observation
+// there.
+std::pair<double, std::size_t> pair_parallax_px(const FeatureMap& fa, const FeatureMap& fb,
+                                                const Eigen::Matrix3d& R_b_a, double focal) {
+  std::vector<double> d;
+  for (const auto& [id, xa] : fa) {
+    const auto it = fb.find(id);
+    if (it == fb.end()) continue;
+    const Eigen::Vector3d r = R_b_a * Eigen::Vector3d(xa.x(), xa.y(), 1.0);
+    if (r.z() <= 1e-6) continue;
+    d.push_back((project(r) - it->second).norm() * focal);
+  }
+  return std::make_pair(median(d), d.size());
+}
+
+// The rotation that best maps the bearings of image a onto those of image b (Kabsch): the parallax left after
+// it is what translation makes, free of the gyro bias.
+Eigen::Matrix3d rotation_fit(const FeatureMap& fa, const FeatureMap& fb) {
+  Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
+  for (const auto& [id, xa] : fa) {
+    const auto it = fb.find(id);
+    if (it == fb.end()) continue;
+    M += xa.homogeneous().normalized() * it->second.homogeneous().normalized().transpose();
+  }
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd3(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
+  D(2, 2) = (svd3.matrixV() * svd3.matrixU().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
+  return Eigen::Matrix3d(svd3.matrixV() * D * svd3.matrixU().transpose());
+}
+
+// PnP of an image with features `features` against `points` (c0), starting from `guess`; false (T_out
+// untouched) when it fails.
+bool pnp(const FeatureMap& features, const std::unordered_map<std::uint64_t, Eigen::Vector3d>& points,
+         double max_reproj, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) {
+  std::vector<cv::Point3d> obj;
+  std::vector<cv::Point2d> img;
+  for (const auto& [id, x] : features) {
+    const auto it = points.find(id);
+    if (it == points.end()) continue;
+    obj.emplace_back(it->second.x(), it->second.y(), it->second.z());
+    img.emplace_back(x.x(), x.y());
+  }
+  if (obj.size() < 10) return false;
+  cv::Mat R_guess;
+  cv::Mat rvec;
+  cv::Mat tvec;
+  cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
+  cv::Rodrigues(R_guess, rvec);
+  cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
+  cv::Mat inliers;
+  if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
+                          static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
+      inliers.rows < 8) {
+    return false;
+  }
+  cv::Mat R_est;
+  cv::Rodrigues(rvec, R_est);
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  cv::cv2eigen(R_est, R);
+  cv::cv2eigen(tvec, t);
+  T_out->setIdentity();
+  T_out->linear() = R;
+  T_out->translation() = t;
+  return true;
+}
+
+}  // namespace
+
 std::optional<InitialState> DynamicInitializer::try_align() {
   const std::size_t n = window_.size();
-  const double focal = focal_px_;
   const double span_s = ns_to_s(window_.back().t_ns - window_.front().t_ns);
   if (n < 3) {
     status_ = fmt("only %zu images in %.2f s", n, span_s);
     return std::nullopt;
   }
+  // The attempt runs on the images from its SfM pair's first image on: those before it share too few tracks
+  // with any later image to enter the structure from motion. When the structure cannot be carried through
+  // every later image (tracks that end before the newest image), the start moves to a later image.
+  std::string structure_failure;
+  for (std::size_t start = 0; start + 2 < n;) {
+    Attempt at;
+    const std::optional<std::size_t> first = choose_sfm_pair(start, span_s, &at);
+    if (!first) break;
+    std::deque<Frame> trimmed;
+    if (*first > 0) trimmed.assign(window_.begin() + static_cast<std::ptrdiff_t>(*first), window_.end());
+    at.frames = *first > 0 ? &trimmed : &window_;
+    at.span_s = ns_to_s(at.frames->back().t_ns - at.frames->front().t_ns);
+    integrate_all(&at);
+    if (!measure_excitation(&at)) return std::nullopt;
+    if (!relative_pose(&at) || !pose_all_images(&at)) {
+      if (structure_failure.empty()) structure_failure = status_;
+      start = *first + 1;
+      continue;
+    }
+    if (!estimate_gyro_bias(&at)) return std::nullopt;
+    build_align_input(&at);
+    return finish(at);
+  }
+  if (!structure_failure.empty()) status_ = structure_failure + "; no later start of the window did better";
+  return std::nullopt;
+}
 
-  // ---- pre-integration with a zero gyro bias ----
-  Eigen::Vector3d bg = Eigen::Vector3d::Zero();
-  std::vector<Preintegrated> pre(n);
-  auto integrate_all = [&]() {
-    for (std::size_t k = 1; k < n; ++k) {
-      pre[k] = preintegrate(window_[k].imu, window_[k - 1].t_ns, window_[k].t_ns, bg);
-    }
-  };
-  integrate_all();
-
-  // ---- SfM pair: the oldest image and the one with the largest rotation-compensated parallax ----
-  const Eigen::Matrix3d R_b_c = T_i_c_.linear();
-  const Eigen::Vector3d p_b_c = T_i_c_.translation();
-  const Frame& f0 = window_.front();
-  auto parallax_px = [&](const Frame& fk, const Eigen::Matrix3d& R_ck_c0, std::vector<std::uint64_t>* ids) {
-    std::vector<double> d;
-    for (const auto& [id, x0] : f0.features) {
-      const auto it = fk.features.find(id);
-      if (it == fk.features.end()) continue;
-      const Eigen::Vector3d r = R_ck_c0 * Eigen::Vector3d(x0.x(), x0.y(), 1.0);
-      if (r.z() <= 1e-6) continue;
-      d.push_back((project(r) - it->second).norm() * focal);
-      if (ids != nullptr) ids->push_back(id);
-    }
-    return std::make_pair(median(d), d.size());
-  };
-  // The rotation that best maps the bearings of image 0 onto those of image k (Kabsch): the parallax left
-  // after it is what translation makes, free of the gyro bias.
-  auto rotation_fit = [&](const Frame& fk) {
-    Eigen::Matrix3d M = Eigen::Matrix3d::Zero();
-    for (const auto& [id, x0] : f0.features) {
-      const auto it = fk.features.find(id);
-      if (it == fk.features.end()) continue;
-      M += x0.homogeneous().normalized() * it->second.homogeneous().normalized().transpose();
-    }
-    const Eigen::JacobiSVD<Eigen::Matrix3d> svd3(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d D = Eigen::Matrix3d::Identity();
-    D(2, 2) = (svd3.matrixV() * svd3.matrixU().transpose()).determinant() < 0.0 ? -1.0 : 1.0;
-    return Eigen::Matrix3d(svd3.matrixV() * D * svd3.matrixU().transpose());
-  };
-  std::size_t best = 0;
-  double best_parallax = -1.0;
-  std::size_t best_common = 0;
-  std::size_t max_common = 0;
+void DynamicInitializer::integrate_all(Attempt* at) const {
+  const std::deque<Frame>& win = *at->frames;
+  const std::size_t n = win.size();
+  at->pre.resize(n);
   for (std::size_t k = 1; k < n; ++k) {
-    const auto [par, common] = parallax_px(window_[k], rotation_fit(window_[k]), nullptr);
-    max_common = std::max(max_common, common);
-    if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
-    if (par > best_parallax) {
-      best_parallax = par;
-      best = k;
-      best_common = common;
+    at->pre[k] = preintegrate(win[k].imu, win[k - 1].t_ns, win[k].t_ns, at->bg);
+  }
+}
+
+std::optional<std::size_t> DynamicInitializer::choose_sfm_pair(std::size_t start, double span_s,
+                                                               Attempt* at) {
+  // The SfM pair: the oldest image that shares at least dynamic_init_min_features tracks with a later image
+  // at dynamic_init_min_parallax_px of rotation-compensated parallax, and that later image with the largest
+  // such parallax. Starting from the oldest image keeps the window as long as the tracks allow; where tracks
+  // live shorter than the window (fast motion, small images), the window starts later.
+  const std::size_t n = window_.size();
+  std::size_t max_common_oldest = 0;
+  double best_parallax_oldest = -1.0;
+  std::size_t best_common_oldest = 0;
+  std::size_t best_oldest = 0;
+  for (std::size_t a = start; a + 2 < n; ++a) {
+    const FeatureMap& fa = window_[a].features;
+    std::size_t best = 0;
+    double best_parallax = -1.0;
+    std::size_t best_common = 0;
+    std::size_t max_common = 0;
+    for (std::size_t k = a + 1; k < n; ++k) {
+      const FeatureMap& fk = window_[k].features;
+      const auto [par, common] = pair_parallax_px(fa, fk, rotation_fit(fa, fk), focal_px_);
+      max_common = std::max(max_common, common);
+      if (common < static_cast<std::size_t>(config_.dynamic_init_min_features)) continue;
+      if (par > best_parallax) {
+        best_parallax = par;
+        best = k;
+        best_common = common;
+      }
+    }
+    if (a == start) {
+      max_common_oldest = max_common;
+      best_parallax_oldest = best_parallax;
+      best_common_oldest = best_common;
+      best_oldest = best;
+    }
+    if (best != 0 && best_parallax >= config_.dynamic_init_min_parallax_px) {
+      at->best = best - a;
+      return a;
     }
   }
-  if (best == 0) {
-    status_ = fmt("features: at most %zu seen in the oldest image and another of the window < %d", max_common,
-                  config_.dynamic_init_min_features);
-    return std::nullopt;
+  if (best_oldest == 0) {
+    status_ = fmt(
+        "features: at most %zu seen in image %zu and another of the window < %d (no later image of the "
+        "window has both with another at %.1f px of parallax)",
+        max_common_oldest, start, config_.dynamic_init_min_features, config_.dynamic_init_min_parallax_px);
+  } else {
+    status_ =
+        fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images %zu-%zu over %.2f s; no "
+            "later "
+            "image of the window does better)",
+            best_parallax_oldest, config_.dynamic_init_min_parallax_px, best_common_oldest, start,
+            best_oldest, span_s);
   }
-  if (best_parallax < config_.dynamic_init_min_parallax_px) {
-    status_ = fmt("parallax %.1f px < %.1f px (rotation-compensated, %zu features, images 0-%zu over %.2f s)",
-                  best_parallax, config_.dynamic_init_min_parallax_px, best_common, best, span_s);
-    return std::nullopt;
-  }
+  return std::nullopt;
+}
 
-  // ---- IMU excitation: the accelerometer's variation over the window ----
+bool DynamicInitializer::measure_excitation(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
+  // IMU excitation: the accelerometer's variation over the window.
+  const std::size_t n = win.size();
   Eigen::Vector3d acc_mean = Eigen::Vector3d::Zero();
   std::size_t acc_count = 0;
   for (std::size_t k = 1; k < n; ++k) {
-    for (const ImuSample& s : window_[k].imu) {
+    for (const ImuSample& s : win[k].imu) {
       acc_mean += s.accel_mps2;
       ++acc_count;
     }
@@ -199,22 +298,31 @@ std::optional<InitialState> DynamicInitializer::try_align() {
   acc_mean /= static_cast<double>(std::max<std::size_t>(acc_count, 1));
   double acc_var = 0.0;
   for (std::size_t k = 1; k < n; ++k) {
-    for (const ImuSample& s : window_[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
+    for (const ImuSample& s : win[k].imu) acc_var += (s.accel_mps2 - acc_mean).squaredNorm();
   }
-  const double acc_std = std::sqrt(acc_var / static_cast<double>(std::max<std::size_t>(acc_count, 1)));
-  if (acc_std < config_.dynamic_init_min_accel_std_mps2) {
-    status_ = fmt("IMU excitation: accelerometer std %.3f m/s^2 < %.3f m/s^2 over %.2f s", acc_std,
-                  config_.dynamic_init_min_accel_std_mps2, span_s);
-    return std::nullopt;
+  at->acc_std = std::sqrt(acc_var / static_cast<double>(std::max<std::size_t>(acc_count, 1)));
+  if (at->acc_std < config_.dynamic_init_min_accel_std_mps2) {
+    status_ = fmt("IMU excitation: accelerometer std %.3f m/s^2 < %.3f m/s^2 over %.2f s", at->acc_std,
+                  config_.dynamic_init_min_accel_std_mps2, at->span_s);
+    return false;
   }
+  return true;
+}
 
-  // ---- essential matrix and relative pose of the pair ----
+bool DynamicInitializer::relative_pose(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
+  // Essential matrix and relative pose of the pair, then its inliers triangulated.
+  const std::size_t n = win.size();
+  const std::size_t best = at->best;
+  const double focal = focal_px_;
+  const FeatureMap& f0 = win.front().features;
+  const FeatureMap& fb = win[best].features;
   std::vector<std::uint64_t> pair_ids;
   std::vector<cv::Point2d> pts0;
   std::vector<cv::Point2d> pts1;
-  for (const auto& [id, x0] : f0.features) {
-    const auto it = window_[best].features.find(id);
-    if (it == window_[best].features.end()) continue;
+  for (const auto& [id, x0] : f0) {
+    const auto it = fb.find(id);
+    if (it == fb.end()) continue;
     pair_ids.push_back(id);
     pts0.emplace_back(x0.x(), x0.y());
     pts1.emplace_back(it->second.x(), it->second.y());
@@ -225,7 +333,7 @@ std::optional<InitialState> DynamicInitializer::try_align() {
       cv::findEssentialMat(pts0, pts1, cv::Mat::eye(3, 3, CV_64F), cv::RANSAC, 0.999, thr, 1000, inlier_mask);
   if (E.rows != 3 || E.cols != 3) {
     status_ = fmt("essential matrix: no solution between images 0 and %zu (%zu features)", best, pts0.size());
-    return std::nullopt;
+    return false;
   }
   cv::Mat R_cv;
   cv::Mat t_cv;
@@ -233,99 +341,70 @@ std::optional<InitialState> DynamicInitializer::try_align() {
   if (good < config_.dynamic_init_min_features / 2) {
     status_ = fmt("relative pose: %d inliers in front of both cameras < %d (images 0-%zu)", good,
                   config_.dynamic_init_min_features / 2, best);
-    return std::nullopt;
+    return false;
   }
   Eigen::Matrix3d R_1_0;
   Eigen::Vector3d t_1_0;
   cv::cv2eigen(R_cv, R_1_0);
   cv::cv2eigen(t_cv, t_1_0);
-  const double vision_parallax = parallax_px(window_[best], R_1_0, nullptr).first;
-  if (vision_parallax < config_.dynamic_init_min_parallax_px) {
+  at->vision_parallax = pair_parallax_px(f0, fb, R_1_0, focal).first;
+  if (at->vision_parallax < config_.dynamic_init_min_parallax_px) {
     status_ = fmt("parallax %.1f px < %.1f px (vision-compensated, images 0-%zu over %.2f s)",
-                  vision_parallax, config_.dynamic_init_min_parallax_px, best, span_s);
-    return std::nullopt;
+                  at->vision_parallax, config_.dynamic_init_min_parallax_px, best, at->span_s);
+    return false;
   }
-
-  // ---- structure: triangulate the pair's inliers, PnP the others, then all tracks and all poses again ----
-  const double max_reproj = 3.0 * config_.ransac_threshold_px / focal + 2.0 / focal;
-  std::vector<Eigen::Isometry3d> T_ck_c0(n, Eigen::Isometry3d::Identity());
+  at->max_reproj = 3.0 * config_.ransac_threshold_px / focal + 2.0 / focal;
+  at->T_ck_c0.assign(n, Eigen::Isometry3d::Identity());
   Eigen::Isometry3d T1 = Eigen::Isometry3d::Identity();
   T1.linear() = R_1_0;
   T1.translation() = t_1_0;
-  T_ck_c0[best] = T1;
-  std::unordered_map<std::uint64_t, Eigen::Vector3d> points;
+  at->T_ck_c0[best] = T1;
+  at->points.clear();
   for (std::size_t i = 0; i < pair_ids.size(); ++i) {
     if (inlier_mask.at<unsigned char>(static_cast<int>(i)) == 0) continue;
     Eigen::Vector3d p;
-    if (triangulate({T_ck_c0[0], T1}, {f0.features.at(pair_ids[i]), window_[best].features.at(pair_ids[i])},
-                    max_reproj, &p)) {
-      points[pair_ids[i]] = p;
+    if (triangulate({at->T_ck_c0[0], T1}, {f0.at(pair_ids[i]), fb.at(pair_ids[i])}, at->max_reproj, &p)) {
+      at->points[pair_ids[i]] = p;
     }
   }
-  // PnP of image k from `guess`; false (T untouched) when it fails.
-  auto pnp = [&](std::size_t k, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) -> bool {
-    std::vector<cv::Point3d> obj;
-    std::vector<cv::Point2d> img;
-    for (const auto& [id, x] : window_[k].features) {
-      const auto it = points.find(id);
-      if (it == points.end()) continue;
-      obj.emplace_back(it->second.x(), it->second.y(), it->second.z());
-      img.emplace_back(x.x(), x.y());
-    }
-    if (obj.size() < 10) return false;
-    cv::Mat R_guess;
-    cv::Mat rvec;
-    cv::Mat tvec;
-    cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
-    cv::Rodrigues(R_guess, rvec);
-    cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
-    cv::Mat inliers;
-    if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
-                            static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
-        inliers.rows < 8) {
-      return false;
-    }
-    cv::Mat R_est;
-    cv::Rodrigues(rvec, R_est);
-    Eigen::Matrix3d R;
-    Eigen::Vector3d t;
-    cv::cv2eigen(R_est, R);
-    cv::cv2eigen(tvec, t);
-    T_out->setIdentity();
-    T_out->linear() = R;
-    T_out->translation() = t;
-    return true;
-  };
-  // Outwards from the pair, each image starting from its neighbour's pose.
+  return true;
+}
+
+void DynamicInitializer::triangulate_new(std::size_t k, Attempt* at) const {
+  const std::deque<Frame>& win = *at->frames;
   // Tracks of image k not triangulated yet, from their observations in the (posed) images before k.
-  auto triangulate_new = [&](std::size_t k) {
-    for (const auto& [id, x] : window_[k].features) {
-      if (points.contains(id)) continue;
-      std::vector<Eigen::Isometry3d> poses;
-      std::vector<Eigen::Vector2d> xy;
-      for (std::size_t j = 0; j < k; ++j) {
-        const auto it = window_[j].features.find(id);
-        if (it == window_[j].features.end()) continue;
-        poses.push_back(T_ck_c0[j]);
-        xy.push_back(it->second);
-      }
-      if (xy.size() < 3) continue;
-      // At least 1 degree between the first and the last ray (in c0): a point triangulated from less is
-      // mostly noise in depth.
-      const Eigen::Vector3d r0 = poses.front().linear().transpose() * xy.front().homogeneous();
-      const Eigen::Vector3d r1 = poses.back().linear().transpose() * xy.back().homogeneous();
-      if (r0.normalized().cross(r1.normalized()).norm() < 0.017) continue;
-      Eigen::Vector3d p;
-      if (triangulate(poses, xy, max_reproj, &p)) points[id] = p;
+  for (const auto& [id, x] : win[k].features) {
+    if (at->points.contains(id)) continue;
+    std::vector<Eigen::Isometry3d> poses;
+    std::vector<Eigen::Vector2d> xy;
+    for (std::size_t j = 0; j < k; ++j) {
+      const auto it = win[j].features.find(id);
+      if (it == win[j].features.end()) continue;
+      poses.push_back(at->T_ck_c0[j]);
+      xy.push_back(it->second);
     }
-  };
+    if (xy.size() < 3) continue;
+    // At least 1 degree between the first and the last ray (in c0): a point triangulated from less is
+    // mostly noise in depth.
+    const Eigen::Vector3d r0 = poses.front().linear().transpose() * xy.front().homogeneous();
+    const Eigen::Vector3d r1 = poses.back().linear().transpose() * xy.back().homogeneous();
+    if (r0.normalized().cross(r1.normalized()).norm() < 0.017) continue;
+    Eigen::Vector3d p;
+    if (triangulate(poses, xy, at->max_reproj, &p)) at->points[id] = p;
+  }
+}
+
+bool DynamicInitializer::pose_all_images(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
+  // PnP of the other images outwards from the pair, each starting from its neighbour's pose.
+  const std::size_t n = win.size();
   for (std::size_t k = 1; k < n; ++k) {
-    if (k == best) continue;
-    if (k > best) triangulate_new(k);
-    if (!pnp(k, T_ck_c0[k - 1], &T_ck_c0[k])) {
+    if (k == at->best) continue;
+    if (k > at->best) triangulate_new(k, at);
+    if (!pnp(win[k].features, at->points, at->max_reproj, at->T_ck_c0[k - 1], &at->T_ck_c0[k])) {
       status_ = fmt("PnP failed for image %zu of %zu (%zu triangulated points; pair 0-%zu)", k, n,
-                    points.size(), best);
-      return std::nullopt;
+                    at->points.size(), at->best);
+      return false;
     }
   }
   // Refinement by alternation (resection-intersection, a poor man's bundle adjustment): every track seen at
@@ -334,94 +413,112 @@ std::optional<InitialState> DynamicInitializer::try_align() {
     std::unordered_map<std::uint64_t, std::pair<std::vector<Eigen::Isometry3d>, std::vector<Eigen::Vector2d>>>
         tracks;
     for (std::size_t k = 0; k < n; ++k) {
-      for (const auto& [id, x] : window_[k].features) {
-        tracks[id].first.push_back(T_ck_c0[k]);
+      for (const auto& [id, x] : win[k].features) {
+        tracks[id].first.push_back(at->T_ck_c0[k]);
         tracks[id].second.push_back(x);
       }
     }
-    points.clear();
+    at->points.clear();
     for (const auto& [id, obs] : tracks) {
       if (obs.second.size() < 3) continue;
       Eigen::Vector3d p;
-      if (triangulate(obs.first, obs.second, 2.0 * max_reproj, &p)) points[id] = p;
+      if (triangulate(obs.first, obs.second, 2.0 * at->max_reproj, &p)) at->points[id] = p;
     }
     for (std::size_t k = 1; k < n; ++k) {
-      if (!pnp(k, T_ck_c0[k], &T_ck_c0[k])) {
-        status_ = fmt("PnP (refinement) failed for image %zu of %zu (%zu points)", k, n, points.size());
-        return std::nullopt;
+      if (!pnp(win[k].features, at->points, at->max_reproj, at->T_ck_c0[k], &at->T_ck_c0[k])) {
+        status_ = fmt("PnP (refinement) failed for image %zu of %zu (%zu points)", k, n, at->points.size());
+        return false;
       }
     }
   }
-  // Up-to-scale unit: the translation between the first and the last camera.
-  std::vector<Eigen::Matrix3d> R_c0_bk(n);
-  std::vector<Eigen::Vector3d> p_c0_ck(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    const Eigen::Isometry3d T_c0_ck = T_ck_c0[k].inverse();
-    R_c0_bk[k] = T_c0_ck.linear() * R_b_c.transpose();
-    p_c0_ck[k] = T_c0_ck.translation();
-  }
-  const double unit = (p_c0_ck[n - 1] - p_c0_ck[0]).norm();
-  if (unit < 1e-9) {
-    status_ = "structure: no translation between the first and last images";
-    return std::nullopt;
-  }
-  for (Eigen::Vector3d& p : p_c0_ck) p /= unit;
+  return true;
+}
 
-  // ---- gyro bias: rotations of vision against the pre-integrated gyro ----
+bool DynamicInitializer::estimate_gyro_bias(Attempt* at) {
+  const std::deque<Frame>& win = *at->frames;
+  const std::size_t n = win.size();
+  const Eigen::Matrix3d R_b_c = T_i_c_.linear();
+  // Up-to-scale unit: the translation between the first and the last camera.
+  at->R_c0_bk.resize(n);
+  at->p_c0_ck.resize(n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Eigen::Isometry3d T_c0_ck = at->T_ck_c0[k].inverse();
+    at->R_c0_bk[k] = T_c0_ck.linear() * R_b_c.transpose();
+    at->p_c0_ck[k] = T_c0_ck.translation();
+  }
+  at->unit = (at->p_c0_ck[n - 1] - at->p_c0_ck[0]).norm();
+  if (at->unit < 1e-9) {
+    status_ = "structure: no translation between the first and last images";
+    return false;
+  }
+  for (Eigen::Vector3d& p : at->p_c0_ck) p /= at->unit;
+  // Gyro bias: rotations of vision against the pre-integrated gyro.
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
   Eigen::Vector3d g_vec = Eigen::Vector3d::Zero();
   for (std::size_t k = 1; k < n; ++k) {
-    const Eigen::Matrix3d R_vis = R_c0_bk[k - 1].transpose() * R_c0_bk[k];
-    const Eigen::Vector3d r = so3_log(pre[k].dR.transpose() * R_vis);
-    H += pre[k].J_R_bg.transpose() * pre[k].J_R_bg;
-    g_vec += pre[k].J_R_bg.transpose() * r;
+    const Eigen::Matrix3d R_vis = at->R_c0_bk[k - 1].transpose() * at->R_c0_bk[k];
+    const Eigen::Vector3d r = so3_log(at->pre[k].dR.transpose() * R_vis);
+    H += at->pre[k].J_R_bg.transpose() * at->pre[k].J_R_bg;
+    g_vec += at->pre[k].J_R_bg.transpose() * r;
   }
   const Eigen::LDLT<Eigen::Matrix3d> H_ldlt(H);
-  bg = H_ldlt.solve(g_vec);
-  if (!bg.allFinite()) {
+  at->bg = H_ldlt.solve(g_vec);
+  if (!at->bg.allFinite()) {
     status_ = "gyro bias: singular system";
-    return std::nullopt;
+    return false;
   }
-  integrate_all();
+  integrate_all(at);
+  return true;
+}
 
-  // ---- alignment with the gyro's rotations: velocity, gravity and accelerometer bias in b0 ----
-  AlignInput in;
-  in.R_b_c = R_b_c;
-  in.p_b_c = p_b_c;
+void DynamicInitializer::build_align_input(Attempt* at) const {
+  const std::deque<Frame>& win = *at->frames;
+  // Alignment with the gyro's rotations: velocity, gravity and accelerometer bias in b0.
+  const std::size_t n = win.size();
+  AlignInput& in = at->in;
+  in.R_b_c = T_i_c_.linear();
+  in.p_b_c = T_i_c_.translation();
   in.R_b0_bk.assign(n, Eigen::Matrix3d::Identity());
   in.T_s.assign(n, 0.0);
   in.alpha.assign(n, Eigen::Vector3d::Zero());
   in.J_alpha_ba.assign(n, Eigen::Matrix3d::Zero());
   in.J_R_bg.assign(n, Eigen::Matrix3d::Zero());
-  std::vector<Eigen::Vector3d> beta(n, Eigen::Vector3d::Zero());
-  std::vector<Eigen::Matrix3d> J_beta_ba(n, Eigen::Matrix3d::Zero());
+  at->beta.assign(n, Eigen::Vector3d::Zero());
+  at->J_beta_ba.assign(n, Eigen::Matrix3d::Zero());
   for (std::size_t k = 1; k < n; ++k) {
-    const Preintegrated& p = pre[k];
+    const Preintegrated& p = at->pre[k];
     const Eigen::Matrix3d& R = in.R_b0_bk[k - 1];
     in.T_s[k] = in.T_s[k - 1] + p.dt_s;
-    in.alpha[k] = in.alpha[k - 1] + beta[k - 1] * p.dt_s + R * p.dp;
-    in.J_alpha_ba[k] = in.J_alpha_ba[k - 1] + J_beta_ba[k - 1] * p.dt_s + R * p.J_p_ba;
-    beta[k] = beta[k - 1] + R * p.dv;
-    J_beta_ba[k] = J_beta_ba[k - 1] + R * p.J_v_ba;
+    in.alpha[k] = in.alpha[k - 1] + at->beta[k - 1] * p.dt_s + R * p.dp;
+    in.J_alpha_ba[k] = in.J_alpha_ba[k - 1] + at->J_beta_ba[k - 1] * p.dt_s + R * p.J_p_ba;
+    at->beta[k] = at->beta[k - 1] + R * p.dv;
+    at->J_beta_ba[k] = at->J_beta_ba[k - 1] + R * p.J_v_ba;
     in.J_R_bg[k] = p.dR.transpose() * in.J_R_bg[k - 1] + p.J_R_bg;
     in.R_b0_bk[k] = R * p.dR;
   }
-  in.sfm_c0_ck = p_c0_ck;
-  for (const auto& [id, point] : points) {
+  in.sfm_c0_ck = at->p_c0_ck;
+  for (const auto& [id, point] : at->points) {
     std::vector<std::pair<std::size_t, Eigen::Vector2d>> obs;
     for (std::size_t k = 0; k < n; ++k) {
-      const auto it = window_[k].features.find(id);
-      if (it != window_[k].features.end()) obs.emplace_back(k, it->second);
+      const auto it = win[k].features.find(id);
+      if (it != win[k].features.end()) obs.emplace_back(k, it->second);
     }
     if (obs.size() < 3) continue;
     in.tracks.push_back(std::move(obs));
-    in.sfm_points_c0.push_back(point / unit);
+    in.sfm_points_c0.push_back(point / at->unit);
   }
-  in.sigma_xy = config_.pixel_sigma_px / focal;
+  in.sigma_xy = config_.pixel_sigma_px / focal_px_;
   in.sigma_ba_mps2 = config_.init_sigma_accel_bias_mps2;
   in.sigma_bg_radps = config_.init_sigma_gyro_bias_radps;
   in.gravity_mps2 = config_.gravity_mps2;
-  in.outlier_xy = config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px / focal;
+  in.outlier_xy = config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px / focal_px_;
+}
+
+std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
+  const std::deque<Frame>& win = *at.frames;
+  const std::size_t n = win.size();
+  const AlignInput& in = at.in;
+  const double focal = focal_px_;
   std::string why;
   const std::optional<AlignOutput> al = align_known_rotations(in, &why);
   if (!al) {
@@ -444,12 +541,12 @@ std::optional<InitialState> DynamicInitializer::try_align() {
   const Eigen::Vector3d g = al->x.segment<3>(3);
   const Eigen::Vector3d ba = al->x.segment<3>(6);
   const Eigen::Vector3d dbg = al->x.segment<3>(9);
-  const Eigen::Vector3d bg_refined = bg + dbg;
+  const Eigen::Vector3d bg_refined = at.bg + dbg;
   const Eigen::Matrix3d R_n = in.R_b0_bk[n - 1] * so3_exp(in.J_R_bg[n - 1] * dbg);
   const double T_n = in.T_s[n - 1];
-  const Eigen::Vector3d v_n = al->x.segment<3>(0) + g * T_n + beta[n - 1] + J_beta_ba[n - 1] * ba;
+  const Eigen::Vector3d v_n = al->x.segment<3>(0) + g * T_n + at.beta[n - 1] + at.J_beta_ba[n - 1] * ba;
   Eigen::Matrix<double, 3, 9> J_vn;
-  J_vn << Eigen::Matrix3d::Identity(), T_n * Eigen::Matrix3d::Identity(), J_beta_ba[n - 1];
+  J_vn << Eigen::Matrix3d::Identity(), T_n * Eigen::Matrix3d::Identity(), at.J_beta_ba[n - 1];
   const Eigen::Matrix3d vel_cov_b0 = J_vn * al->cov.topLeftCorner<9, 9>() * J_vn.transpose();
   const double speed_sigma = std::sqrt(std::max(0.0, vel_cov_b0.trace()));
   const double speed_limit =
@@ -460,14 +557,15 @@ std::optional<InitialState> DynamicInitializer::try_align() {
             speed_sigma, speed_limit, v_n.norm());
     return std::nullopt;
   }
+  const Eigen::Vector3d& p_b_c = in.p_b_c;
   const double translation_m = ((al->p_b0_bk[n - 1] + R_n * p_b_c) - (al->p_b0_bk[0] + p_b_c)).norm();
   if (translation_m < config_.dynamic_init_min_translation_m) {
     status_ = fmt("translation %.3f m < %.3f m over %.2f s", translation_m,
-                  config_.dynamic_init_min_translation_m, span_s);
+                  config_.dynamic_init_min_translation_m, at.span_s);
     return std::nullopt;
   }
 
-  // ---- the state at the last image, in a world frame with +z up and the IMU's yaw zero ----
+  // The state at the last image, in a world frame with +z up and the IMU's yaw zero.
   const Eigen::Matrix3d R_w_b0 =
       Eigen::Quaterniond::FromTwoVectors(g.normalized(), -Eigen::Vector3d::UnitZ()).toRotationMatrix();
   const Eigen::Matrix3d R_w_bn = R_w_b0 * R_n;
@@ -477,14 +575,13 @@ std::optional<InitialState> DynamicInitializer::try_align() {
 
   InitialState out;
   out.method = InitMethod::kDynamic;
-  out.state.t_ns = window_.back().t_ns;
+  out.state.t_ns = win.back().t_ns;
   out.state.q_w_i = Eigen::Quaterniond(R_w * R_n).normalized();
   out.state.p_w_m.setZero();
   out.state.v_w_mps = R_w * v_n;
   out.state.gyro_bias_radps = bg_refined;
   out.state.accel_bias_mps2 = ba;
-  if (!window_.back().imu.empty())
-    out.state.omega_i_radps = window_.back().imu.back().gyro_radps - bg_refined;
+  if (!win.back().imu.empty()) out.state.omega_i_radps = win.back().imu.back().gyro_radps - bg_refined;
   // Covariances: those of the least squares (scaled by their residuals), floored by the config.
   const double sigma_tilt = std::max(config_.dynamic_init_min_sigma_tilt_rad,
                                      std::sqrt(std::max(al->cov.block<3, 3>(3, 3).trace() / 2.0, 0.0)) / G);
@@ -498,14 +595,14 @@ std::optional<InitialState> DynamicInitializer::try_align() {
   out.gyro_bias_cov = al->cov.block<3, 3>(9, 9) + Eigen::Matrix3d::Identity() * min_bg2;
   out.joint_cov = joint_start_covariance(*al, in, R_w, R_n, v_n, J_vn, config_);
   out.scale = translation_m;
-  out.window_s = span_s;
+  out.window_s = at.span_s;
   out.detail = fmt(
       "dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, %zu tracks (%zu dropped), "
       "translation %.2f m, speed %.2f +- %.3f m/s, |g| %.3f before the norm constraint, reprojection RMS "
       "%.2f px, gyro bias (%.4f %.4f %.4f) rad/s, accel bias (%.3f %.3f %.3f) m/s^2, accel std %.2f m/s^2",
-      n, span_s, best, vision_parallax, al->tracks_used, al->tracks_dropped, translation_m, v_n.norm(),
-      speed_sigma, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(), bg_refined.z(), ba.x(), ba.y(),
-      ba.z(), acc_std);
+      n, at.span_s, at.best, at.vision_parallax, al->tracks_used, al->tracks_dropped, translation_m,
+      v_n.norm(), speed_sigma, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(), bg_refined.z(),
+      ba.x(), ba.y(), ba.z(), at.acc_std);
   status_ = out.detail;
   return out;
 }

@@ -25,8 +25,11 @@
 
 #include "stages/ekf/ekf_config.hpp"
 #include "stages/ekf/initializer.hpp"
+#include "stages/ekf/vi_alignment.hpp"
 
 namespace loopgate {
+
+using FeatureMap = std::unordered_map<std::uint64_t, Eigen::Vector2d>;  // track id -> normalised coordinates
 
 class DynamicInitializer {
  public:
@@ -49,11 +52,42 @@ class DynamicInitializer {
  private:
   struct Frame {
     Timestamp t_ns = 0;
-    std::unordered_map<std::uint64_t, Eigen::Vector2d> features;  // id -> normalised coordinates
+    FeatureMap features;         // id -> normalised coordinates
     std::vector<ImuSample> imu;  // samples from the previous image's time (interpolated) to this one's
   };
 
+  // One alignment attempt over the window: what each step hands to the next.
+  struct Attempt {
+    const std::deque<Frame>* frames = nullptr;  // the images it uses: the window, or its newest part
+    double span_s = 0.0;
+    std::vector<Preintegrated> pre;  // per image k >= 1: the IMU from image k-1 to k, under the gyro bias bg
+    Eigen::Vector3d bg = Eigen::Vector3d::Zero();
+    std::size_t best = 0;  // the SfM pair: image 0 of `frames` and this one
+    double acc_std = 0.0;
+    double vision_parallax = 0.0;
+    double max_reproj = 0.0;                                    // normalised
+    std::vector<Eigen::Isometry3d> T_ck_c0;                     // SfM poses (SfM units)
+    std::unordered_map<std::uint64_t, Eigen::Vector3d> points;  // SfM points in c0
+    std::vector<Eigen::Matrix3d> R_c0_bk;
+    std::vector<Eigen::Vector3d> p_c0_ck;  // in units of the first-to-last camera translation
+    double unit = 1.0;                     // that translation in SfM units
+    AlignInput in;
+    std::vector<Eigen::Vector3d> beta;  // pre-integrated velocity in b0 (zero accelerometer bias)
+    std::vector<Eigen::Matrix3d> J_beta_ba;
+  };
+
   std::optional<InitialState> try_align();
+  void integrate_all(Attempt* at) const;
+  // The index in the window (from `start` on) of the first image the attempt uses (its SfM pair in
+  // at->best), or nothing (status_ says why).
+  std::optional<std::size_t> choose_sfm_pair(std::size_t start, double span_s, Attempt* at);
+  bool measure_excitation(Attempt* at);
+  bool relative_pose(Attempt* at);
+  void triangulate_new(std::size_t k, Attempt* at) const;
+  bool pose_all_images(Attempt* at);
+  bool estimate_gyro_bias(Attempt* at);
+  void build_align_input(Attempt* at) const;
+  std::optional<InitialState> finish(const Attempt& at);
 
   EkfConfig config_;
   Eigen::Isometry3d T_i_c_;

@@ -53,6 +53,27 @@ double max_axis_std(const std::vector<Eigen::Vector3d>& values) {
   return std::sqrt(var.maxCoeff());
 }
 
+// Median motion (px) between this image and the previous one of the features seen in both, or -1 when fewer
+// than min_features are; keeps this image's features in previous_xy for the next.
+double image_motion_px(const InitFrame& frame, double focal_px, int min_features,
+                       std::unordered_map<std::uint64_t, Eigen::Vector2d>* previous_xy) {
+  double disparity_px = -1.0;
+  if (frame.observations == nullptr) return disparity_px;
+  std::vector<double> d;
+  for (const FeatureObservation& o : *frame.observations) {
+    const auto it = previous_xy->find(o.id);
+    if (it != previous_xy->end()) d.push_back((o.xy - it->second).norm() * focal_px);
+  }
+  if (static_cast<int>(d.size()) >= min_features) {
+    const auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
+    std::nth_element(d.begin(), mid, d.end());
+    disparity_px = *mid;
+  }
+  previous_xy->clear();
+  for (const FeatureObservation& o : *frame.observations) previous_xy->emplace(o.id, o.xy);
+  return disparity_px;
+}
+
 }  // namespace
 
 double StaticInitializer::lowpassed_noise_std(double density, double lowpass_s) {
@@ -96,22 +117,8 @@ std::optional<InitialState> StaticInitializer::add_frame(const InitFrame& frame)
   while (samples_.size() > 2 && samples_.back().t_ns - samples_[1].t_ns >= window_ns) samples_.pop_front();
 
   // Image motion since the previous image: median over the features seen in both.
-  ImageMotion motion{frame.t_ns, -1.0};
-  if (frame.observations != nullptr) {
-    std::vector<double> d;
-    for (const FeatureObservation& o : *frame.observations) {
-      const auto it = previous_xy_.find(o.id);
-      if (it != previous_xy_.end()) d.push_back((o.xy - it->second).norm() * focal_px_);
-    }
-    if (static_cast<int>(d.size()) >= config_.zupt_min_features) {
-      const auto mid = d.begin() + static_cast<std::ptrdiff_t>(d.size() / 2);
-      std::nth_element(d.begin(), mid, d.end());
-      motion.disparity_px = *mid;
-    }
-    previous_xy_.clear();
-    for (const FeatureObservation& o : *frame.observations) previous_xy_.emplace(o.id, o.xy);
-  }
-  images_.push_back(motion);
+  images_.push_back(
+      ImageMotion{frame.t_ns, image_motion_px(frame, focal_px_, config_.zupt_min_features, &previous_xy_)});
   while (!images_.empty() && images_.front().t_ns < frame.t_ns - window_ns) images_.pop_front();
 
   last_.window_s = samples_.size() >= 2 ? ns_to_s(samples_.back().t_ns - samples_.front().t_ns) : 0.0;

@@ -315,6 +315,10 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
   }
   const double chi2 = cost(x, P, true, &P, &obs);
   const Step s = linearise(x, P);
+  if (s.active < 8) {  // the last outlier rejection can leave too few
+    *why = fmt("alignment: %zu consistent tracks < 8", s.active);
+    return std::nullopt;
+  }
   const MatXZ C = sphere_basis(x);
   // One step with gravity's norm free, from the solution: the |g| the data alone ask for.
   const VecX dx_free = -s.N.ldlt().solve(s.q);
