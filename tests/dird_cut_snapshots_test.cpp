@@ -61,12 +61,17 @@ TEST(DirdCutSnapshots, EverySnapshotReadsBackAsPushedInAnyOrder) {
 TEST(DirdCutSnapshotsSize, EachWidthReadsBackAndSmallChangesTakeLittle) {
   std::mt19937 rng(12);
   const std::size_t bytes = 3456, count = 8 * CutSnapshots::kKeyEvery;
-  // Unchanged (exceptions only), +-1 (2 bits), -7..7 (4 bits), anything (whole bytes).
-  const std::array<int, 4> spans = {0, 1, 7, 255};
-  std::array<std::size_t, 4> sizes{};
+  // Unchanged (exceptions only), +-1 (2 bits), -7..7 (4 bits), anything (whole bytes), geometric (Rice).
+  // 100: a two-sided geometric change (half of the bytes unchanged, a quarter +-1, ...): a Rice code.
+  const std::array<int, 5> spans = {0, 1, 7, 255, 100};
+  std::array<std::size_t, 5> sizes{};
   for (std::size_t w = 0; w < spans.size(); ++w) {
     const int span = spans[w];
     const auto s = walk(count, bytes, rng, [span](std::uint8_t b, std::mt19937& r) {
+      if (span == 100) {
+        const int magnitude = std::geometric_distribution<int>(0.5)(r);
+        return b + (std::bernoulli_distribution(0.5)(r) ? magnitude : -magnitude);
+      }
       return span == 255 ? std::uniform_int_distribution<int>(0, 255)(r)
                          : b + std::uniform_int_distribution<int>(-span, span)(r);
     });
@@ -82,6 +87,7 @@ TEST(DirdCutSnapshotsSize, EachWidthReadsBackAndSmallChangesTakeLittle) {
   EXPECT_LT(sizes[1], whole * 35 / 100) << "+-1 changes";
   EXPECT_LT(sizes[2], whole * 60 / 100) << "-7..7 changes";
   EXPECT_GE(sizes[3], whole) << "random bytes cannot be smaller than whole";
+  EXPECT_LT(sizes[4], whole * 48 / 100) << "two-sided geometric changes (4 bits per byte: 54%)";
 }
 
 TEST(DirdCutSnapshots, RejectsAnUnusableSize) {
