@@ -5,9 +5,10 @@
 //
 // - every kKeyEvery-th snapshot is kept whole (a key);
 // - every other one as the difference d[k] = cut[k] - previous cut[k] of each cut byte, in the smallest of
-//   four records: exceptions only (d = 0 elsewhere), 2 bits per byte (d in {0, +1, -1}), 4 bits per byte
-//   (d in -7..7), or the bytes themselves. A byte whose d the packed width cannot hold is an exception:
-//   its index and new value after the packed part.
+//   these records: exceptions only (d = 0 elsewhere), 2 bits per byte (d in {0, +1, -1}), 4 bits per byte
+//   (d in -7..7), a Rice code of zigzag(d) with parameter 0..3 (most d are small, few are large), or the
+//   bytes themselves. A byte whose d the record cannot hold is an exception: its index and new value
+//   after the packed part.
 //
 // Reading snapshot i decodes from the key before it (at most kKeyEvery - 1 records), or from the last one
 // read when it lies between that key and i: frames are mostly coded in order (a candidate area is a run of
