@@ -34,6 +34,7 @@
 #include <vector>
 
 #include "core/enum_names.hpp"
+#include "stages/dird/dird_cut_snapshots.hpp"
 #include "stages/dird/dird_extractor.hpp"
 #include "stages/dird/dird_standardize.hpp"
 
@@ -158,16 +159,16 @@ class CausalCompactCoder {
 
   std::int64_t observations() const { return moments_.added(); }
   std::size_t snapshots() const { return schedule_.snapshots(); }
-  // Bytes the snapshots take (the cuts).
-  std::size_t snapshot_bytes() const { return cuts_.size() * cut_bytes_; }
+  // Bytes the snapshots take (the cuts, kept as differences: dird_cut_snapshots.hpp).
+  std::size_t snapshot_bytes() const { return cuts_.bytes(); }
 
  private:
   StandardizeConfig config_;
   DirdCodeConfig codes_;
   CausalSchedule schedule_;
   DescriptorMoments moments_;
-  std::size_t cut_bytes_ = 0;
-  std::vector<std::unique_ptr<std::uint8_t[]>> cuts_;  // one per snapshot
+  std::vector<std::uint8_t> scratch_;  // the cuts of the snapshot being made
+  CutSnapshots cuts_;
 };
 
 // Compact codes of one run, by sequence number: a contiguous matrix (capacity x code_words words),
