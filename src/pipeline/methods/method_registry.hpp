@@ -75,8 +75,6 @@ inline constexpr MethodEntry kMethods[] = {
     {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
      "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)", true,
      MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_seqslam_gated)},
-    {"dird-example", Detector::kDird, RunMode::kFull, "off", "DIRD full under its own name (an example)",
-     true, MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_example)},
 };
 
 // The row named `name`, or nullptr.
