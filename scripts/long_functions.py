@@ -16,6 +16,14 @@ import sys
 SUFFIXES = (".cpp", ".hpp", ".cc", ".h")
 
 
+def digit_separator(text, i):
+    """Whether the quote at i separates digits of a number (1'000'000), not a character literal."""
+    j = i
+    while j > 0 and (text[j - 1].isalnum() or text[j - 1] in "_'"):
+        j -= 1
+    return j < i and text[j].isdigit()
+
+
 def strip_code(text):
     """The text with comments, strings and character literals blanked (newlines kept)."""
     out = []
@@ -38,6 +46,9 @@ def strip_code(text):
             j = n if end < 0 else end + len(m.group(1)) + 2
             out.append("".join(ch if ch == "\n" else " " for ch in text[i:j]))
             i = j
+        elif c == "'" and digit_separator(text, i):
+            out.append(c)
+            i += 1
         elif c in "\"'":
             j = i + 1
             while j < n and text[j] != c:

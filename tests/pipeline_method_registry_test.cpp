@@ -30,8 +30,23 @@ TEST(MethodRegistry, NamesAreUniqueAndEveryRowIsFoundByItsWords) {
   for (const MethodEntry& m : kMethods) {
     EXPECT_TRUE(names.insert(m.name).second) << m.name;
     EXPECT_EQ(find_method_entry(m.name), &m);
-    EXPECT_EQ(find_method_entry(enum_name(m.detector), enum_name(m.mode), m.standardize), &m) << m.name;
+    // The words of a row find it, or the first row with the same words (a later row over the same
+    // detector, mode and standardisation is reached by its name: run.method_row).
+    const MethodEntry* by_words = find_method_entry(enum_name(m.detector), enum_name(m.mode), m.standardize);
+    ASSERT_NE(by_words, nullptr) << m.name;
+    EXPECT_LE(by_words, &m) << m.name;
+    EXPECT_EQ(by_words->detector, m.detector) << m.name;
+    EXPECT_EQ(by_words->mode, m.mode) << m.name;
   }
+}
+
+TEST(MethodRegistry, TheRowRunMethodNamedWinsOverItsWords) {
+  PipelineConfig c;  // dird, gated, standardize.mode off: the words of row "gated"
+  EXPECT_EQ(method_entry(c)->name, std::string("gated"));
+  c.run.method_row = "std-gated";
+  EXPECT_EQ(method_entry(c)->name, std::string("std-gated"));
+  c.run.mode = RunMode::kOdometry;
+  EXPECT_EQ(method_entry(c), nullptr);
 }
 
 TEST(MethodRegistry, RunMethodNamesARow) {

@@ -144,6 +144,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   config.run.mode = m.mode;
   config.run.method = m.detector;
   config.standardize.mode = m.standardize;
+  config.run.method_row = m.name;
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
   if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";

@@ -77,6 +77,10 @@ struct RunConfig {
   // the descriptors of the rows just behind the current frame); older frames are read again from the
   // dataset. 0 = no cache. Memory: this many images.
   int image_cache_frames = 64;
+  // The method registry's row that run.method named (`run.method: dird-seqslam-gated`), set when the config
+  // is loaded; empty when run.method is a detector word, whose row follows from the detector, run.mode and
+  // standardize.mode (methods/method_registry.hpp). Not a key of its own: the echo shows the row's words.
+  std::string method_row;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is RunConfig or const RunConfig).
   template <class Self, class V>

@@ -104,195 +104,232 @@ Renderer::Renderer(const World& world, const CameraCalibration& camera, const Re
   }
 }
 
-cv::Mat Renderer::render(const Eigen::Isometry3d& T_w_c, const Illumination& light, std::uint64_t noise_seed,
-                         std::span<const SpotLight> lights, RenderStats* stats) const {
-  const CameraCalibration& cal = camera_.calibration();
-  const int w = cal.width_px, h = cal.height_px;
-  cv::Mat image(h, w, CV_8UC1);
+namespace {
 
-  const Eigen::Matrix3f R = T_w_c.linear().cast<float>();
-  const Eigen::Vector3f origin = T_w_c.translation().cast<float>();
-  const Eigen::Vector3f up = world_.up_w.cast<float>();
-  Eigen::Vector3f sun = light.sun_dir_w.cast<float>();
-  sun = sun.norm() > 0.0f ? Eigen::Vector3f(sun.normalized()) : up;
-  const float ambient = static_cast<float>(light.ambient);
-  const float sun_intensity = static_cast<float>(light.sun_intensity);
-  const float sky = static_cast<float>(light.sky_brightness);
-  const float zenith_gain = static_cast<float>(config_.sky_zenith_gain);
-  const float exposure = static_cast<float>(light.exposure);
-  const float vignetting = static_cast<float>(light.vignetting);
-  const float noise_sigma = static_cast<float>(light.noise_sigma);
-  const float near_m = static_cast<float>(config_.near_m);
-  const float far_m = static_cast<float>(config_.far_m);
-  const float haze_m = static_cast<float>(config_.haze_distance_m);
-  const float min_cos = static_cast<float>(config_.min_incidence_cos);
-
-  // Display transfer as a lookup table over linear [0, 1].
+// Display transfer as a lookup table over linear [0, 1]: kGammaLutSize + 1 grey levels.
+std::vector<float> make_gamma_lut(double gamma) {
   std::vector<float> gamma_lut(kGammaLutSize + 1);
-  const double inv_gamma = 1.0 / light.gamma;
+  const double inv_gamma = 1.0 / gamma;
   for (int k = 0; k <= kGammaLutSize; ++k) {
     gamma_lut[static_cast<std::size_t>(k)] =
         static_cast<float>(255.0 * std::pow(static_cast<double>(k) / kGammaLutSize, inv_gamma));
   }
-  const float lut_scale = static_cast<float>(kGammaLutSize);
+  return gamma_lut;
+}
 
-  const World& world = world_;
+// The per-pixel constants of the camera a frame is rendered through (owned by the Renderer).
+struct PixelRays {
+  const float* ray_c = nullptr;          // 3 floats per pixel: unit bearing in the camera frame
+  const float* footprint_rad = nullptr;  // angular size of each pixel
+  const float* vignette_r2 = nullptr;    // squared normalised distance from the image centre
+  float tan_half_fov_x = 0.0f;           // 0 = no culling of lights
+  float tan_half_fov_y = 0.0f;
+};
 
-  // Lights: those whose reach (a sphere of range_m) meets the view, and the lamp heads in view (with their
-  // glare halo) and not hidden behind a surface.
-  const Eigen::Matrix3f R_c_w = R.transpose();
-  const auto sphere_in_view = [&](const Eigen::Vector3f& c, float radius) {
-    if (c.z() < -radius) return false;
-    if (tan_half_fov_x_ <= 0.0f) return true;
-    for (const auto& [coordinate, tangent] :
-         {std::pair{c.x(), tan_half_fov_x_}, std::pair{-c.x(), tan_half_fov_x_},
-          std::pair{c.y(), tan_half_fov_y_}, std::pair{-c.y(), tan_half_fov_y_}}) {
-      if ((coordinate - tangent * c.z()) / std::sqrt(1.0f + tangent * tangent) > radius) return false;
-    }
-    return true;
-  };
-  std::vector<SpotLight> shading;
-  std::vector<LampHead> heads;
-  for (const SpotLight& lamp : lights) {
-    const Eigen::Vector3f c = R_c_w * (lamp.position_w - origin);
-    if (lamp.intensity > 0.0f && sphere_in_view(c, lamp.range_m)) shading.push_back(lamp);
-    if (!(lamp.head_radius_m > 0.0f && lamp.head_radiance > 0.0f)) continue;
-    const float distance = c.norm();
-    if (!(distance > near_m + lamp.head_radius_m)) continue;
-    LampHead head;
-    head.radius_rad = lamp.head_radius_m / distance;
-    const float a2 = head.radius_rad * head.radius_rad;
-    head.glare_scale = lamp.glare * lamp.head_radiance * a2;
-    // The halo is drawn where it is above kGlareFloor; the head's edge at least.
-    const float halo2 = head.glare_scale / kGlareFloor - a2;
-    head.sin2_max = std::max(halo2, 4.0f * a2);
-    if (!sphere_in_view(c, distance * std::sqrt(std::min(head.sin2_max, 1.0f)))) continue;
-    head.dir_w = (lamp.position_w - origin) / distance;
-    float t_hit = 0, a_m = 0, b_m = 0;
-    if (render_detail::closest_hit(world, origin, head.dir_w, near_m, distance - lamp.head_radius_m, &t_hit,
-                                   &a_m, &b_m) >= 0) {
-      continue;  // hidden
-    }
-    head.transmission = haze_m > 0.0f ? haze_m / (distance + haze_m) : 1.0f;
-    head.radiance = lamp.head_radiance;
-    heads.push_back(head);
+// One frame's scene: pose, light, the spot lights that can light something in view and the lamp heads in
+// view; radiance(k) is the scene radiance along pixel k's ray.
+class FrameScene {
+ public:
+  FrameScene(const World& world, const RendererConfig& config, const PixelRays& pixels,
+             const Eigen::Isometry3d& T_w_c, const Illumination& light, std::span<const SpotLight> lights)
+      : world_(world), pixels_(pixels) {
+    R_ = T_w_c.linear().cast<float>();
+    origin_ = T_w_c.translation().cast<float>();
+    up_ = world.up_w.cast<float>();
+    const Eigen::Vector3f sun = light.sun_dir_w.cast<float>();
+    sun_ = sun.norm() > 0.0f ? Eigen::Vector3f(sun.normalized()) : up_;
+    ambient_ = static_cast<float>(light.ambient);
+    sun_intensity_ = static_cast<float>(light.sun_intensity);
+    sky_ = static_cast<float>(light.sky_brightness);
+    zenith_gain_ = static_cast<float>(config.sky_zenith_gain);
+    near_m_ = static_cast<float>(config.near_m);
+    far_m_ = static_cast<float>(config.far_m);
+    haze_m_ = static_cast<float>(config.haze_distance_m);
+    min_cos_ = static_cast<float>(config.min_incidence_cos);
+    select_lights(lights);
   }
 
+  int shading_lights() const { return static_cast<int>(shading_.size()); }
+  int visible_lamp_heads() const { return static_cast<int>(heads_.size()); }
+
   // Scene radiance along pixel k's ray (hint_quad: the left neighbour's quad, updated).
-  const auto shade = [&](std::size_t k, int& hint_quad) {
-    const Eigen::Vector3f ray_c(ray_c_[3 * k], ray_c_[3 * k + 1], ray_c_[3 * k + 2]);
-    const Eigen::Vector3f d = R * ray_c;
-    const float elevation = std::clamp(d.dot(up), 0.0f, 1.0f);
-    const float sky_radiance = sky * (1.0f + zenith_gain * elevation);
+  float radiance(std::size_t k, int& hint_quad) const {
+    const Eigen::Vector3f ray_c(pixels_.ray_c[3 * k], pixels_.ray_c[3 * k + 1], pixels_.ray_c[3 * k + 2]);
+    const Eigen::Vector3f d = R_ * ray_c;
+    const float elevation = std::clamp(d.dot(up_), 0.0f, 1.0f);
+    const float sky_radiance = sky_ * (1.0f + zenith_gain_ * elevation);
     float t = 0, a_m = 0, b_m = 0;
-    const int qi = render_detail::closest_hit(world, origin, d, near_m, far_m, &t, &a_m, &b_m, hint_quad);
+    const int qi = render_detail::closest_hit(world_, origin_, d, near_m_, far_m_, &t, &a_m, &b_m, hint_quad);
     hint_quad = qi;
     float radiance = sky_radiance;
-    if (qi < 0 && d.dot(up) < 0.0f) {
+    if (qi < 0 && d.dot(up_) < 0.0f) {
       // Below the horizon beyond the modelled ground: a distant, hazy, sunlit ground.
       radiance =
-          sky + (kDistantGroundAlbedo * (ambient + sun_intensity * std::max(0.0f, sun.dot(up))) - sky) *
-                    std::min(1.0f, -d.dot(up) * kDistantGroundFade);
+          sky_ + (kDistantGroundAlbedo * (ambient_ + sun_intensity_ * std::max(0.0f, sun_.dot(up_))) - sky_) *
+                     std::min(1.0f, -d.dot(up_) * kDistantGroundFade);
     } else if (qi >= 0) {
-      const Quad& q = world.quads[static_cast<std::size_t>(qi)];
-      const float cos_inc = q.normal_w.dot(d);
-      const float facing = cos_inc < 0.0f ? 1.0f : -1.0f;  // normal turned towards the camera
-      const float lambert = std::max(0.0f, facing * q.normal_w.dot(sun));
-      const float abs_cos = std::max(std::abs(cos_inc), min_cos);
-      const float footprint_tx = t * footprint_rad_[k] * q.texels_per_m / std::sqrt(abs_cos);
-      const Texture& tex = world.textures[static_cast<std::size_t>(q.texture)];
-      const float albedo = tex.sample(q.u_offset_tx + q.u_sign * a_m * q.texels_per_m,
-                                      q.v_offset_tx + q.v_sign * b_m * q.texels_per_m, footprint_tx);
-      float irradiance = ambient + sun_intensity * lambert;
-      if (!shading.empty()) {
-        const Eigen::Vector3f p = origin + t * d;
-        const Eigen::Vector3f n = facing * q.normal_w;
-        for (const SpotLight& lamp : shading) irradiance += spot_irradiance(lamp, p, n);
-      }
-      const float surface = albedo * irradiance;
-      if (haze_m > 0.0f) {
-        const float haze = t / (t + haze_m);
-        radiance = surface + (sky - surface) * haze;  // fades into the horizon sky
-      } else {
-        radiance = surface;
-      }
+      radiance = surface_radiance(world_.quads[static_cast<std::size_t>(qi)], k, d, t, a_m, b_m);
     }
-    for (const LampHead& head : heads) {
+    for (const LampHead& head : heads_) {
       if (d.dot(head.dir_w) <= 0.0f) continue;
       const float sin2 = d.cross(head.dir_w).squaredNorm();
       if (sin2 > head.sin2_max) continue;
       const float cover =
-          std::clamp((head.radius_rad - std::sqrt(sin2)) / footprint_rad_[k] + 0.5f, 0.0f, 1.0f);
+          std::clamp((head.radius_rad - std::sqrt(sin2)) / pixels_.footprint_rad[k] + 0.5f, 0.0f, 1.0f);
       const float a2 = head.radius_rad * head.radius_rad;
       radiance += head.transmission * (head.radiance * cover + head.glare_scale / (sin2 + a2));
     }
     return radiance;
-  };
+  }
 
+ private:
+  // Radiance of quad q hit at distance t along ray d of pixel k, at (a_m, b_m) on the quad, hazed.
+  float surface_radiance(const Quad& q, std::size_t k, const Eigen::Vector3f& d, float t, float a_m,
+                         float b_m) const {
+    const float cos_inc = q.normal_w.dot(d);
+    const float facing = cos_inc < 0.0f ? 1.0f : -1.0f;  // normal turned towards the camera
+    const float lambert = std::max(0.0f, facing * q.normal_w.dot(sun_));
+    const float abs_cos = std::max(std::abs(cos_inc), min_cos_);
+    const float footprint_tx = t * pixels_.footprint_rad[k] * q.texels_per_m / std::sqrt(abs_cos);
+    const Texture& tex = world_.textures[static_cast<std::size_t>(q.texture)];
+    const float albedo = tex.sample(q.u_offset_tx + q.u_sign * a_m * q.texels_per_m,
+                                    q.v_offset_tx + q.v_sign * b_m * q.texels_per_m, footprint_tx);
+    float irradiance = ambient_ + sun_intensity_ * lambert;
+    if (!shading_.empty()) {
+      const Eigen::Vector3f p = origin_ + t * d;
+      const Eigen::Vector3f n = facing * q.normal_w;
+      for (const SpotLight& lamp : shading_) irradiance += spot_irradiance(lamp, p, n);
+    }
+    const float surface = albedo * irradiance;
+    if (haze_m_ > 0.0f) {
+      const float haze = t / (t + haze_m_);
+      return surface + (sky_ - surface) * haze;  // fades into the horizon sky
+    }
+    return surface;
+  }
+
+  // Whether a sphere of `radius` around c (camera frame) meets the view.
+  bool sphere_in_view(const Eigen::Vector3f& c, float radius) const {
+    if (c.z() < -radius) return false;
+    if (pixels_.tan_half_fov_x <= 0.0f) return true;
+    for (const auto& [coordinate, tangent] :
+         {std::pair{c.x(), pixels_.tan_half_fov_x}, std::pair{-c.x(), pixels_.tan_half_fov_x},
+          std::pair{c.y(), pixels_.tan_half_fov_y}, std::pair{-c.y(), pixels_.tan_half_fov_y}}) {
+      if ((coordinate - tangent * c.z()) / std::sqrt(1.0f + tangent * tangent) > radius) return false;
+    }
+    return true;
+  }
+
+  // Lights: those whose reach (a sphere of range_m) meets the view, and the lamp heads in view (with their
+  // glare halo) and not hidden behind a surface.
+  void select_lights(std::span<const SpotLight> lights) {
+    const Eigen::Matrix3f R_c_w = R_.transpose();
+    for (const SpotLight& lamp : lights) {
+      const Eigen::Vector3f c = R_c_w * (lamp.position_w - origin_);
+      if (lamp.intensity > 0.0f && sphere_in_view(c, lamp.range_m)) shading_.push_back(lamp);
+      if (!(lamp.head_radius_m > 0.0f && lamp.head_radiance > 0.0f)) continue;
+      const float distance = c.norm();
+      if (!(distance > near_m_ + lamp.head_radius_m)) continue;
+      LampHead head;
+      head.radius_rad = lamp.head_radius_m / distance;
+      const float a2 = head.radius_rad * head.radius_rad;
+      head.glare_scale = lamp.glare * lamp.head_radiance * a2;
+      // The halo is drawn where it is above kGlareFloor; the head's edge at least.
+      const float halo2 = head.glare_scale / kGlareFloor - a2;
+      head.sin2_max = std::max(halo2, 4.0f * a2);
+      if (!sphere_in_view(c, distance * std::sqrt(std::min(head.sin2_max, 1.0f)))) continue;
+      head.dir_w = (lamp.position_w - origin_) / distance;
+      float t_hit = 0, a_m = 0, b_m = 0;
+      if (render_detail::closest_hit(world_, origin_, head.dir_w, near_m_, distance - lamp.head_radius_m,
+                                     &t_hit, &a_m, &b_m) >= 0) {
+        continue;  // hidden
+      }
+      head.transmission = haze_m_ > 0.0f ? haze_m_ / (distance + haze_m_) : 1.0f;
+      head.radiance = lamp.head_radiance;
+      heads_.push_back(head);
+    }
+  }
+
+  const World& world_;
+  PixelRays pixels_;
+  Eigen::Matrix3f R_;
+  Eigen::Vector3f origin_, up_, sun_;
+  float ambient_ = 0, sun_intensity_ = 0, sky_ = 0, zenith_gain_ = 0;
+  float near_m_ = 0, far_m_ = 0, haze_m_ = 0, min_cos_ = 0;
+  std::vector<SpotLight> shading_;
+  std::vector<LampHead> heads_;
+};
+
+std::size_t pixel_index(int u, int v, int w) {
+  return static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
+}
+
+// The photon sensor: radiance at the sensor (vignetting is the lens'), metered on a sparse grid, exposed,
+// then shot + read noise in linear grey levels, clipping, gamma and quantisation.
+void expose_photon_sensor(const FrameScene& scene, const PixelRays& pixels, const Illumination& light,
+                          std::uint64_t noise_seed, cv::Mat& image, RenderStats* stats) {
+  const int w = image.cols, h = image.rows;
+  const float vignetting = static_cast<float>(light.vignetting);
+  const std::vector<float> gamma_lut = make_gamma_lut(light.gamma);
+  const float lut_scale = static_cast<float>(kGammaLutSize);
+  std::vector<float> signal(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
+  for (int v = 0; v < h; ++v) {
+    int hint_quad = -1;
+    for (int u = 0; u < w; ++u) {
+      const std::size_t k = pixel_index(u, v, w);
+      signal[k] = scene.radiance(k, hint_quad) * (1.0f - vignetting * pixels.vignette_r2[k]);
+    }
+  }
+  const int stride = light.sensor.ae_metering_stride_px;
+  std::vector<float> samples;
+  samples.reserve(signal.size() / static_cast<std::size_t>(stride * stride) + 1);
+  for (int v = stride / 2; v < h; v += stride) {
+    for (int u = stride / 2; u < w; u += stride) samples.push_back(signal[pixel_index(u, v, w)]);
+  }
+  const SensorExposure ae = auto_exposure(samples, light.sensor, light.gamma);
+  const float scale_dn = static_cast<float>(255.0 * ae.scale());
+  const float dn_per_e = static_cast<float>(ae.dn_per_electron(light.sensor));
+  const float read_dn = dn_per_e * static_cast<float>(light.sensor.read_noise_e);
+  const float read_dn2 = read_dn * read_dn;
+  const std::uint64_t photon_key = render_detail::mix64(noise_seed ^ 0xF070F070F070ull);
+  for (int v = 0; v < h; ++v) {
+    std::uint8_t* row = image.ptr<std::uint8_t>(v);
+    for (int u = 0; u < w; ++u) {
+      const std::size_t k = pixel_index(u, v, w);
+      const float signal_dn = scale_dn * signal[k];
+      const float sigma_dn = std::sqrt(dn_per_e * std::max(0.0f, signal_dn) + read_dn2);
+      const float noisy_dn = signal_dn + sigma_dn * kIrwinHallScale *
+                                             irwin_hall_centred(render_detail::hash_combine(photon_key, k));
+      const float linear = std::clamp(noisy_dn * (1.0f / 255.0f), 0.0f, 1.0f);
+      const float grey = gamma_lut[static_cast<std::size_t>(linear * lut_scale)];
+      row[u] = static_cast<std::uint8_t>(std::clamp(grey + 0.5f, 0.0f, 255.0f));
+    }
+  }
   if (stats != nullptr) {
-    *stats = RenderStats{};
-    stats->shading_lights = static_cast<int>(shading.size());
-    stats->visible_lamp_heads = static_cast<int>(heads.size());
+    stats->exposure_time = ae.exposure_time;
+    stats->gain = ae.gain;
+    stats->dn_per_electron = ae.dn_per_electron(light.sensor);
   }
-  if (light.photon_sensor) {
-    // Radiance at the sensor (vignetting is the lens'), metered on a sparse grid, exposed, then shot + read
-    // noise in linear grey levels, clipping, gamma and quantisation.
-    std::vector<float> signal(static_cast<std::size_t>(w) * static_cast<std::size_t>(h));
-    for (int v = 0; v < h; ++v) {
-      int hint_quad = -1;
-      for (int u = 0; u < w; ++u) {
-        const std::size_t k =
-            static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-        signal[k] = shade(k, hint_quad) * (1.0f - vignetting * vignette_r2_[k]);
-      }
-    }
-    const int stride = light.sensor.ae_metering_stride_px;
-    std::vector<float> samples;
-    samples.reserve(signal.size() / static_cast<std::size_t>(stride * stride) + 1);
-    for (int v = stride / 2; v < h; v += stride) {
-      for (int u = stride / 2; u < w; u += stride) {
-        samples.push_back(
-            signal[static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u)]);
-      }
-    }
-    const SensorExposure ae = auto_exposure(samples, light.sensor, light.gamma);
-    const float scale_dn = static_cast<float>(255.0 * ae.scale());
-    const float dn_per_e = static_cast<float>(ae.dn_per_electron(light.sensor));
-    const float read_dn = dn_per_e * static_cast<float>(light.sensor.read_noise_e);
-    const float read_dn2 = read_dn * read_dn;
-    const std::uint64_t photon_key = render_detail::mix64(noise_seed ^ 0xF070F070F070ull);
-    for (int v = 0; v < h; ++v) {
-      std::uint8_t* row = image.ptr<std::uint8_t>(v);
-      for (int u = 0; u < w; ++u) {
-        const std::size_t k =
-            static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-        const float signal_dn = scale_dn * signal[k];
-        const float sigma_dn = std::sqrt(dn_per_e * std::max(0.0f, signal_dn) + read_dn2);
-        const float noisy_dn = signal_dn + sigma_dn * kIrwinHallScale *
-                                               irwin_hall_centred(render_detail::hash_combine(photon_key, k));
-        const float linear = std::clamp(noisy_dn * (1.0f / 255.0f), 0.0f, 1.0f);
-        const float grey = gamma_lut[static_cast<std::size_t>(linear * lut_scale)];
-        row[u] = static_cast<std::uint8_t>(std::clamp(grey + 0.5f, 0.0f, 255.0f));
-      }
-    }
-    if (stats != nullptr) {
-      stats->exposure_time = ae.exposure_time;
-      stats->gain = ae.gain;
-      stats->dn_per_electron = ae.dn_per_electron(light.sensor);
-    }
-    return image;
-  }
+}
 
+// The additive sensor: fixed exposure, vignetting, clipping, gamma, then additive grey-level noise.
+void expose_additive_sensor(const FrameScene& scene, const PixelRays& pixels, const Illumination& light,
+                            std::uint64_t noise_seed, cv::Mat& image, RenderStats* stats) {
+  const int w = image.cols, h = image.rows;
+  const float exposure = static_cast<float>(light.exposure);
+  const float vignetting = static_cast<float>(light.vignetting);
+  const float noise_sigma = static_cast<float>(light.noise_sigma);
+  const std::vector<float> gamma_lut = make_gamma_lut(light.gamma);
+  const float lut_scale = static_cast<float>(kGammaLutSize);
   if (stats != nullptr) stats->exposure_time = light.exposure;
   const std::uint64_t frame_key = render_detail::mix64(noise_seed ^ 0x5EED5EED5EEDull);
   for (int v = 0; v < h; ++v) {
     std::uint8_t* row = image.ptr<std::uint8_t>(v);
     int hint_quad = -1;  // the left neighbour's quad (reset per row)
     for (int u = 0; u < w; ++u) {
-      const std::size_t k =
-          static_cast<std::size_t>(v) * static_cast<std::size_t>(w) + static_cast<std::size_t>(u);
-      const float radiance = shade(k, hint_quad);
-      float linear = exposure * radiance * (1.0f - vignetting * vignette_r2_[k]);
+      const std::size_t k = pixel_index(u, v, w);
+      const float radiance = scene.radiance(k, hint_quad);
+      float linear = exposure * radiance * (1.0f - vignetting * pixels.vignette_r2[k]);
       linear = std::clamp(linear, 0.0f, 1.0f);
       float grey = gamma_lut[static_cast<std::size_t>(linear * lut_scale)];
       if (noise_sigma > 0.0f) {
@@ -300,6 +337,27 @@ cv::Mat Renderer::render(const Eigen::Isometry3d& T_w_c, const Illumination& lig
       }
       row[u] = static_cast<std::uint8_t>(std::clamp(grey + 0.5f, 0.0f, 255.0f));
     }
+  }
+}
+
+}  // namespace
+
+cv::Mat Renderer::render(const Eigen::Isometry3d& T_w_c, const Illumination& light, std::uint64_t noise_seed,
+                         std::span<const SpotLight> lights, RenderStats* stats) const {
+  const CameraCalibration& cal = camera_.calibration();
+  cv::Mat image(cal.height_px, cal.width_px, CV_8UC1);
+  const PixelRays pixels{ray_c_.data(), footprint_rad_.data(), vignette_r2_.data(), tan_half_fov_x_,
+                         tan_half_fov_y_};
+  const FrameScene scene(world_, config_, pixels, T_w_c, light, lights);
+  if (stats != nullptr) {
+    *stats = RenderStats{};
+    stats->shading_lights = scene.shading_lights();
+    stats->visible_lamp_heads = scene.visible_lamp_heads();
+  }
+  if (light.photon_sensor) {
+    expose_photon_sensor(scene, pixels, light, noise_seed, image, stats);
+  } else {
+    expose_additive_sensor(scene, pixels, light, noise_seed, image, stats);
   }
   return image;
 }

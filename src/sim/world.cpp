@@ -220,85 +220,123 @@ struct PlacedFacade {
   Eigen::Vector2d a, b, normal;  // normal towards the road
 };
 
-void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
-  const WorldConfig& cfg = bld.config;
-  const Frame& f = bld.frame;
-  const PathCurve curve = make_curve(path_w, f);
-  PointGrid path_grid(std::max(1.0, cfg.street_clearance_m));
-  for (const Eigen::Vector2d& p : curve.xy) path_grid.add(p);
-  const std::uint64_t seed = static_cast<std::uint64_t>(cfg.seed);
+// The street's ground: world-aligned grid cells near the path, each two triangles over vertex heights fitted
+// to the path (so neighbouring cells share their edges exactly: no cracks).
+class StreetGround {
+ public:
+  StreetGround(const WorldConfig& cfg, const PathCurve& curve, const PointGrid& path_grid)
+      : cfg_(cfg), curve_(curve), path_grid_(path_grid) {
+    const double ground_reach_m =
+        cfg.street_facade_offset_m + cfg.street_facade_offset_jitter_m + kGroundBeyondFacadesM;
+    const double tile_m = cfg.street_ground_tile_m;
+    for (const Eigen::Vector2d& p : curve.xy) {
+      const long long r = static_cast<long long>(std::ceil(ground_reach_m / tile_m));
+      const long long px = static_cast<long long>(std::floor(p.x() / tile_m));
+      const long long py = static_cast<long long>(std::floor(p.y() / tile_m));
+      for (long long ix = px - r; ix <= px + r; ++ix) {
+        for (long long iy = py - r; iy <= py + r; ++iy) {
+          const double cx = (ix + 0.5) * tile_m, cy = (iy + 0.5) * tile_m;
+          const double dx = std::max(0.0, std::abs(p.x() - cx) - 0.5 * tile_m);
+          const double dy = std::max(0.0, std::abs(p.y() - cy) - 0.5 * tile_m);
+          if (std::hypot(dx, dy) > ground_reach_m) continue;
+          if (cell_set_.emplace(cell_key(ix, iy), 1).second) cells_.emplace_back(ix, iy);
+        }
+      }
+    }
+    std::sort(cells_.begin(), cells_.end());
+  }
 
-  // Ground: world-aligned grid cells near the path, each two triangles over vertex heights fitted to the
-  // path (so neighbouring cells share their edges exactly: no cracks).
-  const double ground_reach_m =
-      cfg.street_facade_offset_m + cfg.street_facade_offset_jitter_m + kGroundBeyondFacadesM;
   // The historical key of a cell (its texture seed): different cells can share it, e.g. (1, -24) and
   // (-1, 22). As the key of the cell set and the vertex heights it drops such cells from the ground (holes
   // through which the distant ground shows) and gives their vertices one height; street_ground_exact_cells
   // keys those by the cell itself (the legacy keys stay the default: they are what the first presets render).
-  const auto seed_key = [](long long ix, long long iy) -> std::uint64_t {
+  static std::uint64_t seed_key(long long ix, long long iy) {
     return (static_cast<std::uint64_t>(ix) * 0x9E3779B97F4A7C15ull) ^ static_cast<std::uint64_t>(iy);
-  };
-  const bool exact_cells = cfg.street_ground_exact_cells;
-  const auto cell_key = [&](long long ix, long long iy) -> std::uint64_t {
-    if (!exact_cells) return seed_key(ix, iy);
-    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(ix)) << 32) |
-           static_cast<std::uint64_t>(static_cast<std::uint32_t>(iy));
-  };
-  std::unordered_map<std::uint64_t, char> cell_set;
-  std::vector<std::pair<long long, long long>> cells;
-  for (const Eigen::Vector2d& p : curve.xy) {
-    const long long r = static_cast<long long>(std::ceil(ground_reach_m / cfg.street_ground_tile_m));
-    const long long px = static_cast<long long>(std::floor(p.x() / cfg.street_ground_tile_m));
-    const long long py = static_cast<long long>(std::floor(p.y() / cfg.street_ground_tile_m));
-    for (long long ix = px - r; ix <= px + r; ++ix) {
-      for (long long iy = py - r; iy <= py + r; ++iy) {
-        const double cx = (ix + 0.5) * cfg.street_ground_tile_m, cy = (iy + 0.5) * cfg.street_ground_tile_m;
-        const double dx = std::max(0.0, std::abs(p.x() - cx) - 0.5 * cfg.street_ground_tile_m);
-        const double dy = std::max(0.0, std::abs(p.y() - cy) - 0.5 * cfg.street_ground_tile_m);
-        if (std::hypot(dx, dy) > ground_reach_m) continue;
-        if (cell_set.emplace(cell_key(ix, iy), 1).second) cells.emplace_back(ix, iy);
-      }
-    }
   }
-  std::sort(cells.begin(), cells.end());
-  std::unordered_map<std::uint64_t, double> vertex_heights;
-  const auto vertex_height = [&](long long ix, long long iy) {
-    const auto found = vertex_heights.find(cell_key(ix, iy));
-    if (found != vertex_heights.end()) return found->second;
-    const Eigen::Vector2d c(ix * cfg.street_ground_tile_m, iy * cfg.street_ground_tile_m);
+
+  // The cells near the path, sorted.
+  const std::vector<std::pair<long long, long long>>& cells() const { return cells_; }
+
+  // Height of grid vertex (ix, iy) below the camera path; remembered by cell key (the first asked fixes it).
+  double vertex_height(long long ix, long long iy) {
+    const auto found = vertex_heights_.find(cell_key(ix, iy));
+    if (found != vertex_heights_.end()) return found->second;
+    const Eigen::Vector2d c(ix * cfg_.street_ground_tile_m, iy * cfg_.street_ground_tile_m);
     // Weighted mean of the nearby path heights (no extrapolated slopes away from the road).
     double sum_w = 0.0, sum_wz = 0.0;
     double radius = kGroundFitRadiusM;
     while (sum_w == 0.0) {
-      path_grid.for_each_within(c, radius, [&](int idx) {
-        const Eigen::Vector2d& p = path_grid.point(idx);
+      path_grid_.for_each_within(c, radius, [&](int idx) {
+        const Eigen::Vector2d& p = path_grid_.point(idx);
         const double w = 1.0 / (1.0 + (p - c).squaredNorm() / (kGroundFitSigmaM * kGroundFitSigmaM));
         sum_w += w;
-        sum_wz += w * (curve.z[static_cast<std::size_t>(idx)] - cfg.street_camera_height_m);
+        sum_wz += w * (curve_.z[static_cast<std::size_t>(idx)] - cfg_.street_camera_height_m);
       });
       radius *= 2.0;
     }
     const double h = sum_wz / sum_w;
-    vertex_heights.emplace(cell_key(ix, iy), h);
+    vertex_heights_.emplace(cell_key(ix, iy), h);
     return h;
-  };
+  }
+
+  // Ground height at horizontal position p (fallback outside the ground cells).
+  double height(const Eigen::Vector2d& p, double fallback) {
+    const double tile_m = cfg_.street_ground_tile_m;
+    const long long ix = static_cast<long long>(std::floor(p.x() / tile_m));
+    const long long iy = static_cast<long long>(std::floor(p.y() / tile_m));
+    if (cell_set_.find(cell_key(ix, iy)) == cell_set_.end()) return fallback;
+    const double fx = p.x() / tile_m - ix, fy = p.y() / tile_m - iy;
+    const double h00 = vertex_height(ix, iy), h10 = vertex_height(ix + 1, iy);
+    const double h01 = vertex_height(ix, iy + 1), h11 = vertex_height(ix + 1, iy + 1);
+    if (fx + fy <= 1.0) return h00 + fx * (h10 - h00) + fy * (h01 - h00);
+    return h11 + (1.0 - fx) * (h01 - h11) + (1.0 - fy) * (h10 - h11);
+  }
+
+ private:
+  std::uint64_t cell_key(long long ix, long long iy) const {
+    if (!cfg_.street_ground_exact_cells) return seed_key(ix, iy);
+    return (static_cast<std::uint64_t>(static_cast<std::uint32_t>(ix)) << 32) |
+           static_cast<std::uint64_t>(static_cast<std::uint32_t>(iy));
+  }
+
+  const WorldConfig& cfg_;
+  const PathCurve& curve_;
+  const PointGrid& path_grid_;
+  std::unordered_map<std::uint64_t, char> cell_set_;
+  std::vector<std::pair<long long, long long>> cells_;
+  std::unordered_map<std::uint64_t, double> vertex_heights_;
+};
+
+// The street's building site: the path, its clearance grid and the ground.
+struct StreetSite {
+  const WorldConfig& cfg;
+  const Frame& f;
+  const PathCurve& curve;
+  const PointGrid& path_grid;
+  StreetGround& ground;
+  std::uint64_t seed;
+};
+
+// The ground cells as road-textured triangle pairs.
+void add_street_ground(Builder& bld, const StreetSite& site) {
+  const WorldConfig& cfg = site.cfg;
   std::vector<int> road_textures;
   for (int k = 0; k < kRoadTextureVariants; ++k) {
     road_textures.push_back(static_cast<int>(bld.world.textures.size()));
     const int px = static_cast<int>(std::lround(kRoadTextureM * cfg.street_road_texels_per_m));
-    bld.world.textures.push_back(make_texture(TextureStyle::kRoad, hash_combine(seed, 0x70AD00u + k), px, px,
-                                              kRoadTextureM, kRoadTextureM));
+    bld.world.textures.push_back(make_texture(TextureStyle::kRoad, hash_combine(site.seed, 0x70AD00u + k), px,
+                                              px, kRoadTextureM, kRoadTextureM));
   }
   const double tpm_road = cfg.street_road_texels_per_m;
-  for (const auto& [ix, iy] : cells) {
+  StreetGround& ground = site.ground;
+  for (const auto& [ix, iy] : ground.cells()) {
     const double x0 = ix * cfg.street_ground_tile_m, y0 = iy * cfg.street_ground_tile_m;
     const double x1 = x0 + cfg.street_ground_tile_m, y1 = y0 + cfg.street_ground_tile_m;
-    const Eigen::Vector3d p00 = f.to_world(x0, y0, vertex_height(ix, iy));
-    const Eigen::Vector3d p10 = f.to_world(x1, y0, vertex_height(ix + 1, iy));
-    const Eigen::Vector3d p01 = f.to_world(x0, y1, vertex_height(ix, iy + 1));
-    const Eigen::Vector3d p11 = f.to_world(x1, y1, vertex_height(ix + 1, iy + 1));
-    const std::uint64_t tile_seed = hash_combine(seed, seed_key(ix, iy));
+    const Eigen::Vector3d p00 = site.f.to_world(x0, y0, ground.vertex_height(ix, iy));
+    const Eigen::Vector3d p10 = site.f.to_world(x1, y0, ground.vertex_height(ix + 1, iy));
+    const Eigen::Vector3d p01 = site.f.to_world(x0, y1, ground.vertex_height(ix, iy + 1));
+    const Eigen::Vector3d p11 = site.f.to_world(x1, y1, ground.vertex_height(ix + 1, iy + 1));
+    const std::uint64_t tile_seed = hash_combine(site.seed, StreetGround::seed_key(ix, iy));
     const int s = bld.add_structure("ground", TextureStyle::kRoad, tile_seed, cfg.street_ground_tile_m,
                                     cfg.street_ground_tile_m, 0.25 * (p00 + p10 + p01 + p11), false);
     bld.pending[static_cast<std::size_t>(s)].info.texture =
@@ -306,25 +344,20 @@ void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     bld.add_patch(s, p00, p10 - p00, p01 - p00, true, tpm_road, x0 * tpm_road, y0 * tpm_road);
     bld.add_patch(s, p11, p01 - p11, p10 - p11, true, tpm_road, x1 * tpm_road, y1 * tpm_road, -1.0, -1.0);
   }
-  const auto ground_height = [&](const Eigen::Vector2d& p, double fallback) {
-    const long long ix = static_cast<long long>(std::floor(p.x() / cfg.street_ground_tile_m));
-    const long long iy = static_cast<long long>(std::floor(p.y() / cfg.street_ground_tile_m));
-    if (cell_set.find(cell_key(ix, iy)) == cell_set.end()) return fallback;
-    const double fx = p.x() / cfg.street_ground_tile_m - ix, fy = p.y() / cfg.street_ground_tile_m - iy;
-    const double h00 = vertex_height(ix, iy), h10 = vertex_height(ix + 1, iy);
-    const double h01 = vertex_height(ix, iy + 1), h11 = vertex_height(ix + 1, iy + 1);
-    if (fx + fy <= 1.0) return h00 + fx * (h10 - h00) + fy * (h01 - h00);
-    return h11 + (1.0 - fx) * (h01 - h11) + (1.0 - fy) * (h10 - h11);
-  };
+}
 
-  // Road markings: a dashed centre line along the path and solid edge lines, deduplicated on revisits.
+// Road markings: a dashed centre line along the path and solid edge lines, deduplicated on revisits.
+void add_street_markings(Builder& bld, const StreetSite& site) {
+  const WorldConfig& cfg = site.cfg;
+  const Frame& f = site.f;
+  const PathCurve& curve = site.curve;
   const int marking_texture = static_cast<int>(bld.world.textures.size());
   {
     const int px_u = static_cast<int>(std::lround(kMarkingTextureLengthM * cfg.street_road_texels_per_m));
     const int px_v =
         std::max(2, static_cast<int>(std::lround(kMarkingWidthM * cfg.street_road_texels_per_m)));
-    bld.world.textures.push_back(make_texture(TextureStyle::kMarking, hash_combine(seed, 0x3A4Bu), px_u, px_v,
-                                              kMarkingTextureLengthM, kMarkingWidthM));
+    bld.world.textures.push_back(make_texture(TextureStyle::kMarking, hash_combine(site.seed, 0x3A4Bu), px_u,
+                                              px_v, kMarkingTextureLengthM, kMarkingWidthM));
   }
   PointGrid dash_grid(kDashPeriodM);
   PointGrid edge_grid(kEdgeLineLengthM);
@@ -346,8 +379,8 @@ void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     marking_grid.for_each_within(center, dedup_m, [&](int) { duplicate = true; });
     if (duplicate) return;
     marking_grid.add(center);
-    const double za = ground_height(a, z0 - cfg.street_camera_height_m) + kMarkingLiftM;
-    const double zb = ground_height(b, z1 - cfg.street_camera_height_m) + kMarkingLiftM;
+    const double za = site.ground.height(a, z0 - cfg.street_camera_height_m) + kMarkingLiftM;
+    const double zb = site.ground.height(b, z1 - cfg.street_camera_height_m) + kMarkingLiftM;
     const Eigen::Vector3d origin = f.to_world(a.x(), a.y(), za);
     const Eigen::Vector3d du = f.to_world(b.x(), b.y(), zb) - origin;
     Eigen::Vector3d dv = f.to_world(n.x(), n.y(), 0.0);
@@ -364,139 +397,199 @@ void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     add_marking(edge_grid, 0.5 * kEdgeLineLengthM, s, kEdgeLineLengthM - 0.2, edge_offset_m);
     add_marking(edge_grid, 0.5 * kEdgeLineLengthM, s, kEdgeLineLengthM - 0.2, -edge_offset_m);
   }
+}
 
-  // Posts along the kerb (lamp / sign posts): four faces each, clear of every path point, once per place.
-  if (cfg.street_pole_spacing_m > 0.0) {
-    PointGrid pole_grid(cfg.street_pole_spacing_m);
-    int pole_index = 0;
-    for (double s = 0.5 * cfg.street_pole_spacing_m; s < curve.length(); s += cfg.street_pole_spacing_m) {
-      Eigen::Vector2d p0, p1, pc;
-      double z0 = 0, z1 = 0, zc = 0;
-      curve.sample(s - 1.0, &p0, &z0);
-      curve.sample(s + 1.0, &p1, &z1);
-      curve.sample(s, &pc, &zc);
-      if ((p1 - p0).norm() < 1.0) continue;
-      const Eigen::Vector2d t = (p1 - p0).normalized();
-      const double side = (pole_index++ % 2 == 0) ? 1.0 : -1.0;
-      const Eigen::Vector2d c = pc + Eigen::Vector2d(-t.y(), t.x()) * side * cfg.street_pole_offset_m;
-      const double half = 0.5 * cfg.street_pole_width_m;
-      if (path_grid.min_distance_to_segment(c, c, cfg.street_clearance_m + half) <
-          cfg.street_clearance_m + half) {
-        continue;
-      }
-      bool duplicate = false;
-      pole_grid.for_each_within(c, 0.5 * cfg.street_pole_spacing_m, [&](int) { duplicate = true; });
-      if (duplicate) continue;
-      pole_grid.add(c);
-      const double base = ground_height(c, zc - cfg.street_camera_height_m) - kFacadeBelowGroundM;
-      const double height = cfg.street_pole_height_m + kFacadeBelowGroundM;
-      const double w = cfg.street_pole_width_m;
-      const std::uint64_t pole_seed = hash_combine(seed, 0x9013ull + static_cast<std::uint64_t>(pole_index));
-      const int sidx = bld.add_structure("pole", TextureStyle::kPillar, pole_seed, 4.0 * w, height,
-                                         f.to_world(c.x(), c.y(), base + 0.5 * height), false);
-      const Eigen::Vector2d corners[4] = {{c.x() - half, c.y() - half},
-                                          {c.x() + half, c.y() - half},
-                                          {c.x() + half, c.y() + half},
-                                          {c.x() - half, c.y() + half}};
-      for (int k = 0; k < 4; ++k) {
-        const Eigen::Vector2d a = corners[k], b = corners[(k + 1) % 4];
-        bld.add_quad(sidx, f.to_world(a.x(), a.y(), base), f.to_world(b.x() - a.x(), b.y() - a.y(), 0.0),
-                     f.up, w, height, cfg.street_facade_texels_per_m * 2.0,
-                     k * w * cfg.street_facade_texels_per_m * 2.0, 0.0);
-      }
+// Posts along the kerb (lamp / sign posts): four faces each, clear of every path point, once per place.
+void add_street_posts(Builder& bld, const StreetSite& site) {
+  const WorldConfig& cfg = site.cfg;
+  const Frame& f = site.f;
+  const PathCurve& curve = site.curve;
+  if (!(cfg.street_pole_spacing_m > 0.0)) return;
+  PointGrid pole_grid(cfg.street_pole_spacing_m);
+  int pole_index = 0;
+  for (double s = 0.5 * cfg.street_pole_spacing_m; s < curve.length(); s += cfg.street_pole_spacing_m) {
+    Eigen::Vector2d p0, p1, pc;
+    double z0 = 0, z1 = 0, zc = 0;
+    curve.sample(s - 1.0, &p0, &z0);
+    curve.sample(s + 1.0, &p1, &z1);
+    curve.sample(s, &pc, &zc);
+    if ((p1 - p0).norm() < 1.0) continue;
+    const Eigen::Vector2d t = (p1 - p0).normalized();
+    const double side = (pole_index++ % 2 == 0) ? 1.0 : -1.0;
+    const Eigen::Vector2d c = pc + Eigen::Vector2d(-t.y(), t.x()) * side * cfg.street_pole_offset_m;
+    const double half = 0.5 * cfg.street_pole_width_m;
+    if (site.path_grid.min_distance_to_segment(c, c, cfg.street_clearance_m + half) <
+        cfg.street_clearance_m + half) {
+      continue;
+    }
+    bool duplicate = false;
+    pole_grid.for_each_within(c, 0.5 * cfg.street_pole_spacing_m, [&](int) { duplicate = true; });
+    if (duplicate) continue;
+    pole_grid.add(c);
+    const double base = site.ground.height(c, zc - cfg.street_camera_height_m) - kFacadeBelowGroundM;
+    const double height = cfg.street_pole_height_m + kFacadeBelowGroundM;
+    const double w = cfg.street_pole_width_m;
+    const std::uint64_t pole_seed =
+        hash_combine(site.seed, 0x9013ull + static_cast<std::uint64_t>(pole_index));
+    const int sidx = bld.add_structure("pole", TextureStyle::kPillar, pole_seed, 4.0 * w, height,
+                                       f.to_world(c.x(), c.y(), base + 0.5 * height), false);
+    const Eigen::Vector2d corners[4] = {{c.x() - half, c.y() - half},
+                                        {c.x() + half, c.y() - half},
+                                        {c.x() + half, c.y() + half},
+                                        {c.x() - half, c.y() + half}};
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Vector2d a = corners[k], b = corners[(k + 1) % 4];
+      bld.add_quad(sidx, f.to_world(a.x(), a.y(), base), f.to_world(b.x() - a.x(), b.y() - a.y(), 0.0), f.up,
+                   w, height, cfg.street_facade_texels_per_m * 2.0,
+                   k * w * cfg.street_facade_texels_per_m * 2.0, 0.0);
     }
   }
+}
 
-  // Facades on both sides.
-  std::vector<PlacedFacade> placed;
-  PointGrid facade_grid(cfg.street_facade_length_m);
-  int facade_counter = 0;
-  const auto try_facade = [&](double s_center, double length_m, double side) -> bool {
-    Rng rng(hash_combine(seed, 0xFACADEull + static_cast<std::uint64_t>(facade_counter++)));
+// Facades on both sides of the street, placed one by one (deduplicated on revisits).
+class FacadePlacer {
+ public:
+  FacadePlacer(Builder& bld, const StreetSite& site)
+      : bld_(bld), site_(site), cfg_(site.cfg), facade_grid_(site.cfg.street_facade_length_m) {}
+
+  // Places a facade of length_m centred at arc length s_center on `side` (+1 left, -1 right) unless it
+  // would come too close to the path or repeat a facade already placed there.
+  bool try_place(double s_center, double length_m, double side) {
+    const Frame& f = site_.f;
+    Rng rng(hash_combine(site_.seed, 0xFACADEull + static_cast<std::uint64_t>(facade_counter_++)));
     Eigen::Vector2d pa, pb, pc;
     double za = 0, zb = 0, zc = 0;
-    curve.sample(s_center - 0.5 * length_m, &pa, &za);
-    curve.sample(s_center + 0.5 * length_m, &pb, &zb);
-    curve.sample(s_center, &pc, &zc);
+    site_.curve.sample(s_center - 0.5 * length_m, &pa, &za);
+    site_.curve.sample(s_center + 0.5 * length_m, &pb, &zb);
+    site_.curve.sample(s_center, &pc, &zc);
     const Eigen::Vector2d chord = pb - pa;
     if (chord.norm() < 0.3 * length_m) return false;
     const Eigen::Vector2d t = chord.normalized();
     const Eigen::Vector2d n = Eigen::Vector2d(-t.y(), t.x()) * side;  // away from the road
-    const double offset = cfg.street_facade_offset_m + rng.uniform(0.0, cfg.street_facade_offset_jitter_m);
+    const double offset = cfg_.street_facade_offset_m + rng.uniform(0.0, cfg_.street_facade_offset_jitter_m);
     const Eigen::Vector2d a = pc - t * 0.5 * length_m + n * offset;
     const Eigen::Vector2d b = pc + t * 0.5 * length_m + n * offset;
-    if (path_grid.min_distance_to_segment(a, b, cfg.street_clearance_m) < cfg.street_clearance_m)
+    if (site_.path_grid.min_distance_to_segment(a, b, cfg_.street_clearance_m) < cfg_.street_clearance_m)
       return false;
     const Eigen::Vector2d mid = 0.5 * (a + b);
     const Eigen::Vector2d inward = -n;
-    bool duplicate = false;
-    facade_grid.for_each_within(mid, 2.0 * cfg.street_facade_length_m, [&](int idx) {
-      const PlacedFacade& other = placed[static_cast<std::size_t>(idx)];
+    if (duplicate(mid, inward, length_m)) return false;
+    facade_grid_.add(mid);
+    placed_.push_back({a, b, inward});
+    const double ground = site_.ground.height(pc, zc - cfg_.street_camera_height_m);
+    const double height = rng.uniform(cfg_.street_facade_min_height_m, cfg_.street_facade_max_height_m);
+    const double r = rng.uniform();
+    const TextureStyle style = r < 0.35  ? TextureStyle::kFacadeWindows
+                               : r < 0.6 ? TextureStyle::kFacadeBrick
+                               : r < 0.8 ? TextureStyle::kFacadePlaster
+                                         : TextureStyle::kFacadeShop;
+    const std::uint64_t tex_seed =
+        hash_combine(site_.seed, 0xB1D6ull + static_cast<std::uint64_t>(placed_.size()));
+    const Eigen::Vector3d origin = f.to_world(a.x(), a.y(), ground - kFacadeBelowGroundM);
+    const Eigen::Vector3d du = f.to_world(b.x() - a.x(), b.y() - a.y(), 0.0);
+    const int sidx = bld_.add_structure("facade", style, tex_seed, length_m, height,
+                                        origin + 0.5 * du + f.up * (0.5 * height), true);
+    bld_.add_quad(sidx, origin, du, f.up, length_m, height + kFacadeBelowGroundM,
+                  cfg_.street_facade_texels_per_m, 0.0,
+                  -kFacadeBelowGroundM * cfg_.street_facade_texels_per_m);
+    return true;
+  }
+
+ private:
+  // Whether a facade facing `inward` centred at mid already stands there (a revisit of the place).
+  bool duplicate(const Eigen::Vector2d& mid, const Eigen::Vector2d& inward, double length_m) const {
+    bool found = false;
+    facade_grid_.for_each_within(mid, 2.0 * cfg_.street_facade_length_m, [&](int idx) {
+      const PlacedFacade& other = placed_[static_cast<std::size_t>(idx)];
       if (other.normal.dot(inward) < 0.5) return;
       const Eigen::Vector2d ot = (other.b - other.a);
       const double olen = ot.norm();
       const Eigen::Vector2d od = ot / olen;
       const double along = (mid - 0.5 * (other.a + other.b)).dot(od);
       const double lateral = std::abs((mid - other.a).dot(Eigen::Vector2d(-od.y(), od.x())));
-      if (lateral < kFacadeDedupLateralM && std::abs(along) < 0.5 * (olen + length_m)) duplicate = true;
+      if (lateral < kFacadeDedupLateralM && std::abs(along) < 0.5 * (olen + length_m)) found = true;
     });
-    if (duplicate) return false;
-    facade_grid.add(mid);
-    placed.push_back({a, b, inward});
-    const double ground = ground_height(pc, zc - cfg.street_camera_height_m);
-    const double height = rng.uniform(cfg.street_facade_min_height_m, cfg.street_facade_max_height_m);
-    const double r = rng.uniform();
-    const TextureStyle style = r < 0.35  ? TextureStyle::kFacadeWindows
-                               : r < 0.6 ? TextureStyle::kFacadeBrick
-                               : r < 0.8 ? TextureStyle::kFacadePlaster
-                                         : TextureStyle::kFacadeShop;
-    const std::uint64_t tex_seed = hash_combine(seed, 0xB1D6ull + static_cast<std::uint64_t>(placed.size()));
-    const Eigen::Vector3d origin = f.to_world(a.x(), a.y(), ground - kFacadeBelowGroundM);
-    const Eigen::Vector3d du = f.to_world(b.x() - a.x(), b.y() - a.y(), 0.0);
-    const int sidx = bld.add_structure("facade", style, tex_seed, length_m, height,
-                                       origin + 0.5 * du + f.up * (0.5 * height), true);
-    bld.add_quad(sidx, origin, du, f.up, length_m, height + kFacadeBelowGroundM,
-                 cfg.street_facade_texels_per_m, 0.0, -kFacadeBelowGroundM * cfg.street_facade_texels_per_m);
-    return true;
-  };
+    return found;
+  }
+
+  Builder& bld_;
+  const StreetSite& site_;
+  const WorldConfig& cfg_;
+  std::vector<PlacedFacade> placed_;
+  PointGrid facade_grid_;
+  int facade_counter_ = 0;
+};
+
+void add_street_facades(Builder& bld, const StreetSite& site) {
+  const WorldConfig& cfg = site.cfg;
+  FacadePlacer placer(bld, site);
   const double step = cfg.street_facade_length_m + cfg.street_facade_gap_m;
   const double length = cfg.street_facade_length_m;
-  for (double s = 0.5 * length; s < curve.length(); s += step) {
+  for (double s = 0.5 * length; s < site.curve.length(); s += step) {
     for (double side : {1.0, -1.0}) {
-      if (!try_facade(s, length, side)) {
-        try_facade(s - 0.25 * step, 0.5 * length - 0.5 * cfg.street_facade_gap_m, side);
-        try_facade(s + 0.25 * step, 0.5 * length - 0.5 * cfg.street_facade_gap_m, side);
+      if (!placer.try_place(s, length, side)) {
+        placer.try_place(s - 0.25 * step, 0.5 * length - 0.5 * cfg.street_facade_gap_m, side);
+        placer.try_place(s + 0.25 * step, 0.5 * length - 0.5 * cfg.street_facade_gap_m, side);
       }
     }
   }
 }
 
+void build_street(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
+  const WorldConfig& cfg = bld.config;
+  const PathCurve curve = make_curve(path_w, bld.frame);
+  PointGrid path_grid(std::max(1.0, cfg.street_clearance_m));
+  for (const Eigen::Vector2d& p : curve.xy) path_grid.add(p);
+  StreetGround ground(cfg, curve, path_grid);
+  const StreetSite site{cfg, bld.frame, curve, path_grid, ground, static_cast<std::uint64_t>(cfg.seed)};
+  add_street_ground(bld, site);
+  add_street_markings(bld, site);
+  add_street_posts(bld, site);
+  add_street_facades(bld, site);
+}
+
 // ------------------------------------------------------------------------------------------------- hall
 
-void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
-  const WorldConfig& cfg = bld.config;
-  const Frame& f = bld.frame;
-  const std::uint64_t seed = static_cast<std::uint64_t>(cfg.seed);
+// The hall's box around the path (margins included) and the path's clearance grid.
+struct HallSite {
+  const WorldConfig& cfg;
+  const Frame& f;
+  std::uint64_t seed = 0;
+  Eigen::Vector2d lo, hi;  // horizontal extent of the room
+  double floor_z = 0, ceiling_z = 0, room_h = 0;
+  PointGrid path_grid;
+};
+
+HallSite make_hall_site(const WorldConfig& cfg, const Frame& f, const std::vector<Eigen::Vector3d>& path_w) {
+  HallSite site{cfg, f, static_cast<std::uint64_t>(cfg.seed),          {}, {}, 0,
+                0,   0, PointGrid(std::max(0.5, cfg.hall_clearance_m))};
   Eigen::Vector2d lo(std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity());
   Eigen::Vector2d hi = -lo;
   double z_lo = std::numeric_limits<double>::infinity(), z_hi = -z_lo;
-  PointGrid path_grid(std::max(0.5, cfg.hall_clearance_m));
   for (const Eigen::Vector3d& p : path_w) {
     const Eigen::Vector2d xy(p.dot(f.e1), p.dot(f.e2));
     lo = lo.cwiseMin(xy);
     hi = hi.cwiseMax(xy);
     z_lo = std::min(z_lo, p.dot(f.up));
     z_hi = std::max(z_hi, p.dot(f.up));
-    path_grid.add(xy);
+    site.path_grid.add(xy);
   }
   lo.array() -= cfg.hall_margin_m;
   hi.array() += cfg.hall_margin_m;
-  const double floor_z = z_lo - cfg.hall_floor_below_m;
-  const double ceiling_z = z_hi + cfg.hall_ceiling_above_m;
-  const double room_h = ceiling_z - floor_z;
-  const double tpm = cfg.hall_texels_per_m;
+  site.lo = lo;
+  site.hi = hi;
+  site.floor_z = z_lo - cfg.hall_floor_below_m;
+  site.ceiling_z = z_hi + cfg.hall_ceiling_above_m;
+  site.room_h = site.ceiling_z - site.floor_z;
+  return site;
+}
 
-  // Walls: four sides split into panels.
+// Walls (four sides split into panels), floor and ceiling (in tiles).
+void add_hall_shell(Builder& bld, const HallSite& site) {
+  const WorldConfig& cfg = site.cfg;
+  const Frame& f = site.f;
+  const Eigen::Vector2d &lo = site.lo, &hi = site.hi;
+  const double tpm = cfg.hall_texels_per_m;
   const Eigen::Vector2d corners[4] = {{lo.x(), lo.y()}, {hi.x(), lo.y()}, {hi.x(), hi.y()}, {lo.x(), hi.y()}};
   for (int side = 0; side < 4; ++side) {
     const Eigen::Vector2d a = corners[side];
@@ -507,16 +600,15 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     const Eigen::Vector2d t = (b - a) / len;
     for (int k = 0; k < panels; ++k) {
       const Eigen::Vector2d pa = a + t * (k * pw);
-      const Eigen::Vector3d origin = f.to_world(pa.x(), pa.y(), floor_z);
+      const Eigen::Vector3d origin = f.to_world(pa.x(), pa.y(), site.floor_z);
       const Eigen::Vector3d du = f.to_world(t.x(), t.y(), 0.0);
       const std::uint64_t s_seed =
-          hash_combine(seed, 0x3A11ull + static_cast<std::uint64_t>(side * 1000 + k));
-      const int s = bld.add_structure("wall", TextureStyle::kHallWall, s_seed, pw, room_h,
-                                      origin + du * (0.5 * pw) + f.up * (0.5 * room_h), true);
-      bld.add_quad(s, origin, du, f.up, pw, room_h, tpm, 0.0, 0.0);
+          hash_combine(site.seed, 0x3A11ull + static_cast<std::uint64_t>(side * 1000 + k));
+      const int s = bld.add_structure("wall", TextureStyle::kHallWall, s_seed, pw, site.room_h,
+                                      origin + du * (0.5 * pw) + f.up * (0.5 * site.room_h), true);
+      bld.add_quad(s, origin, du, f.up, pw, site.room_h, tpm, 0.0, 0.0);
     }
   }
-  // Floor and ceiling in tiles.
   const double tile = 2.0 * cfg.hall_wall_panel_m;
   const int nx = std::max(1, static_cast<int>(std::ceil((hi.x() - lo.x()) / tile)));
   const int ny = std::max(1, static_cast<int>(std::ceil((hi.y() - lo.y()) / tile)));
@@ -525,10 +617,10 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     for (int j = 0; j < ny; ++j) {
       const double x0 = lo.x() + i * tx, y0 = lo.y() + j * ty;
       for (int level = 0; level < 2; ++level) {
-        const double z = level == 0 ? floor_z : ceiling_z;
+        const double z = level == 0 ? site.floor_z : site.ceiling_z;
         const Eigen::Vector3d origin = f.to_world(x0, y0, z);
         const std::uint64_t s_seed =
-            hash_combine(seed, 0xF100ull + static_cast<std::uint64_t>((i * 1000 + j) * 2 + level));
+            hash_combine(site.seed, 0xF100ull + static_cast<std::uint64_t>((i * 1000 + j) * 2 + level));
         const TextureStyle style = level == 0 ? TextureStyle::kHallFloor : TextureStyle::kHallCeiling;
         const int s = bld.add_structure(level == 0 ? "floor" : "ceiling", style, s_seed, tx, ty,
                                         origin + f.to_world(0.5 * tx, 0.5 * ty, 0.0), false);
@@ -536,10 +628,18 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
       }
     }
   }
-  // Pillars and crates at random places clear of the path.
-  Rng rng(hash_combine(seed, 0x9111A5ull));
+}
+
+// Pillars and crates at random places clear of the path and of each other.
+void add_hall_props(Builder& bld, const HallSite& site) {
+  const WorldConfig& cfg = site.cfg;
+  const Frame& f = site.f;
+  const Eigen::Vector2d &lo = site.lo, &hi = site.hi;
+  const double floor_z = site.floor_z, room_h = site.room_h;
+  const double tpm = cfg.hall_texels_per_m;
+  Rng rng(hash_combine(site.seed, 0x9111A5ull));
   const auto clear_box = [&](const Eigen::Vector2d& c, double half) {
-    return path_grid.min_distance_to_segment(c, c, half * 1.5 + cfg.hall_clearance_m) >=
+    return site.path_grid.min_distance_to_segment(c, c, half * 1.5 + cfg.hall_clearance_m) >=
            half * 1.5 + cfg.hall_clearance_m;
   };
   std::vector<std::pair<Eigen::Vector2d, double>> occupied;
@@ -573,7 +673,7 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     const Eigen::Vector2d c(rng.uniform(lo.x() + 1.0, hi.x() - 1.0), rng.uniform(lo.y() + 1.0, hi.y() - 1.0));
     if (!clear_box(c, 0.5 * w) || !free_of_others(c, 0.5 * w)) continue;
     occupied.emplace_back(c, 0.5 * w);
-    const std::uint64_t s_seed = hash_combine(seed, 0x9177ull + static_cast<std::uint64_t>(pillars));
+    const std::uint64_t s_seed = hash_combine(site.seed, 0x9177ull + static_cast<std::uint64_t>(pillars));
     // Pillar texture wraps around its four faces: width 4 w.
     const int s = bld.add_structure("pillar", TextureStyle::kPillar, s_seed, 4.0 * w, room_h,
                                     f.to_world(c.x(), c.y(), floor_z + 0.5 * room_h), true);
@@ -591,7 +691,7 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     const int levels = stacked ? 2 : 1;
     for (int level = 0; level < levels; ++level) {
       const std::uint64_t s_seed =
-          hash_combine(seed, 0xC7A7Eull + static_cast<std::uint64_t>(crates * 2 + level));
+          hash_combine(site.seed, 0xC7A7Eull + static_cast<std::uint64_t>(crates * 2 + level));
       const double base = floor_z + level * w;
       const int s = bld.add_structure("crate", TextureStyle::kCrate, s_seed, 4.0 * w, w,
                                       f.to_world(c.x(), c.y(), base + 0.5 * w), true);
@@ -599,6 +699,12 @@ void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
     }
     ++crates;
   }
+}
+
+void build_hall(Builder& bld, const std::vector<Eigen::Vector3d>& path_w) {
+  const HallSite site = make_hall_site(bld.config, bld.frame, path_w);
+  add_hall_shell(bld, site);
+  add_hall_props(bld, site);
 }
 
 // --------------------------------------------------------------------------------------------- aliasing

@@ -3,7 +3,7 @@
 // on every frame (full) or inside the candidate areas (gated).
 // The graph calls one hook per node; a method owns all of its state (descriptors, matcher, gate, areas) and
 // nothing outside it branches on which method runs. To add a method, implement this interface in a new file
-// and add one line to make_detection_method (docs/architecture.md § Adding a method).
+// and add its row to kMethods (method_registry.hpp; docs/architecture.md § Adding a method).
 //
 // Threading contract (the pipeline guarantees it): gate() and match() are called serially, in sequence
 // order; describe() may run for several frames at once; finish() runs once after the graph drained (inside
@@ -109,17 +109,8 @@ class DetectionMethod {
 std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& context, bool dataset_has_images,
                                                        const std::filesystem::path& dataset_root);
 
-// The methods (detection_method.cpp, dird_methods.cpp, seqslam_method.cpp, seqslam_gated_method.cpp).
+// run.mode odometry: no detection (detection_method.cpp). The methods' factories are declared by their rows
+// of kMethods (method_registry.hpp).
 std::unique_ptr<DetectionMethod> make_no_detection(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_dird_full(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_dird_gated(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_seqslam(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_seqslam_gated(const MethodContext& context);
-// DIRD with causal standardisation and/or the online scale (standard_dird_methods.cpp).
-std::unique_ptr<DetectionMethod> make_standard_dird_full(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_standard_dird_gated(const MethodContext& context);
-// DIRD distances matched by contrast enhancement and sequence search (dird_seqslam_methods.cpp).
-std::unique_ptr<DetectionMethod> make_dird_seqslam_full(const MethodContext& context);
-std::unique_ptr<DetectionMethod> make_dird_seqslam_gated(const MethodContext& context);
 
 }  // namespace loopgate

@@ -27,6 +27,8 @@ const MethodEntry* find_method_entry(std::string_view detector, std::string_view
 }
 
 const MethodEntry* method_entry(const PipelineConfig& config) {
+  if (!config.run.method_row.empty() && config.run.detects_loops())
+    return find_method_entry(config.run.method_row);
   return find_method_entry(enum_name(config.run.method), enum_name(config.run.mode), config.standardize.mode);
 }
 
@@ -39,14 +41,14 @@ std::string method_entry_names(bool two_sequence_only) {
   return out;
 }
 
-void expand_method_name(RawConfig& raw) {
+const MethodEntry* expand_method_name(RawConfig& raw) {
   const auto run = raw.sections().find("run");
-  if (run == raw.sections().end()) return;
+  if (run == raw.sections().end()) return nullptr;
   const auto method = run->second.find("method");
-  if (method == run->second.end()) return;
+  if (method == run->second.end()) return nullptr;
   const RawConfigValue given = method->second;
   for (const EnumName<Detector>& d : enum_names(Detector{})) {
-    if (given.text == d.name) return;  // a detector word: run.mode chooses gated or full
+    if (given.text == d.name) return nullptr;  // a detector word: run.mode chooses gated or full
   }
   const MethodEntry* entry = find_method_entry(given.text);
   if (entry == nullptr) {
@@ -63,6 +65,7 @@ void expand_method_name(RawConfig& raw) {
   raw.set("run", "method", std::string(enum_name(entry->detector)), origin);
   raw.set("run", "mode", std::string(enum_name(entry->mode)), origin);
   if (entry->detector == Detector::kDird) raw.set("standardize", "mode", entry->standardize, origin);
+  return entry;
 }
 
 void validate_method(const PipelineConfig& config) {
@@ -83,10 +86,11 @@ PipelineConfig load_pipeline_config(const std::filesystem::path& file,
     const std::size_t dot = f.key.find('.');
     raw.set(f.key.substr(0, dot), f.key.substr(dot + 1), f.value, f.flag);
   }
-  expand_method_name(raw);
+  const MethodEntry* named = expand_method_name(raw);
   if (paths == ConfigPaths::kMustExist) raw.require_resolved_paths_exist();
   PipelineConfig config;
   apply_config(raw, config);
+  if (named != nullptr) config.run.method_row = named->name;
   validate_method(config);
   return config;
 }

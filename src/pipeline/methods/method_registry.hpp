@@ -46,25 +46,35 @@ struct MethodEntry {
   MethodFactory make;  // the stage objects it composes, as one DetectionMethod
 };
 
+// A row's factory: the function `fn` that the method's own file defines, declared by the row itself (a
+// block-scope declaration inside a captureless lambda, which converts to a MethodFactory at compile time), so
+// a new method needs no declaration in a shared header: one file and one row.
+#define LOOPGATE_METHOD_FACTORY(fn)                                      \
+  [](const MethodContext& context) -> std::unique_ptr<DetectionMethod> { \
+    std::unique_ptr<DetectionMethod> fn(const MethodContext&);           \
+    return fn(context);                                                  \
+  }
+
 inline constexpr MethodEntry kMethods[] = {
     {"full", Detector::kDird, RunMode::kFull, "off", "DIRD on every frame (the paper's baseline)", true,
-     MarginKey::kMatchMargin, make_two_sequence_dird, make_dird_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird, LOOPGATE_METHOD_FACTORY(make_dird_full)},
     {"gated", Detector::kDird, RunMode::kGated, "off", "DIRD in the pose gate's candidate areas (the paper)",
-     true, MarginKey::kMatchMargin, nullptr, make_dird_gated},
+     true, MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_gated)},
     {"seqslam", Detector::kSeqSlam, RunMode::kFull, "off", "SeqSLAM on every frame", false,
-     MarginKey::kSeqSlamExclusion, make_two_sequence_seqslam, make_seqslam},
+     MarginKey::kSeqSlamExclusion, make_two_sequence_seqslam, LOOPGATE_METHOD_FACTORY(make_seqslam)},
     {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas", false,
-     MarginKey::kSeqSlamExclusion, nullptr, make_seqslam_gated},
+     MarginKey::kSeqSlamExclusion, nullptr, LOOPGATE_METHOD_FACTORY(make_seqslam_gated)},
     {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame", true,
-     MarginKey::kMatchMargin, make_two_sequence_dird, make_standard_dird_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird, LOOPGATE_METHOD_FACTORY(make_standard_dird_full)},
     {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas",
-     true, MarginKey::kMatchMargin, nullptr, make_standard_dird_gated},
+     true, MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_standard_dird_gated)},
     {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
      "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame", true,
-     MarginKey::kMatchMargin, make_two_sequence_dird_seqslam, make_dird_seqslam_full},
+     MarginKey::kMatchMargin, make_two_sequence_dird_seqslam,
+     LOOPGATE_METHOD_FACTORY(make_dird_seqslam_full)},
     {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
      "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)", true,
-     MarginKey::kMatchMargin, nullptr, make_dird_seqslam_gated},
+     MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_seqslam_gated)},
 };
 
 // The row named `name`, or nullptr.
@@ -77,7 +87,8 @@ const MethodEntry* find_method_entry(std::string_view name);
 const MethodEntry* find_method_entry(std::string_view detector, std::string_view mode,
                                      std::string_view standardize);
 
-// The row of a configuration (its detector, mode and standardize.mode); nullptr for run.mode odometry.
+// The row of a configuration: the one run.method named (run.method_row), else the one of its detector, mode
+// and standardize.mode; nullptr for run.mode odometry.
 const MethodEntry* method_entry(const PipelineConfig& config);
 
 // "full,gated,..." (every row, in table order; only those with a two-sequence form when asked).
@@ -87,15 +98,16 @@ std::string method_entry_names(bool two_sequence_only = false);
 // standardisation are then written into run.method, run.mode and standardize.mode before the config is
 // parsed. The detector words (dird, seqslam, dird-seqslam) keep their meaning: the detector, in the mode
 // that run.mode says (`--method seqslam --mode gated`). A run.mode set to another mode than the row's is a
-// ConfigError naming both.
-void expand_method_name(RawConfig& raw);
+// ConfigError naming both. Returns the row named, nullptr for a detector word.
+const MethodEntry* expand_method_name(RawConfig& raw);
 
 // The checks of a valid configuration that depend on its method's row (PipelineConfig::validate() knows the
 // sections, not the methods): gate.feedback needs a method that streams its loops. Throws ConfigError.
 void validate_method(const PipelineConfig& config);
 
 // load_config<PipelineConfig> with run.method expanded as above: `file` (when not empty), the --set
-// overrides in order, then the flags; validated once (and validate_method()).
+// overrides in order, then the flags; validated once (and validate_method()). run.method_row holds the row
+// run.method named.
 PipelineConfig load_pipeline_config(const std::filesystem::path& file,
                                     const std::vector<std::string>& overrides,
                                     const std::vector<FlagValue>& flags, ConfigPaths paths);
