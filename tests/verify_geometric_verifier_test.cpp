@@ -275,10 +275,10 @@ TEST(GeometricVerifier, TracksTheLoopIntoANightImageWhereOrbFails) {
   EXPECT_LT((r.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15)
       << r.T_j_i.translation().transpose() << " vs " << s.T_j_i.translation().transpose();
   EXPECT_LT(Eigen::AngleAxisd(r.T_j_i.rotation().transpose() * s.T_j_i.rotation()).angle(), 0.02);
-  // The odometry's rotation of i starts the tracking where j's points rotate to: the same pose.
-  const Eigen::Matrix3d R_w_bi = (s.j.T_w_b * s.T_j_i).linear();
+  // The odometry's pose of i starts the tracking where i sees j's points: the same pose.
+  const Eigen::Isometry3d T_w_bi = s.j.T_w_b * s.T_j_i;
   const VerifyResult predicted = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image),
-                                                 s.j.T_w_b, verifier.detect(s.n.image), s.n.T_w_b, &R_w_bi);
+                                                 s.j.T_w_b, verifier.detect(s.n.image), s.n.T_w_b, &T_w_bi);
   ASSERT_TRUE(predicted.verified) << predicted.reason;
   EXPECT_LT((predicted.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15);
   // An unrelated view at night is rejected by both, and the reason gives both counts.
@@ -289,25 +289,71 @@ TEST(GeometricVerifier, TracksTheLoopIntoANightImageWhereOrbFails) {
   EXPECT_NE(no.reason.find("; tracked: "), std::string::npos) << no.reason;
 }
 
-// After a long loop the odometry's rotation from j to i carries its heading drift: started where that
-// rotation moves j's points, the tracking misses them by tens of pixels and the loop is lost. The second
+// After a long loop the odometry's pose of i carries its heading drift: started where that pose sees
+// j's points, the tracking misses them by tens of pixels and the loop is lost. The second
 // start, j's points where they are (i sees the place as j did), verifies it, and the reason says which start
 // failed first.
 TEST(GeometricVerifier, TracksFromTheImagesWhenTheOdometrysRotationHasDrifted) {
   Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(0.5, 0.1, -0.2, 2 * kPi / 180));
   s.i.image = at_night(s.i.image, 5);
   const GeometricVerifier verifier(VerifyConfig{}, s.camera);
-  const Eigen::Matrix3d R_true = (s.j.T_w_b * s.T_j_i).linear();
-  const Eigen::Matrix3d R_drifted =
-      R_true * Eigen::AngleAxisd(15 * kPi / 180, Eigen::Vector3d::UnitY()).matrix();
+  Eigen::Isometry3d T_drifted = s.j.T_w_b * s.T_j_i;
+  T_drifted.linear() =
+      T_drifted.linear() * Eigen::AngleAxisd(15 * kPi / 180, Eigen::Vector3d::UnitY()).matrix();
   const VerifyResult r = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image), s.j.T_w_b,
-                                         verifier.detect(s.n.image), s.n.T_w_b, &R_drifted);
+                                         verifier.detect(s.n.image), s.n.T_w_b, &T_drifted);
   ASSERT_TRUE(r.verified) << r.reason;
   EXPECT_TRUE(r.tracked);
   // The drifted start alone did not verify it (the premise of the second start).
   EXPECT_NE(r.reason.find("; from the images' rotation, after; tracked: "), std::string::npos) << r.reason;
   EXPECT_LT((r.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15);
   EXPECT_EQ(verify_reason_key(r.reason), "verified_by_tracking");
+}
+
+// A revisit metres aside of a near facade at night: j's points move by the parallax of the offset, further
+// than the tracking reaches on a noisy night image from where they are in j. Started where the odometry's
+// pose of i sees j's triangulated points, the tracking verifies the loop with the metric pose.
+TEST(GeometricVerifier, TracksFromWhereTheOdometrysPoseOfISeesTheNightImagesPoints) {
+  Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(2.4, 0.2, -0.3, 2 * kPi / 180));
+  s.i.image = at_night(s.i.image, 5);
+  const GeometricVerifier verifier(VerifyConfig{}, s.camera);
+  const OrbFeatures fi = verifier.detect(s.i.image), fj = verifier.detect(s.j.image),
+                    fn = verifier.detect(s.n.image);
+  const VerifyResult from_j = verifier.verify(fi, fj, s.j.T_w_b, fn, s.n.T_w_b);
+  EXPECT_FALSE(from_j.verified) << "tracked from where the points are in j: the test's premise is lost";
+  // The odometry's pose of i, 0.2 m and 1 degree off the truth (its drift from j to i).
+  Eigen::Isometry3d T_w_bi = s.j.T_w_b * s.T_j_i;
+  T_w_bi.translation() += Eigen::Vector3d(0.15, -0.1, 0.08);
+  T_w_bi.linear() = T_w_bi.linear() * Eigen::AngleAxisd(kPi / 180, Eigen::Vector3d::UnitZ()).matrix();
+  const VerifyResult r = verifier.verify(fi, fj, s.j.T_w_b, fn, s.n.T_w_b, &T_w_bi);
+  ASSERT_TRUE(r.verified) << r.reason;
+  EXPECT_TRUE(r.tracked);
+  EXPECT_LT((r.T_j_i.translation() - s.T_j_i.translation()).norm(), 0.15)
+      << r.T_j_i.translation().transpose() << " vs " << s.T_j_i.translation().transpose();
+  EXPECT_LT(Eigen::AngleAxisd(r.T_j_i.rotation().transpose() * s.T_j_i.rotation()).angle(), 0.02);
+}
+
+// A copy of j's place elsewhere (the aliasing preset's copied block), seen at night: the images agree with j,
+// the odometry puts frame i 40 m away. Started from that pose, the points fall outside i or where nothing
+// matches; started where they are in j, the tracking finds the copy, and the odometry check rejects the pose.
+TEST(GeometricVerifier, AnAliasedNightViewIsRejectedByTheOdometry) {
+  Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(0.5, 0.1, -0.2, 2 * kPi / 180));
+  s.i.image = at_night(s.i.image, 5);
+  const GeometricVerifier verifier(VerifyConfig{}, s.camera);
+  Eigen::Isometry3d T_w_bi = s.j.T_w_b * s.T_j_i;
+  T_w_bi.translation() += Eigen::Vector3d(40.0, 0.0, 0.0);
+  const auto veto = [&](const VerifyResult& loop) {
+    return odometry_disagreement(T_w_bi, s.j.T_w_b, loop, 1.0, 0.6, VerifyConfig{}.odometry_chi2);
+  };
+  const VerifyResult r = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image), s.j.T_w_b,
+                                         verifier.detect(s.n.image), s.n.T_w_b, &T_w_bi, veto);
+  EXPECT_FALSE(r.verified) << r.reason;
+  EXPECT_NE(r.reason.find("from the odometry's frame i"), std::string::npos) << r.reason;
+  EXPECT_EQ(verify_reason_key(r.reason), "illumination");
+  // Without the odometry check the images alone would take it: the check is what rejects it.
+  const VerifyResult unchecked = verifier.verify(verifier.detect(s.i.image), verifier.detect(s.j.image),
+                                                 s.j.T_w_b, verifier.detect(s.n.image), s.n.T_w_b, &T_w_bi);
+  EXPECT_TRUE(unchecked.verified) << unchecked.reason;
 }
 
 TEST(GeometricVerifier, SkipsTinyImagesAndMissingCalibrationWithAReason) {

@@ -105,7 +105,6 @@ VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const 
   }
   try {
     const std::optional<Eigen::Isometry3d> T_w_bi = pose_of(loop.query);
-    const Eigen::Matrix3d R_w_bi = T_w_bi ? Eigen::Matrix3d(T_w_bi->linear()) : Eigen::Matrix3d::Identity();
     // The image geometry agrees; the odometry must too (a copy of the place elsewhere looks the same), when
     // its chain from j to i is whole (no frame lost or re-initialised in between).
     GeometricVerifier::Veto odometry_check;
@@ -117,7 +116,7 @@ VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const 
       };
     }
     result = verifier_.verify(*job.i, *job.j, *pose_of(loop.reference), *job.n, *pose_of(*job.neighbour),
-                              T_w_bi ? &R_w_bi : nullptr, odometry_check);
+                              T_w_bi ? &*T_w_bi : nullptr, odometry_check);
   } catch (const std::exception& e) {
     result = VerifyResult{};
     result.reason = std::string("geometry: ") + e.what();

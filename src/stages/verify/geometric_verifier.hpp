@@ -183,13 +183,14 @@ class GeometricVerifier {
   using Veto = std::function<std::string(const VerifyResult&)>;
 
   // The same from features detected beforehand (detect()): i's features, j's and n's with their poses.
-  // `R_w_bi`, the odometry's rotation of frame i when known, starts the tracking fallback where the rotation
-  // from j to i moves j's points (relative rotation drifts little; the translation is left to the images).
+  // `T_w_bi`, the odometry's pose of frame i when known, starts the tracking fallback where that pose sees
+  // j's triangulated points (the odometry's relative pose drifts little over a revisit; the images measure
+  // what it drifted).
   // `veto` judges each pose the images verify, ORB's then the fallback's: across a change of illumination
   // ORB's matches can give a wrong pose with many inliers, which the odometry rejects and tracking corrects.
   VerifyResult verify(const OrbFeatures& i, const OrbFeatures& j, const Eigen::Isometry3d& T_w_bj,
                       const OrbFeatures& n, const Eigen::Isometry3d& T_w_bn,
-                      const Eigen::Matrix3d* R_w_bi = nullptr, const Veto& veto = {}) const;
+                      const Eigen::Isometry3d* T_w_bi = nullptr, const Veto& veto = {}) const;
 
   // ORB features of a grey image (none without a calibration or for an empty image).
   OrbFeatures detect(const cv::Mat& image) const;
@@ -212,7 +213,7 @@ class GeometricVerifier {
   TrackedPose track_into_i(const Pyramid& pyramid_src, const Pyramid& pyramid_i,
                            std::vector<cv::Point2f> uv_src, const std::vector<Eigen::Vector3d>& p_csrc,
                            const Eigen::Isometry3d& T_w_csrc, const Eigen::Vector3d& c_other,
-                           const Eigen::Matrix3d* R_w_bi, double threshold) const;
+                           const Eigen::Isometry3d* T_w_bi, double threshold) const;
   // What the tracking fallback tracks: j's triangulated points (their pixels in j and in its neighbour n,
   // their positions in camera j and in camera n) and the three images' normalised pyramids.
   struct TrackSources {
@@ -222,22 +223,31 @@ class GeometricVerifier {
     Eigen::Isometry3d T_w_cj = Eigen::Isometry3d::Identity();
     Eigen::Isometry3d T_cn_cj = Eigen::Isometry3d::Identity();
   };
-  // The tracking fallback from one start (R_w_bi: the odometry's rotation of i, or nullptr: j's points
+  // The tracking fallback from one start (T_w_bi: the odometry's pose of i, or nullptr: j's points
   // where they are): i's pose tracked from j, confirmed from n, then `vetoed` (the odometry check). Verified,
   // or not with `note` saying why.
-  VerifyResult track_from_j_and_n(const TrackSources& sources, const Eigen::Matrix3d* R_w_bi,
+  VerifyResult track_from_j_and_n(const TrackSources& sources, const Eigen::Isometry3d* T_w_bi,
                                   double threshold, const std::function<bool(VerifyResult&)>& vetoed,
                                   std::string& note) const;
+  // The fallback when ORB's matches did not verify the loop (`result`, returned with the tracking's notes
+  // when the fallback does not verify it either): across a change of illumination (the noise ratio of i and
+  // j), j's triangulated points `p_cj` (rows `point_rows` of j's features, `jn` their matches in n) tracked
+  // into i, from the two starts of track_from_j_and_n().
+  VerifyResult track_fallback(const OrbFeatures& fi, const OrbFeatures& fj, const OrbFeatures& fn,
+                              const Eigen::Isometry3d& T_w_cj, const Eigen::Isometry3d& T_cn_cj,
+                              const std::vector<Eigen::Vector3d>& p_cj, const std::vector<int>& point_rows,
+                              const std::vector<int>& jn, const Eigen::Isometry3d* T_w_bi, double threshold,
+                              const std::function<bool(VerifyResult&)>& vetoed, VerifyResult result) const;
   // The KLT pyramid of normalise_illumination(grey) smoothed from its `noise` to `noise_target`.
   Pyramid normalised_pyramid(const cv::Mat& grey, double noise, double noise_target) const;
   // PnP RANSAC on the correspondences, refined on its inliers: fills `result` (verified, or the reason).
   void solve_pose(const std::vector<cv::Point3d>& object, const std::vector<cv::Point2d>& image,
                   double threshold, const Eigen::Isometry3d& T_b_c, VerifyResult& result) const;
-  // `points` of image j tracked into image i on their normalised_pyramid()s, forward and back, starting where
-  // the rotation R_ci_cj (when given) moves them: where a point is found, points[k] becomes its position in i
-  // and found[k] is 1.
+  // `points` of image j tracked into image i on their normalised_pyramid()s, forward from `start_i` (the
+  // predicted positions in i) and back from each point moved by what the forward track corrected of its
+  // prediction: where a point is found both ways, points[k] becomes its position in i and found[k] is 1.
   std::vector<unsigned char> track_across_illumination(const Pyramid& pyramid_j, const Pyramid& pyramid_i,
-                                                       const Eigen::Matrix3d* R_ci_cj,
+                                                       const std::vector<cv::Point2f>& start_i,
                                                        std::vector<cv::Point2f>& points) const;
 
   VerifyConfig config_;
