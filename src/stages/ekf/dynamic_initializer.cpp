@@ -150,37 +150,15 @@ Eigen::Matrix3d rotation_fit(const FeatureMap& fa, const FeatureMap& fb) {
 // untouched) when it fails.
 bool pnp(const FeatureMap& features, const std::unordered_map<std::uint64_t, Eigen::Vector3d>& points,
          double max_reproj, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) {
-  std::vector<cv::Point3d> obj;
-  std::vector<cv::Point2d> img;
+  std::vector<Eigen::Vector3d> p_c0;
+  std::vector<Eigen::Vector2d> xy;
   for (const auto& [id, x] : features) {
     const auto it = points.find(id);
     if (it == points.end()) continue;
-    obj.emplace_back(it->second.x(), it->second.y(), it->second.z());
-    img.emplace_back(x.x(), x.y());
+    p_c0.push_back(it->second);
+    xy.push_back(x);
   }
-  if (obj.size() < 10) return false;
-  cv::Mat R_guess;
-  cv::Mat rvec;
-  cv::Mat tvec;
-  cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
-  cv::Rodrigues(R_guess, rvec);
-  cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
-  cv::Mat inliers;
-  if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
-                          static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
-      inliers.rows < 8) {
-    return false;
-  }
-  cv::Mat R_est;
-  cv::Rodrigues(rvec, R_est);
-  Eigen::Matrix3d R;
-  Eigen::Vector3d t;
-  cv::cv2eigen(R_est, R);
-  cv::cv2eigen(tvec, t);
-  T_out->setIdentity();
-  T_out->linear() = R;
-  T_out->translation() = t;
-  return true;
+  return pnp_ransac(p_c0, xy, max_reproj, guess, T_out);
 }
 
 }  // namespace

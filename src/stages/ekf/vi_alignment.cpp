@@ -6,6 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/core/eigen.hpp>
 
 #include "core/geometry.hpp"
 
@@ -148,144 +151,198 @@ bool triangulate(const std::vector<Eigen::Isometry3d>& T_ck_c0, const std::vecto
   return true;
 }
 
-// Gauss-Newton (Levenberg-Marquardt) on the reprojection errors themselves, from the linear guess. The
-// unknowns are x = [v0, g, ba, dbg] - dbg a correction of the gyro bias that turns every rotation by
-// Exp(J_k dbg) - with g moved only on its sphere, and every track's position (eliminated by its Schur
-// complement); both biases are under their zero-mean priors. Tracks behind a camera or with an observation
-// further than outlier_xy are dropped as the solve goes. One more step with gravity's norm free gives the
-// |g| the data alone ask for: a check of the whole solve.
-std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::string* why) {
-  using VecX = Eigen::Matrix<double, kAlignDim, 1>;
-  using MatX = Eigen::Matrix<double, kAlignDim, kAlignDim>;
-  using VecZ = Eigen::Matrix<double, kAlignDim - 1, 1>;
-  using MatZ = Eigen::Matrix<double, kAlignDim - 1, kAlignDim - 1>;
-  using MatXZ = Eigen::Matrix<double, kAlignDim, kAlignDim - 1>;
-  const std::size_t nt = in.tracks.size();
-  Eigen::Matrix<double, 9, 1> x9;
-  std::vector<std::optional<Eigen::Vector3d>> P;
-  if (!linear_guess(in, &x9, &P, why)) return std::nullopt;
-  VecX x = VecX::Zero();
-  x.head<9>() = x9;
-  const double w0 = 1.0 / (in.sigma_xy * in.sigma_xy);
-  const double prior_ba = 1.0 / (in.sigma_ba_mps2 * in.sigma_ba_mps2);
-  const double prior_bg = 1.0 / (in.sigma_bg_radps * in.sigma_bg_radps);
-  auto rotation = [&](std::size_t k, const VecX& xx) {
-    return Eigen::Matrix3d(in.R_b0_bk[k] * so3_exp(in.J_R_bg[k] * xx.segment<3>(9)));
-  };
-  auto prior_cost = [&](const VecX& xx) {
-    return prior_ba * xx.segment<3>(6).squaredNorm() + prior_bg * xx.segment<3>(9).squaredNorm();
-  };
-  // Reprojection cost (in units of the pixel sigma squared) of x and P; drops bad tracks when asked.
-  auto cost = [&](const VecX& xx, const std::vector<std::optional<Eigen::Vector3d>>& PP, bool drop,
-                  std::vector<std::optional<Eigen::Vector3d>>* PP_out, std::size_t* obs) {
+bool pnp_ransac(const std::vector<Eigen::Vector3d>& p_c0, const std::vector<Eigen::Vector2d>& xy,
+                double max_reproj, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out) {
+  std::vector<cv::Point3d> obj;
+  std::vector<cv::Point2d> img;
+  for (std::size_t i = 0; i < p_c0.size() && i < xy.size(); ++i) {
+    obj.emplace_back(p_c0[i].x(), p_c0[i].y(), p_c0[i].z());
+    img.emplace_back(xy[i].x(), xy[i].y());
+  }
+  if (obj.size() < 10) return false;
+  cv::Mat R_guess;
+  cv::Mat rvec;
+  cv::Mat tvec;
+  cv::eigen2cv(Eigen::Matrix3d(guess.linear()), R_guess);
+  cv::Rodrigues(R_guess, rvec);
+  cv::eigen2cv(Eigen::Vector3d(guess.translation()), tvec);
+  cv::Mat inliers;
+  if (!cv::solvePnPRansac(obj, img, cv::Mat::eye(3, 3, CV_64F), cv::Mat(), rvec, tvec, true, 100,
+                          static_cast<float>(max_reproj), 0.99, inliers, cv::SOLVEPNP_ITERATIVE) ||
+      inliers.rows < 8) {
+    return false;
+  }
+  cv::Mat R_est;
+  cv::Rodrigues(rvec, R_est);
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+  cv::cv2eigen(R_est, R);
+  cv::cv2eigen(tvec, t);
+  T_out->setIdentity();
+  T_out->linear() = R;
+  T_out->translation() = t;
+  return true;
+}
+
+namespace {
+
+using VecX = Eigen::Matrix<double, kAlignDim, 1>;
+using MatX = Eigen::Matrix<double, kAlignDim, kAlignDim>;
+using VecZ = Eigen::Matrix<double, kAlignDim - 1, 1>;
+using MatZ = Eigen::Matrix<double, kAlignDim - 1, kAlignDim - 1>;
+using MatXZ = Eigen::Matrix<double, kAlignDim, kAlignDim - 1>;
+using TrackPoints = std::vector<std::optional<Eigen::Vector3d>>;
+
+// The normal equations of one Gauss-Newton step in all unknowns (tracks eliminated), with the priors.
+struct AlignStep {
+  MatX N = MatX::Zero();
+  VecX q = VecX::Zero();
+  std::vector<std::optional<Eigen::Matrix3d>> Haa_inv;
+  std::vector<Eigen::Matrix<double, 3, kAlignDim>> Hab;
+  std::vector<Eigen::Vector3d> ga;
+  std::size_t active = 0;
+};
+
+// The reprojection problem of the alignment: x = [v0, g, ba, dbg] and every track's position P, the
+// reprojection errors in units of the pixel sigma squared, both biases under their zero-mean priors.
+class AlignProblem {
+ public:
+  explicit AlignProblem(const AlignInput& in)
+      : in_(in),
+        w0_(1.0 / (in.sigma_xy * in.sigma_xy)),
+        prior_ba_(1.0 / (in.sigma_ba_mps2 * in.sigma_ba_mps2)),
+        prior_bg_(1.0 / (in.sigma_bg_radps * in.sigma_bg_radps)) {}
+
+  double w0() const { return w0_; }
+
+  double prior_cost(const VecX& x) const {
+    return prior_ba_ * x.segment<3>(6).squaredNorm() + prior_bg_ * x.segment<3>(9).squaredNorm();
+  }
+
+  // Reprojection cost of x and P plus the priors; with drop, the tracks behind a camera or with an
+  // observation further than outlier_xy are removed from *P_out.
+  double cost(const VecX& x, const TrackPoints& P, bool drop, TrackPoints* P_out, std::size_t* obs) const {
     double c = 0.0;
     *obs = 0;
-    for (std::size_t f = 0; f < nt; ++f) {
-      if (!PP[f]) continue;
+    for (std::size_t f = 0; f < in_.tracks.size(); ++f) {
+      if (!P[f]) continue;
       double track = 0.0;
       bool bad = false;
-      for (const auto& [k, xy] : in.tracks[f]) {
-        const Eigen::Matrix3d R_k = rotation(k, xx);
+      for (const auto& [k, xy] : in_.tracks[f]) {
+        const Eigen::Matrix3d R_k = rotation(k, x);
         const Eigen::Vector3d pc =
-            in.R_b_c.transpose() *
-            (R_k.transpose() * (*PP[f] - imu_position(in, k, xx.head<9>())) - in.p_b_c);
+            in_.R_b_c.transpose() *
+            (R_k.transpose() * (*P[f] - imu_position(in_, k, x.head<9>())) - in_.p_b_c);
         if (pc.z() <= 1e-3) {
           bad = true;
           break;
         }
         const double e2 = (pc.head<2>() / pc.z() - xy).squaredNorm();
-        bad = bad || e2 > in.outlier_xy * in.outlier_xy;
+        bad = bad || e2 > in_.outlier_xy * in_.outlier_xy;
         track += e2;
       }
       if (bad && drop) {
-        (*PP_out)[f].reset();
+        (*P_out)[f].reset();
         continue;
       }
-      c += bad ? in.outlier_xy * in.outlier_xy * static_cast<double>(in.tracks[f].size()) : track;
-      *obs += in.tracks[f].size();
+      c += bad ? in_.outlier_xy * in_.outlier_xy * static_cast<double>(in_.tracks[f].size()) : track;
+      *obs += in_.tracks[f].size();
     }
-    return c * w0 + prior_cost(xx);
-  };
-  // The normal equations of one Gauss-Newton step in all unknowns (tracks eliminated), with the priors.
-  struct Step {
-    MatX N = MatX::Zero();
-    VecX q = VecX::Zero();
-    std::vector<std::optional<Eigen::Matrix3d>> Haa_inv;
-    std::vector<Eigen::Matrix<double, 3, kAlignDim>> Hab;
-    std::vector<Eigen::Vector3d> ga;
-    std::size_t active = 0;
-  };
-  auto linearise = [&](const VecX& xx, const std::vector<std::optional<Eigen::Vector3d>>& PP) {
-    Step s;
+    return c * w0_ + prior_cost(x);
+  }
+
+  AlignStep linearise(const VecX& x, const TrackPoints& P) const {
+    AlignStep s;
+    const std::size_t nt = in_.tracks.size();
     s.Haa_inv.assign(nt, std::nullopt);
     s.Hab.resize(nt);
     s.ga.resize(nt);
     for (std::size_t f = 0; f < nt; ++f) {
-      if (!PP[f]) continue;
-      Eigen::Matrix3d haa = Eigen::Matrix3d::Zero();
-      Eigen::Matrix<double, 3, kAlignDim> hab = Eigen::Matrix<double, 3, kAlignDim>::Zero();
-      MatX hbb = MatX::Zero();
-      Eigen::Vector3d a_r = Eigen::Vector3d::Zero();
-      VecX b_r = VecX::Zero();
-      for (const auto& [k, xy] : in.tracks[f]) {
-        const Eigen::Matrix3d R_k = rotation(k, xx);
-        const Eigen::Vector3d u = R_k.transpose() * (*PP[f] - imu_position(in, k, xx.head<9>()));
-        const Eigen::Vector3d pc = in.R_b_c.transpose() * (u - in.p_b_c);
-        const double iz = 1.0 / std::max(pc.z(), 1e-3);
-        Eigen::Matrix<double, 2, 3> Jpi;
-        Jpi << iz, 0.0, -pc.x() * iz * iz, 0.0, iz, -pc.y() * iz * iz;
-        const Eigen::Matrix<double, 2, 3> A = Jpi * in.R_b_c.transpose() * R_k.transpose();
-        const double T = in.T_s[k];
-        Eigen::Matrix<double, 3, 9> dp_dx;
-        dp_dx << T * Eigen::Matrix3d::Identity(), 0.5 * T * T * Eigen::Matrix3d::Identity(), in.J_alpha_ba[k];
-        Eigen::Matrix<double, 2, kAlignDim> B;
-        B << -A * dp_dx, Jpi * in.R_b_c.transpose() * skew(u) * in.J_R_bg[k];
-        const Eigen::Vector2d e = pc.head<2>() * iz - xy;
-        haa += A.transpose() * A;
-        hab += A.transpose() * B;
-        hbb += B.transpose() * B;
-        a_r += A.transpose() * e;
-        b_r += B.transpose() * e;
-      }
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(haa);
-      if (!(eig.eigenvalues()(0) > 1e-9 * eig.eigenvalues()(2))) continue;
-      const Eigen::Matrix3d inv = haa.inverse();
-      s.Haa_inv[f] = inv;
-      s.Hab[f] = hab;
-      s.ga[f] = a_r;
-      s.N += w0 * (hbb - hab.transpose() * inv * hab);
-      s.q += w0 * (b_r - hab.transpose() * inv * a_r);
-      ++s.active;
+      if (P[f]) add_track(f, x, *P[f], &s);
     }
-    s.N.block<3, 3>(6, 6) += prior_ba * Eigen::Matrix3d::Identity();
-    s.q.segment<3>(6) += prior_ba * xx.segment<3>(6);
-    s.N.block<3, 3>(9, 9) += prior_bg * Eigen::Matrix3d::Identity();
-    s.q.segment<3>(9) += prior_bg * xx.segment<3>(9);
+    s.N.block<3, 3>(6, 6) += prior_ba_ * Eigen::Matrix3d::Identity();
+    s.q.segment<3>(6) += prior_ba_ * x.segment<3>(6);
+    s.N.block<3, 3>(9, 9) += prior_bg_ * Eigen::Matrix3d::Identity();
+    s.q.segment<3>(9) += prior_bg_ * x.segment<3>(9);
     return s;
-  };
+  }
+
   // Tangent parametrisation of gravity on its sphere: x = x0 + C dz.
-  auto sphere_basis = [&](const VecX& xx) {
+  static MatXZ sphere_basis(const VecX& x) {
     MatXZ C = MatXZ::Zero();
     C.block<3, 3>(0, 0).setIdentity();
-    C.block<3, 2>(3, 3) = tangent_basis(xx.segment<3>(3).normalized());
+    C.block<3, 2>(3, 3) = tangent_basis(x.segment<3>(3).normalized());
     C.block<6, 6>(6, 5).setIdentity();
     return C;
-  };
-  AlignOutput out;
+  }
+
+ private:
+  Eigen::Matrix3d rotation(std::size_t k, const VecX& x) const {
+    return Eigen::Matrix3d(in_.R_b0_bk[k] * so3_exp(in_.J_R_bg[k] * x.segment<3>(9)));
+  }
+
+  // Track f's block of the normal equations, eliminated by its Schur complement (skipped without parallax).
+  void add_track(std::size_t f, const VecX& x, const Eigen::Vector3d& p, AlignStep* s) const {
+    Eigen::Matrix3d haa = Eigen::Matrix3d::Zero();
+    Eigen::Matrix<double, 3, kAlignDim> hab = Eigen::Matrix<double, 3, kAlignDim>::Zero();
+    MatX hbb = MatX::Zero();
+    Eigen::Vector3d a_r = Eigen::Vector3d::Zero();
+    VecX b_r = VecX::Zero();
+    for (const auto& [k, xy] : in_.tracks[f]) {
+      const Eigen::Matrix3d R_k = rotation(k, x);
+      const Eigen::Vector3d u = R_k.transpose() * (p - imu_position(in_, k, x.head<9>()));
+      const Eigen::Vector3d pc = in_.R_b_c.transpose() * (u - in_.p_b_c);
+      const double iz = 1.0 / std::max(pc.z(), 1e-3);
+      Eigen::Matrix<double, 2, 3> Jpi;
+      Jpi << iz, 0.0, -pc.x() * iz * iz, 0.0, iz, -pc.y() * iz * iz;
+      const Eigen::Matrix<double, 2, 3> A = Jpi * in_.R_b_c.transpose() * R_k.transpose();
+      const double T = in_.T_s[k];
+      Eigen::Matrix<double, 3, 9> dp_dx;
+      dp_dx << T * Eigen::Matrix3d::Identity(), 0.5 * T * T * Eigen::Matrix3d::Identity(), in_.J_alpha_ba[k];
+      Eigen::Matrix<double, 2, kAlignDim> B;
+      B << -A * dp_dx, Jpi * in_.R_b_c.transpose() * skew(u) * in_.J_R_bg[k];
+      const Eigen::Vector2d e = pc.head<2>() * iz - xy;
+      haa += A.transpose() * A;
+      hab += A.transpose() * B;
+      hbb += B.transpose() * B;
+      a_r += A.transpose() * e;
+      b_r += B.transpose() * e;
+    }
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(haa);
+    if (!(eig.eigenvalues()(0) > 1e-9 * eig.eigenvalues()(2))) return;
+    const Eigen::Matrix3d inv = haa.inverse();
+    s->Haa_inv[f] = inv;
+    s->Hab[f] = hab;
+    s->ga[f] = a_r;
+    s->N += w0_ * (hbb - hab.transpose() * inv * hab);
+    s->q += w0_ * (b_r - hab.transpose() * inv * a_r);
+    ++s->active;
+  }
+
+  const AlignInput& in_;
+  double w0_;
+  double prior_ba_;
+  double prior_bg_;
+};
+
+// Levenberg-Marquardt on x (gravity moved on its sphere) and P, from the linear guess. Tracks that are bad at
+// the current estimate are dropped from the fourth iteration on (the guess is rough). False, with why, when
+// fewer than 8 consistent tracks remain.
+bool refine_alignment(const AlignProblem& problem, VecX* x, TrackPoints* P, double gravity_mps2,
+                      std::string* why) {
   double lambda = 1e-3;
   std::size_t obs = 0;
   for (int it = 0; it < 30; ++it) {
-    // Drop the tracks that are bad at the current estimate (not in the first iterations: the guess is rough).
-    if (it >= 3) cost(x, P, true, &P, &obs);
-    const Step s = linearise(x, P);
+    if (it >= 3) problem.cost(*x, *P, true, P, &obs);
+    const AlignStep s = problem.linearise(*x, *P);
     if (s.active < 8) {
       *why = fmt("alignment: %zu consistent tracks < 8", s.active);
-      return std::nullopt;
+      return false;
     }
-    const MatXZ C = sphere_basis(x);
+    const MatXZ C = AlignProblem::sphere_basis(*x);
     const MatZ Nz = C.transpose() * s.N * C;
     const VecZ qz = C.transpose() * s.q;
-    const double c0 = cost(x, P, false, nullptr, &obs);
+    const double c0 = problem.cost(*x, *P, false, nullptr, &obs);
     bool accepted = false;
     bool converged = false;
     for (int tries = 0; tries < 8 && !accepted; ++tries) {
@@ -293,18 +350,18 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
       Nd.diagonal() *= 1.0 + lambda;
       const VecZ dz = -Nd.ldlt().solve(qz);
       const VecX dx = C * dz;
-      VecX x_new = x + dx;
-      x_new.segment<3>(3) = x_new.segment<3>(3).normalized() * in.gravity_mps2;
-      std::vector<std::optional<Eigen::Vector3d>> P_new = P;
-      for (std::size_t f = 0; f < nt; ++f) {
+      VecX x_new = *x + dx;
+      x_new.segment<3>(3) = x_new.segment<3>(3).normalized() * gravity_mps2;
+      TrackPoints P_new = *P;
+      for (std::size_t f = 0; f < P_new.size(); ++f) {
         if (P_new[f] && s.Haa_inv[f]) *P_new[f] -= *s.Haa_inv[f] * (s.ga[f] + s.Hab[f] * dx);
         if (P_new[f] && !s.Haa_inv[f]) P_new[f].reset();  // no parallax at this estimate
       }
-      const double c1 = cost(x_new, P_new, false, nullptr, &obs);
+      const double c1 = problem.cost(x_new, P_new, false, nullptr, &obs);
       if (c1 < c0) {
         converged = (c0 - c1) < 1e-9 * c0;
-        x = x_new;
-        P = std::move(P_new);
+        *x = x_new;
+        *P = std::move(P_new);
         lambda = std::max(lambda / 10.0, 1e-9);
         accepted = true;
       } else {
@@ -313,20 +370,42 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
     }
     if (!accepted || converged) break;
   }
-  const double chi2 = cost(x, P, true, &P, &obs);
-  const Step s = linearise(x, P);
+  return true;
+}
+
+}  // namespace
+
+// Gauss-Newton (Levenberg-Marquardt) on the reprojection errors themselves, from the linear guess. The
+// unknowns are x = [v0, g, ba, dbg] - dbg a correction of the gyro bias that turns every rotation by
+// Exp(J_k dbg) - with g moved only on its sphere, and every track's position (eliminated by its Schur
+// complement); both biases are under their zero-mean priors. Tracks behind a camera or with an observation
+// further than outlier_xy are dropped as the solve goes. One more step with gravity's norm free gives the
+// |g| the data alone ask for: a check of the whole solve.
+std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::string* why) {
+  const std::size_t nt = in.tracks.size();
+  Eigen::Matrix<double, 9, 1> x9;
+  TrackPoints P;
+  if (!linear_guess(in, &x9, &P, why)) return std::nullopt;
+  VecX x = VecX::Zero();
+  x.head<9>() = x9;
+  const AlignProblem problem(in);
+  if (!refine_alignment(problem, &x, &P, in.gravity_mps2, why)) return std::nullopt;
+  std::size_t obs = 0;
+  const double chi2 = problem.cost(x, P, true, &P, &obs);
+  const AlignStep s = problem.linearise(x, P);
   if (s.active < 8) {  // the last outlier rejection can leave too few
     *why = fmt("alignment: %zu consistent tracks < 8", s.active);
     return std::nullopt;
   }
-  const MatXZ C = sphere_basis(x);
+  const MatXZ C = AlignProblem::sphere_basis(x);
+  AlignOutput out;
   // One step with gravity's norm free, from the solution: the |g| the data alone ask for.
   const VecX dx_free = -s.N.ldlt().solve(s.q);
   out.g_norm_free = (x.segment<3>(3) + dx_free.segment<3>(3)).norm();
   out.x = x;
   out.tracks_used = s.active;
   out.tracks_dropped = nt - s.active;
-  const double reproj2 = std::max(0.0, chi2 - prior_cost(x)) / w0;
+  const double reproj2 = std::max(0.0, chi2 - problem.prior_cost(x)) / problem.w0();
   out.rms_xy = obs > 0 ? std::sqrt(reproj2 / static_cast<double>(2 * obs)) : 0.0;
   const double dof =
       std::max(1.0, static_cast<double>(2 * obs) - 3.0 * static_cast<double>(s.active) - (kAlignDim - 1.0));

@@ -1,6 +1,6 @@
 // The pieces of the dynamic initialiser that are plain numerics: IMU pre-integration between images,
-// multi-view triangulation, and the visual-inertial alignment with known rotations (velocity, gravity, both
-// biases and the tracks on the reprojection errors) with the covariance the filter starts from.
+// multi-view triangulation, PnP, and the visual-inertial alignment with known rotations (velocity, gravity,
+// both biases and the tracks on the reprojection errors) with the covariance the filter starts from.
 #pragma once
 
 #include <Eigen/Core>
@@ -39,6 +39,12 @@ Preintegrated preintegrate(const std::vector<ImuSample>& samples, Timestamp t_a,
 // T_ck_c0. Returns false when the point is behind a camera or poorly constrained.
 bool triangulate(const std::vector<Eigen::Isometry3d>& T_ck_c0, const std::vector<Eigen::Vector2d>& xy,
                  double max_reproj, Eigen::Vector3d* p_c0);
+
+// Camera pose T_c_c0 of an image from its normalised observations xy of the points p_c0 (RANSAC PnP, at
+// least 10 correspondences and 8 inliers within max_reproj), starting from `guess`; false (T_out untouched)
+// when it fails.
+bool pnp_ransac(const std::vector<Eigen::Vector3d>& p_c0, const std::vector<Eigen::Vector2d>& xy,
+                double max_reproj, const Eigen::Isometry3d& guess, Eigen::Isometry3d* T_out);
 
 // Visual-inertial alignment with known rotations (the gyro's, bias-corrected; after the closed-form linear
 // initialisation of Dong-Si and Mourikis 2012 as used by OpenVINS' dynamic initialiser). The unknowns are
