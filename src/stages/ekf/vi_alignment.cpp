@@ -254,7 +254,7 @@ class AlignProblem {
   AlignStep linearise(const VecX& x, const TrackPoints& P) const {
     AlignStep s;
     const std::size_t nt = in_.tracks.size();
-    s.Haa_inv.assign(nt, std::nullopt);
+    s.Haa_inv.resize(nt);  // every entry empty: a fresh step
     s.Hab.resize(nt);
     s.ga.resize(nt);
     for (std::size_t f = 0; f < nt; ++f) {
