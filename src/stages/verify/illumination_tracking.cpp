@@ -136,25 +136,40 @@ VerifyResult GeometricVerifier::track_fallback(
     sources.points_j.push_back(p_cj[a]);
     sources.points_n.push_back(T_cn_cj * p_cj[a]);
   }
-  // Two starts for the tracking: where the odometry's pose of i puts j's triangulated points, then where they
-  // are in j. The first follows the parallax of the revisit's offset (a near facade moves tens of pixels for
-  // a metre sideways, more than the tracking's reach on a noisy night image); the odometry's relative pose
-  // carries its drift from j to i, its heading drift a few degrees after a long loop (tens of pixels), the
-  // second start none: the place descriptor matched i to j because i sees the place much as j did. The second
-  // runs only when the first does not verify the loop.
+  // Three starts for the tracking, each tried only when the one before does not verify the loop: where the
+  // odometry's pose of i puts j's triangulated points; where the odometry's rotation alone moves them (i
+  // placed at j); where they are in j. The first follows the parallax of the revisit's offset (a near facade
+  // moves tens of pixels for a metre sideways, more than the tracking's reach on a noisy night image), but
+  // carries the odometry's position drift from j to i; the second carries only its heading drift, a few
+  // degrees after a long loop (tens of pixels); the third none: the place descriptor matched i to j because i
+  // sees the place much as j did.
+  struct Start {
+    std::optional<Eigen::Isometry3d> T_w_bi;
+    const char* label;  // before its note when it fails
+    const char* after;  // after the reason when it verifies, behind the failed starts' notes
+  };
+  std::vector<Start> starts;
+  if (T_w_bi != nullptr) {
+    const Eigen::Isometry3d& T_b_c = camera_->calibration().T_b_c;
+    Eigen::Isometry3d T_w_ci_at_j = *T_w_bi * T_b_c;
+    T_w_ci_at_j.translation() = T_w_cj.translation();
+    starts.push_back({*T_w_bi, "; tracked: ", ""});
+    starts.push_back({T_w_ci_at_j * T_b_c.inverse(),
+                      "; tracked from the odometry's rotation: ", "; from the odometry's rotation, after"});
+  }
+  starts.push_back({std::nullopt, starts.empty() ? "; tracked: " : "; tracked from the images' rotation: ",
+                    "; from the images' rotation, after"});
   std::string notes;
-  const Eigen::Isometry3d* starts[] = {T_w_bi, nullptr};
-  for (const Eigen::Isometry3d* start : starts) {
-    const bool first = notes.empty();
-    if (start == nullptr && T_w_bi == nullptr && !first) break;  // the same start again
+  for (const Start& start : starts) {
     std::string note;
-    VerifyResult tracked = track_from_j_and_n(sources, start, threshold, vetoed, note);
+    VerifyResult tracked =
+        track_from_j_and_n(sources, start.T_w_bi ? &*start.T_w_bi : nullptr, threshold, vetoed, note);
     if (tracked.verified) {
       tracked.points = result.points;
-      if (!notes.empty()) tracked.reason += "; from the images' rotation, after" + notes;
+      if (!notes.empty()) tracked.reason += start.after + notes;
       return tracked;
     }
-    notes += (first ? "; tracked: " : "; tracked from the images' rotation: ") + note;
+    notes += start.label + note;
   }
   result.reason += notes;
   return result;
