@@ -153,7 +153,9 @@ void CutSnapshots::push(const std::uint8_t* cuts) {
       const std::size_t n = write_rice(latest_.data(), cuts, cut_bytes_, bits - kRiceMode,
                                        scratch_.data() + kHeaderBytes, exception);
       put_u16(scratch_.data() + 1, n);
-      std::memcpy(scratch_.data() + scratch_.size() - exception.size(), exception.data(), exception.size());
+      // std::copy, not memcpy: a record without exceptions has an empty vector, whose data() may be null.
+      std::copy(exception.begin(), exception.end(),
+                scratch_.end() - static_cast<std::ptrdiff_t>(exception.size()));
       append_record(scratch_);
       std::memcpy(latest_.data(), cuts, cut_bytes_);
       return;
