@@ -37,10 +37,14 @@ Eigen::Vector2d project(const Eigen::Vector3d& p) {
 }  // namespace
 
 DynamicInitializer::DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c,
-                                       double focal_px)
-    : config_(config), T_i_c_(T_i_c), focal_px_(focal_px) {
+                                       double focal_px, const ImuNoise& noise)
+    : config_(config), T_i_c_(T_i_c), focal_px_(focal_px), noise_(noise) {
   config_.validate();
   if (!(focal_px_ > 0.0 && std::isfinite(focal_px_))) throw std::invalid_argument("focal_px must be > 0");
+  if (!(noise_.accel_noise_density >= 0.0 && noise_.gyro_noise_density >= 0.0 &&
+        noise_.accel_random_walk >= 0.0)) {
+    throw std::invalid_argument("IMU noise densities must be >= 0");
+  }
 }
 
 void DynamicInitializer::reset() {
@@ -490,6 +494,9 @@ void DynamicInitializer::build_align_input(Attempt* at) const {
   in.sigma_bg_radps = config_.init_sigma_gyro_bias_radps;
   in.gravity_mps2 = config_.gravity_mps2;
   in.outlier_xy = config_.triangulation_max_reproj_sigma * config_.pixel_sigma_px / focal_px_;
+  in.accel_noise_density = noise_.accel_noise_density;
+  in.gyro_noise_density = noise_.gyro_noise_density;
+  in.accel_random_walk = noise_.accel_random_walk;
 }
 
 std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
@@ -501,6 +508,19 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   const std::optional<AlignOutput> al = align_known_rotations(in, &why);
   if (!al) {
     status_ = why;
+    return std::nullopt;
+  }
+  // The tracks the structure from motion found consistent with the rotations of vision are the data the
+  // solution must explain. A solution that has to drop most of them as outliers is not the data's solution
+  // but one that a minority happens to fit (a shrunk scene with a near-zero velocity fits any few tracks):
+  // refused, the next window tries again.
+  if (al->tracks_used < al->tracks_dropped) {
+    status_ =
+        fmt("alignment contradicts the structure: %zu tracks kept, %zu dropped as outliers (velocity at the "
+            "first "
+            "image %.2f m/s, translation %.2f m)",
+            al->tracks_used, al->tracks_dropped, al->x.head<3>().norm(),
+            (al->p_b0_bk.back() - al->p_b0_bk.front()).norm());
     return std::nullopt;
   }
   const double G = config_.gravity_mps2;
@@ -526,13 +546,17 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   Eigen::Matrix<double, 3, 9> J_vn;
   J_vn << Eigen::Matrix3d::Identity(), T_n * Eigen::Matrix3d::Identity(), at.J_beta_ba[n - 1];
   const Eigen::Matrix3d vel_cov_b0 = J_vn * al->cov.topLeftCorner<9, 9>() * J_vn.transpose();
-  const double speed_sigma = std::sqrt(std::max(0.0, vel_cov_b0.trace()));
+  // The certainty of the velocity (the scale) that decides: with the pre-integration's own errors.
+  const double speed_sigma =
+      std::sqrt(std::max(0.0, (J_vn * al->cov_imu.topLeftCorner<9, 9>() * J_vn.transpose()).trace()));
+  const double speed_sigma_pixels = std::sqrt(std::max(0.0, vel_cov_b0.trace()));
   const double speed_limit =
       config_.dynamic_init_max_speed_sigma_ratio * v_n.norm() + config_.dynamic_init_min_sigma_vel_mps;
   if (!(speed_sigma <= speed_limit)) {
-    status_ =
-        fmt("velocity sigma %.3f m/s > %.3f m/s (speed %.2f m/s): too little excitation to fix the scale",
-            speed_sigma, speed_limit, v_n.norm());
+    status_ = fmt(
+        "velocity sigma %.3f m/s > %.3f m/s (speed %.2f m/s; %.3f m/s from the pixels alone, the rest the "
+        "IMU's pre-integration): too little excitation to fix the scale",
+        speed_sigma, speed_limit, v_n.norm(), speed_sigma_pixels);
     return std::nullopt;
   }
   const Eigen::Vector3d& p_b_c = in.p_b_c;
@@ -576,11 +600,12 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   out.window_s = at.span_s;
   out.detail = fmt(
       "dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, %zu tracks (%zu dropped), "
-      "translation %.2f m, speed %.2f +- %.3f m/s, |g| %.3f before the norm constraint, reprojection RMS "
+      "translation %.2f m, speed %.2f +- %.3f m/s (pixels alone %.3f), |g| %.3f before the norm constraint, "
+      "reprojection RMS "
       "%.2f px, gyro bias (%.4f %.4f %.4f) rad/s, accel bias (%.3f %.3f %.3f) m/s^2, accel std %.2f m/s^2",
       n, at.span_s, at.best, at.vision_parallax, al->tracks_used, al->tracks_dropped, translation_m,
-      v_n.norm(), speed_sigma, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(), bg_refined.z(),
-      ba.x(), ba.y(), ba.z(), at.acc_std);
+      v_n.norm(), speed_sigma, speed_sigma_pixels, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(),
+      bg_refined.z(), ba.x(), ba.y(), ba.z(), at.acc_std);
   status_ = out.detail;
   return out;
 }

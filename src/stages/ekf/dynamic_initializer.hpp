@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "stages/ekf/ekf_config.hpp"
+#include "stages/ekf/imu_propagator.hpp"
 #include "stages/ekf/initializer.hpp"
 #include "stages/ekf/vi_alignment.hpp"
 
@@ -34,8 +35,10 @@ using FeatureMap = std::unordered_map<std::uint64_t, Eigen::Vector2d>;  // track
 class DynamicInitializer {
  public:
   // T_i_c: camera -> IMU (the camera pose in the IMU frame); focal_px turns normalised coordinates into the
-  // pixels of the parallax and residual thresholds.
-  DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c, double focal_px);
+  // pixels of the parallax and residual thresholds; noise: the IMU's effective noise densities, whose
+  // pre-integrated errors enter the certainty of the velocity (all zero: the pre-integration taken as exact).
+  DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c, double focal_px,
+                     const ImuNoise& noise = ImuNoise{});
 
   // One call per image, in time order. Returns the initial state at this image's time once the alignment
   // over the window succeeds (InitialState::frame counts the images given since construction or reset()).
@@ -92,6 +95,7 @@ class DynamicInitializer {
   EkfConfig config_;
   Eigen::Isometry3d T_i_c_;
   double focal_px_ = 1.0;
+  ImuNoise noise_;
   std::deque<Frame> window_;
   std::optional<ImuSample> last_sample_;  // the latest IMU sample seen (start of the next interval)
   std::size_t frames_seen_ = 0;

@@ -4,6 +4,7 @@
 #include <Eigen/Dense>
 #include <Eigen/SVD>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <opencv2/calib3d.hpp>
@@ -281,6 +282,25 @@ class AlignProblem {
     return Eigen::Matrix3d(in_.R_b0_bk[k] * so3_exp(in_.J_R_bg[k] * x.segment<3>(9)));
   }
 
+  // The Jacobians of one observation (image k, normalised xy) of a track at p: A on the track's position
+  // (minus A on the IMU's position at image k), B on x; e the reprojection error.
+  void observation(std::size_t k, const Eigen::Vector2d& xy, const VecX& x, const Eigen::Vector3d& p,
+                   Eigen::Matrix<double, 2, 3>* A, Eigen::Matrix<double, 2, kAlignDim>* B,
+                   Eigen::Vector2d* e) const {
+    const Eigen::Matrix3d R_k = rotation(k, x);
+    const Eigen::Vector3d u = R_k.transpose() * (p - imu_position(in_, k, x.head<9>()));
+    const Eigen::Vector3d pc = in_.R_b_c.transpose() * (u - in_.p_b_c);
+    const double iz = 1.0 / std::max(pc.z(), 1e-3);
+    Eigen::Matrix<double, 2, 3> Jpi;
+    Jpi << iz, 0.0, -pc.x() * iz * iz, 0.0, iz, -pc.y() * iz * iz;
+    *A = Jpi * in_.R_b_c.transpose() * R_k.transpose();
+    const double T = in_.T_s[k];
+    Eigen::Matrix<double, 3, 9> dp_dx;
+    dp_dx << T * Eigen::Matrix3d::Identity(), 0.5 * T * T * Eigen::Matrix3d::Identity(), in_.J_alpha_ba[k];
+    *B << -*A * dp_dx, Jpi * in_.R_b_c.transpose() * skew(u) * in_.J_R_bg[k];
+    *e = pc.head<2>() * iz - xy;
+  }
+
   // Track f's block of the normal equations, eliminated by its Schur complement (skipped without parallax).
   void add_track(std::size_t f, const VecX& x, const Eigen::Vector3d& p, AlignStep* s) const {
     Eigen::Matrix3d haa = Eigen::Matrix3d::Zero();
@@ -289,19 +309,10 @@ class AlignProblem {
     Eigen::Vector3d a_r = Eigen::Vector3d::Zero();
     VecX b_r = VecX::Zero();
     for (const auto& [k, xy] : in_.tracks[f]) {
-      const Eigen::Matrix3d R_k = rotation(k, x);
-      const Eigen::Vector3d u = R_k.transpose() * (p - imu_position(in_, k, x.head<9>()));
-      const Eigen::Vector3d pc = in_.R_b_c.transpose() * (u - in_.p_b_c);
-      const double iz = 1.0 / std::max(pc.z(), 1e-3);
-      Eigen::Matrix<double, 2, 3> Jpi;
-      Jpi << iz, 0.0, -pc.x() * iz * iz, 0.0, iz, -pc.y() * iz * iz;
-      const Eigen::Matrix<double, 2, 3> A = Jpi * in_.R_b_c.transpose() * R_k.transpose();
-      const double T = in_.T_s[k];
-      Eigen::Matrix<double, 3, 9> dp_dx;
-      dp_dx << T * Eigen::Matrix3d::Identity(), 0.5 * T * T * Eigen::Matrix3d::Identity(), in_.J_alpha_ba[k];
+      Eigen::Matrix<double, 2, 3> A;
       Eigen::Matrix<double, 2, kAlignDim> B;
-      B << -A * dp_dx, Jpi * in_.R_b_c.transpose() * skew(u) * in_.J_R_bg[k];
-      const Eigen::Vector2d e = pc.head<2>() * iz - xy;
+      Eigen::Vector2d e;
+      observation(k, xy, x, p, &A, &B, &e);
       haa += A.transpose() * A;
       hab += A.transpose() * B;
       hbb += B.transpose() * B;
@@ -319,6 +330,33 @@ class AlignProblem {
     ++s->active;
   }
 
+ public:
+  // The cross block of the normal equations between x and an error e_k of the pre-integrated IMU position
+  // at each image k >= 1 (columns 3(k-1)..), the tracks of the step eliminated: x moves by -N^-1 H e.
+  Eigen::MatrixXd imu_cross(const VecX& x, const TrackPoints& P, const AlignStep& s) const {
+    const std::size_t n = in_.T_s.size();
+    const auto cols = static_cast<Eigen::Index>(3 * (n - 1));
+    Eigen::MatrixXd H = Eigen::MatrixXd::Zero(kAlignDim, cols);
+    for (std::size_t f = 0; f < in_.tracks.size(); ++f) {
+      if (!P[f] || !s.Haa_inv[f]) continue;
+      Eigen::MatrixXd hae = Eigen::MatrixXd::Zero(3, cols);
+      Eigen::MatrixXd hbe = Eigen::MatrixXd::Zero(kAlignDim, cols);
+      for (const auto& [k, xy] : in_.tracks[f]) {
+        if (k == 0) continue;  // the first image is the origin of the pre-integration: no error
+        Eigen::Matrix<double, 2, 3> A;
+        Eigen::Matrix<double, 2, kAlignDim> B;
+        Eigen::Vector2d e;
+        observation(k, xy, x, *P[f], &A, &B, &e);
+        const auto c = static_cast<Eigen::Index>(3 * (k - 1));
+        hae.block(0, c, 3, 3) -= A.transpose() * A;
+        hbe.block(0, c, kAlignDim, 3) -= B.transpose() * A;
+      }
+      H += w0_ * (hbe - s.Hab[f].transpose() * *s.Haa_inv[f] * hae);
+    }
+    return H;
+  }
+
+ private:
   const AlignInput& in_;
   double w0_;
   double prior_ba_;
@@ -410,10 +448,47 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
   const double dof =
       std::max(1.0, static_cast<double>(2 * obs) - 3.0 * static_cast<double>(s.active) - (kAlignDim - 1.0));
   const MatZ Nz = C.transpose() * s.N * C;
-  out.cov = C * (Nz.inverse() * std::max(1.0, chi2 / dof)) * C.transpose();
+  const MatZ Nz_inv = Nz.inverse();
+  out.cov = C * (Nz_inv * std::max(1.0, chi2 / dof)) * C.transpose();
+  out.cov_imu = out.cov;
+  if (in.T_s.size() > 1 &&
+      (in.accel_noise_density > 0.0 || in.gyro_noise_density > 0.0 || in.accel_random_walk > 0.0)) {
+    const Eigen::MatrixXd D = C * Nz_inv * C.transpose() * problem.imu_cross(x, P, s);  // dx/de = -D
+    out.cov_imu += D * preintegrated_position_covariance(in) * D.transpose();
+    out.cov_imu = 0.5 * (out.cov_imu + out.cov_imu.transpose()).eval();
+  }
   out.p_b0_bk.resize(in.T_s.size());
   for (std::size_t k = 0; k < in.T_s.size(); ++k) out.p_b0_bk[k] = imu_position(in, k, x.head<9>());
   return out;
+}
+
+Eigen::MatrixXd preintegrated_position_covariance(const AlignInput& in) {
+  const std::size_t n = in.T_s.size();
+  const auto dim = static_cast<Eigen::Index>(3 * (n > 0 ? n - 1 : 0));
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(dim, dim);
+  const double qa = in.accel_noise_density * in.accel_noise_density;
+  const double g_qg = in.gravity_mps2 * in.gravity_mps2 * in.gyro_noise_density * in.gyro_noise_density;
+  const double qw = g_qg + in.accel_random_walk * in.accel_random_walk;
+  // Three-point Gauss-Legendre on [0, m]: exact for the quartic (s-u)^2 (t-u)^2.
+  const std::array<double, 3> node{-std::sqrt(0.6), 0.0, std::sqrt(0.6)};
+  const std::array<double, 3> weight{5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
+  for (std::size_t i = 1; i < n; ++i) {
+    for (std::size_t j = i; j < n; ++j) {
+      const double m = std::min(in.T_s[i], in.T_s[j]);
+      const double M = std::max(in.T_s[i], in.T_s[j]);
+      double quartic = 0.0;
+      for (std::size_t q = 0; q < 3; ++q) {
+        const double u = 0.5 * m * (node[q] + 1.0);
+        quartic += 0.5 * m * weight[q] * (m - u) * (m - u) * (M - u) * (M - u);
+      }
+      const double c = qa * (m * m * M / 2.0 - m * m * m / 6.0) + qw * quartic / 4.0;
+      const auto r = static_cast<Eigen::Index>(3 * (i - 1));
+      const auto k = static_cast<Eigen::Index>(3 * (j - 1));
+      S.block(r, k, 3, 3) = c * Eigen::Matrix3d::Identity();
+      S.block(k, r, 3, 3) = c * Eigen::Matrix3d::Identity();
+    }
+  }
+  return S;
 }
 
 // The covariance the filter starts from: the alignment's own (its normal equations at the solution, scaled by

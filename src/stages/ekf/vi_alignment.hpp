@@ -72,6 +72,12 @@ struct AlignInput {
   double sigma_bg_radps = 0.01;                // prior of the gyro bias correction (zero mean)
   double gravity_mps2 = 9.81;
   double outlier_xy = 5.0 / 460.0;  // a track with an observation further than this is dropped
+  // The IMU's noise (the filter's effective densities; zero: not modelled). The alignment takes the
+  // pre-integrated positions as exact; these give the covariance of their errors, propagated into
+  // AlignOutput::cov_imu.
+  double accel_noise_density = 0.0;  // m / s^2 / sqrt(Hz)
+  double gyro_noise_density = 0.0;   // rad / s / sqrt(Hz)
+  double accel_random_walk = 0.0;    // m / s^3 / sqrt(Hz)
 };
 
 constexpr int kAlignDim = 12;  // v0, g, ba, dbg
@@ -79,6 +85,13 @@ constexpr int kAlignDim = 12;  // v0, g, ba, dbg
 struct AlignOutput {
   Eigen::Matrix<double, kAlignDim, 1> x = Eigen::Matrix<double, kAlignDim, 1>::Zero();
   Eigen::Matrix<double, kAlignDim, kAlignDim> cov = Eigen::Matrix<double, kAlignDim, kAlignDim>::Identity();
+  // cov plus the pre-integration's errors carried into the solution: the solve's sensitivity to an error
+  // of each image's pre-integrated position (tracks eliminated) applied to their covariance (white noise of
+  // the accelerometer; the gyro's white noise tilting gravity and the accelerometer bias's random walk,
+  // both integrated three times). On a weakly excited window the metric scale rests on a few centimetres
+  // of pre-integrated deviation from constant velocity; this is the covariance that says so.
+  Eigen::Matrix<double, kAlignDim, kAlignDim> cov_imu =
+      Eigen::Matrix<double, kAlignDim, kAlignDim>::Identity();
   double g_norm_free = 0.0;  // |g| of one step with gravity's norm free, from the solution
   double rms_xy = 0.0;       // reprojection RMS of the tracks kept (normalised)
   std::size_t tracks_used = 0;
@@ -93,6 +106,13 @@ struct AlignOutput {
 // further than outlier_xy are dropped as the solve goes. One more step with gravity's norm free gives the
 // |g| the data alone ask for: a check of the whole solve.
 std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::string* why);
+
+// Covariance of the errors of the pre-integrated IMU positions at the images 1..n-1 of the window (3(n-1)
+// square, isotropic per axis): accelerometer white noise integrated twice, Cov(e(s), e(t)) = qa (m^2 M / 2 -
+// m^3 / 6), plus an acceleration error that itself walks (the gyro's white noise tilting gravity, |g|^2 qg,
+// and the accelerometer bias's random walk) integrated twice more, (|g|^2 qg + qb) int_0^m (s-u)^2 (t-u)^2
+// / 4 du; m, M the smaller and larger of the two times since the first image.
+Eigen::MatrixXd preintegrated_position_covariance(const AlignInput& in);
 
 // The covariance the filter starts from: the alignment's own (its normal equations at the solution, scaled by
 // the residuals), carried to the state at the last image with its cross terms, rows [attitude as the

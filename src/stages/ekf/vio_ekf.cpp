@@ -83,7 +83,8 @@ VioEkf::VioEkf(const EkfConfig& config, const CameraCalibration& camera, const I
       filter_(config, effective_imu_noise(config, imu), imu.T_b_i.inverse() * camera.T_b_c,
               0.5 * (camera.fx + camera.fy)),
       static_init_(config, effective_imu_noise(config, imu), 0.5 * (camera.fx + camera.fy)),
-      dynamic_init_(config, imu.T_b_i.inverse() * camera.T_b_c, 0.5 * (camera.fx + camera.fy)) {}
+      dynamic_init_(config, imu.T_b_i.inverse() * camera.T_b_c, 0.5 * (camera.fx + camera.fy),
+                    effective_imu_noise(config, imu)) {}
 
 void VioEkf::initialize_from(const InitialState& init) {
   const ImuState& state = init.state;
