@@ -510,19 +510,6 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
     status_ = why;
     return std::nullopt;
   }
-  // The tracks the structure from motion found consistent with the rotations of vision are the data the
-  // solution must explain. A solution that has to drop most of them as outliers is not the data's solution
-  // but one that a minority happens to fit (a shrunk scene with a near-zero velocity fits any few tracks):
-  // refused, the next window tries again.
-  if (al->tracks_used < al->tracks_dropped) {
-    status_ =
-        fmt("alignment contradicts the structure: %zu tracks kept, %zu dropped as outliers (velocity at the "
-            "first "
-            "image %.2f m/s, translation %.2f m)",
-            al->tracks_used, al->tracks_dropped, al->x.head<3>().norm(),
-            (al->p_b0_bk.back() - al->p_b0_bk.front()).norm());
-    return std::nullopt;
-  }
   const double G = config_.gravity_mps2;
   if (!(std::abs(al->g_norm_free - G) <= config_.dynamic_init_max_gravity_error_mps2)) {
     status_ = fmt("gravity norm %.3f vs %.3f m/s^2 (tolerance %.2f; %zu tracks, reprojection RMS %.2f px)",

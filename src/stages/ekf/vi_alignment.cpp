@@ -435,6 +435,20 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
     *why = fmt("alignment: %zu consistent tracks < 8", s.active);
     return std::nullopt;
   }
+  // The tracks given are those the structure from motion found consistent with the rotations of vision:
+  // the data the solution must explain. A solution that has to drop most of them as outliers is not the
+  // data's solution but one a minority happens to fit (a shrunk scene with a near-zero velocity fits any
+  // few tracks): refused.
+  if (s.active < nt - s.active) {
+    const std::size_t last = in.T_s.size() - 1;
+    *why =
+        fmt("alignment contradicts the structure: %zu tracks kept, %zu dropped as outliers (velocity at the "
+            "first "
+            "image %.2f m/s, IMU translation %.2f m)",
+            s.active, nt - s.active, x.head<3>().norm(),
+            (imu_position(in, last, x.head<9>()) - imu_position(in, 0, x.head<9>())).norm());
+    return std::nullopt;
+  }
   const MatXZ C = AlignProblem::sphere_basis(x);
   AlignOutput out;
   // One step with gravity's norm free, from the solution: the |g| the data alone ask for.

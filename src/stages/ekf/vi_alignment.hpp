@@ -104,7 +104,9 @@ struct AlignOutput {
 // Exp(J_k dbg) - with g moved only on its sphere, and every track's position (eliminated by its Schur
 // complement); both biases are under their zero-mean priors. Tracks behind a camera or with an observation
 // further than outlier_xy are dropped as the solve goes. One more step with gravity's norm free gives the
-// |g| the data alone ask for: a check of the whole solve.
+// |g| the data alone ask for: a check of the whole solve. Refused (nothing, with why) when fewer than 8
+// tracks are left, or when the solution keeps fewer tracks than it drops: the tracks given are those vision
+// found consistent, and a solution most of them contradict is not theirs.
 std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::string* why);
 
 // Covariance of the errors of the pre-integrated IMU positions at the images 1..n-1 of the window (3(n-1)
