@@ -36,7 +36,8 @@ class DynamicInitializer {
  public:
   // T_i_c: camera -> IMU (the camera pose in the IMU frame); focal_px turns normalised coordinates into the
   // pixels of the parallax and residual thresholds; noise: the IMU's effective noise densities, whose
-  // pre-integrated errors enter the certainty of the velocity (all zero: the pre-integration taken as exact).
+  // pre-integrated errors give the certainty of the velocity reported beside the one that decides (all zero:
+  // the pre-integration taken as exact).
   DynamicInitializer(const EkfConfig& config, const Eigen::Isometry3d& T_i_c, double focal_px,
                      const ImuNoise& noise = ImuNoise{});
 
