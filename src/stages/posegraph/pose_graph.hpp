@@ -35,7 +35,7 @@ struct PoseGraphConfig {
   double odometry_sigma_rotation_rad_per_sqrt_m = 0.002;
   double odometry_sigma_rotation_floor_rad = 0.0005;
   std::string loss = "cauchy";   // cauchy | huber | none (loop edges only)
-  double loss_scale = 1.0;       // in whitened units (sigma)
+  double loss_scale = 1.0;       // in whitened units (sigma); a loop edge's own: loop_loss_scale()
   double outlier_chi2 = 22.46;   // chi-square, 6 dof, 0.999
   int max_iterations = 50;       // per solve
   double max_solve_s = 2.0;      // per solve while the stream runs (the final solve has no time bound)
