@@ -9,6 +9,8 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/geometry.hpp"
+#include "core/pose_covariance.hpp"
 #include "stages/posegraph/pose_graph.hpp"
 #include "stages/posegraph/relative_pose_cost.hpp"
 
@@ -292,6 +294,99 @@ TEST(PoseGraph, OdometryCovarianceScaleFromTheLoops) {
   EXPECT_EQ(odometry_cov_scale_from_loops(innovations(9.0, 2, 0, 5), 3, 1e6), 1.0);
   EXPECT_EQ(odometry_cov_scale_from_loops({}, 3, 1e6), 1.0);
   EXPECT_EQ(odometry_cov_scale_from_loops(innovations(9.0, 5, 5, 6), 3, 4.0), 4.0);
+}
+
+// One or two loops: the median cannot outvote a wrong one, so the scale they show is taken only as far as
+// the odometry's own position sigmas allow (check_scale), never beyond; without that figure, 1.
+TEST(PoseGraph, OdometryCovarianceScaleFromOneOrTwoLoopsStaysWithinTheOdometrysOwnSigma) {
+  const std::vector<LoopInnovation> two = innovations(9.0, 2, 0, 7);
+  EXPECT_EQ(odometry_cov_scale_from_loops(two, 3, 1e6), 1.0);  // check_scale unknown: as before
+  std::vector<LoopInnovation> checked = two;
+  for (LoopInnovation& loop : checked) loop.check_scale = 50.0;
+  const double k = odometry_cov_scale_from_loops(checked, 3, 1e6);
+  EXPECT_GT(k, 1.5);  // the two loops show an overconfident odometry
+  EXPECT_LE(k, 50.0);
+  // A wrong loop 30 times its sigma off: at most what the odometry's sigma granted it.
+  std::vector<LoopInnovation> wrong = innovations(1.0, 1, 1, 8);
+  wrong[0].check_scale = 4.0;
+  EXPECT_EQ(odometry_cov_scale_from_loops(wrong, 3, 1e6), 4.0);
+  // The smallest check among the loops bounds it; one without a check leaves the odometry unscaled.
+  checked[1].check_scale = 2.0;
+  EXPECT_LE(odometry_cov_scale_from_loops(checked, 3, 1e6), 2.0);
+  checked[1].check_scale = 0.0;
+  EXPECT_EQ(odometry_cov_scale_from_loops(checked, 3, 1e6), 1.0);
+  // The check scale: the growth of the absolute position variance over the relative covariance's trace.
+  EXPECT_NEAR(odometry_check_scale(cov(0.1, 0.01), 0.5, 0.3), (0.25 - 0.09) / 0.03, 1e-9);
+  EXPECT_EQ(odometry_check_scale(cov(0.1, 0.01), 0.3, 0.5), 0.0);  // it learnt where it is in between
+  EXPECT_EQ(odometry_check_scale(cov(0.1, 0.01), std::nan(""), 0.1), 0.0);
+}
+
+// A filter whose step covariances claim 10 times too small a sigma, while its absolute position sigma grows
+// honestly: a single true loop after a drifted lap is an outlier to the graph at the claimed covariance and
+// is switched off; with the scale one loop shows within the odometry's own sigma, and the robust loss as
+// wide as that odometry's uncertainty seen through the edge (loop_loss_scale()), it is kept and removes most
+// of the drift.
+TEST(PoseGraph, OneTrueLoopIsKeptWhenTheOdometrysStepCovarianceIsOverconfident) {
+  const std::size_t per_lap = 100;
+  const Drive d = circle_drive(per_lap, 0.004);
+  PoseGraphConfig config;
+  const std::size_t j = 5, i = j + per_lap;
+  // The odometry's covariance of T_j_i, composed from its (overconfident) steps, and the honest one.
+  PoseCov claimed = PoseCov::Zero(), honest = PoseCov::Zero();
+  Eigen::Isometry3d T_j_f = Eigen::Isometry3d::Identity();
+  for (std::size_t f = j + 1; f <= i; ++f) {
+    const Eigen::Isometry3d step = d.odometry[f - 1].inverse() * d.odometry[f];
+    const PoseCov step_cov = config.model_cov(step);
+    claimed = compose_pose_cov(T_j_f, claimed, step, 0.01 * step_cov);
+    honest = compose_pose_cov(T_j_f, honest, step, step_cov);
+    T_j_f = T_j_f * step;
+  }
+  LoopInnovation loop;
+  const Eigen::Isometry3d T_j_i_truth = d.truth[j].inverse() * d.truth[i];
+  const Eigen::Isometry3d T_j_i_odometry = d.odometry[j].inverse() * d.odometry[i];
+  loop.error.head<3>() = T_j_i_truth.translation() - T_j_i_odometry.translation();
+  loop.error.tail<3>() = so3_log(T_j_i_odometry.rotation().transpose() * T_j_i_truth.rotation());
+  loop.odometry_cov = claimed;
+  loop.loop_cov = cov(0.1, 0.01);
+  const double sigma_j = 0.2;
+  const double sigma_i = std::sqrt(sigma_j * sigma_j + honest.topLeftCorner<3, 3>().trace());
+  loop.check_scale = odometry_check_scale(claimed, sigma_i, sigma_j);
+  EXPECT_NEAR(loop.check_scale, 100.0, 1.0);
+  const double k = odometry_cov_scale_from_loops({loop}, 3, 1e6);
+  EXPECT_GT(k, 1.0);
+  EXPECT_LE(k, loop.check_scale);
+  const auto solve = [&](double scale, bool with_loop, bool with_loss_scale) {
+    PoseGraph graph(config);
+    for (const auto& T : d.odometry) graph.add_node(T);
+    for (std::size_t f = 1; f < d.odometry.size(); ++f) {
+      const Eigen::Isometry3d step = d.odometry[f - 1].inverse() * d.odometry[f];
+      graph.add_edge(f - 1, f, EdgeKind::kOdometry, step, scale * 0.01 * config.model_cov(step));
+    }
+    if (with_loop)
+      graph.add_edge(j, i, EdgeKind::kLoop, T_j_i_truth, loop.loop_cov,
+                     with_loss_scale ? loop_loss_scale(config, scale * claimed, loop.loop_cov) : 0.0);
+    graph.optimize(true, 0);
+    return graph;
+  };
+  const double odometry_m = rmse(solve(1.0, false, false), d.truth);
+  const PoseGraph unscaled = solve(1.0, true, false);
+  ASSERT_TRUE(unscaled.edges().back().outlier)
+      << "the premise: at the claimed covariance the loop is an outlier";
+  // The scaled odometry alone leaves the loop deep in the robust loss's flat tail: switched off too.
+  EXPECT_TRUE(solve(k, true, false).edges().back().outlier);
+  const PoseGraph scaled = solve(k, true, true);
+  EXPECT_FALSE(scaled.edges().back().outlier) << "chi2 " << scaled.edges().back().chi2;
+  EXPECT_LT(rmse(scaled, d.truth), 0.5 * odometry_m);
+}
+
+// The loop's robust loss scale: the configured one when the odometry knows T_j_i exactly, growing with the
+// odometry's uncertainty in units of the edge's.
+TEST(PoseGraph, LoopLossScaleGrowsWithTheOdometrysUncertaintyOfTheLoop) {
+  PoseGraphConfig config;
+  config.loss_scale = 2.0;
+  EXPECT_DOUBLE_EQ(loop_loss_scale(config, PoseCov::Zero(), cov(0.1, 0.01)), 2.0);
+  // The odometry 3 times the edge's sigma on every axis: tr(C_loop^-1 C_odo) = 6 x 9.
+  EXPECT_NEAR(loop_loss_scale(config, cov(0.3, 0.03), cov(0.1, 0.01)), 2.0 * std::sqrt(10.0), 1e-9);
 }
 
 TEST(PoseGraph, BadEdgesAndConfigAreRejected) {

@@ -7,6 +7,7 @@
 #include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <string>
 
 #include "core/error.hpp"
 #include "stages/verify/geometric_verifier.hpp"
@@ -287,6 +288,34 @@ TEST(GeometricVerifier, TracksTheLoopIntoANightImageWhereOrbFails) {
   const VerifyResult no = verifier.verify(unrelated.i, unrelated.j, unrelated.n);
   EXPECT_FALSE(no.verified);
   EXPECT_NE(no.reason.find("; tracked: "), std::string::npos) << no.reason;
+}
+
+// A tracked edge is no more certain than its inliers' geometry: with many inliers the model's covariance
+// (verify.sigma_position_m shrinking as sqrt(min_inliers / inliers)) would claim a few centimetres, and the
+// graph would call a true loop an outlier; the edge's position sigma is the one the reason gives for its
+// inliers, its rotation sigma scaled alike.
+TEST(GeometricVerifier, ATrackedEdgeIsAsUncertainAsItsInliersGeometry) {
+  Scene s = scene(Eigen::Isometry3d::Identity(), 7, camera_pose(0.5, 0.1, -0.2, 2 * kPi / 180));
+  s.i.image = at_night(s.i.image, 5);
+  const auto geometry_sigma_m = [](const VerifyResult& r) {
+    const std::size_t at = r.reason.find("position sigma ");
+    return at == std::string::npos ? -1.0 : std::stod(r.reason.substr(at + 15));
+  };
+  const VerifyResult first = GeometricVerifier(VerifyConfig{}, s.camera).verify(s.i, s.j, s.n);
+  ASSERT_TRUE(first.verified && first.tracked) << first.reason;
+  // A bound just above this edge's geometry: the model at its inliers, sigma_position_m sqrt(25 / inliers),
+  // is then more certain than the geometry.
+  VerifyConfig config;
+  config.sigma_position_m = 1.25 * geometry_sigma_m(first);
+  const VerifyResult r = GeometricVerifier(config, s.camera).verify(s.i, s.j, s.n);
+  ASSERT_TRUE(r.verified && r.tracked) << r.reason;
+  const double geometry_m = geometry_sigma_m(r);
+  const double model_m = config.sigma_position_m * std::sqrt(25.0 / r.inliers);
+  ASSERT_GT(geometry_m, model_m + 0.01)
+      << "the premise: the model is more certain than the geometry; " << r.reason;
+  EXPECT_NEAR(std::sqrt(r.cov(0, 0)), geometry_m, 0.006) << r.reason;
+  EXPECT_NEAR(std::sqrt(r.cov(3, 3)) / std::sqrt(r.cov(0, 0)),
+              config.sigma_rotation_rad / config.sigma_position_m, 1e-9);
 }
 
 // After a long loop the odometry's pose of i carries its heading drift: started where that pose sees

@@ -122,9 +122,16 @@ double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std:
     innovation.error.tail<3>() = so3_log(T_j_i.rotation().transpose() * r.result.T_j_i.rotation());
     innovation.odometry_cov = step_pose_cov(T_o_f[j], cov[j], T_o_f[i], cov[i]);
     innovation.loop_cov = r.result.cov;
+    innovation.check_scale = odometry_check_scale(innovation.odometry_cov, sigma_m_[i], sigma_m_[j]);
     innovations.push_back(innovation);
   }
-  return odometry_cov_scale_from_loops(innovations, 3, 1e6);
+  const double scale = odometry_cov_scale_from_loops(innovations, 3, 1e6);
+  if (innovations.size() < 3) {
+    for (const LoopInnovation& n : innovations)
+      spdlog::debug("posegraph: a loop's check scale {:.3g}, its NIS at scale 1 {:.3g}; scale {:.3g}",
+                    n.check_scale, n.error.dot((n.odometry_cov + n.loop_cov).ldlt().solve(n.error)), scale);
+  }
+  return scale;
 }
 
 std::optional<Eigen::Isometry3d> LoopCloser::pose_of(std::size_t frame) const {
@@ -248,8 +255,10 @@ double LoopCloser::solve(std::size_t last, bool final) {
     const std::int64_t b = node_of[r.loop.query - first_];
     if (a < 0 || b < 0) continue;
     edge_of_loop.push_back({{r.loop.query, r.loop.reference}, graph.edges().size()});
+    // The robust loss as wide as the odometry's (scaled) uncertainty of T_j_i makes a true loop's residual.
+    const PoseCov odometry_ji = relative_odometry_cov(r.loop.reference, r.loop.query, scale);
     graph.add_edge(static_cast<std::size_t>(a), static_cast<std::size_t>(b), EdgeKind::kLoop, r.result.T_j_i,
-                   r.result.cov);
+                   r.result.cov, loop_loss_scale(graph_config_, odometry_ji, r.result.cov));
   }
   const auto start = std::chrono::steady_clock::now();
   const SolveReport report = graph.optimize(final, final ? 0.0 : graph_config_.max_solve_s);

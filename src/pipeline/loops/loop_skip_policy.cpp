@@ -94,6 +94,7 @@ void LoopCloser::add_innovation(const LoopResult& r) {
   innovation.error.tail<3>() = so3_log(T_j_i.rotation().transpose() * r.result.T_j_i.rotation());
   innovation.odometry_cov = step_pose_cov(chain_T_[j], chain_cov_[j], chain_T_[i], chain_cov_[i]);
   innovation.loop_cov = r.result.cov;
+  innovation.check_scale = odometry_check_scale(innovation.odometry_cov, sigma_m_[i], sigma_m_[j]);
   innovations_.push_back(innovation);
   checked_spans_.push_back(
       {r.loop.query, r.loop.reference, odometry_cov_scale_from_loops({innovation}, 1, 1e6), r.result.cov});

@@ -99,7 +99,14 @@ Eigen::Matrix<double, 6, 6> PoseGraphConfig::with_floors(const Eigen::Matrix<dou
 double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
                                      double max_scale) {
   constexpr double kChi2MedianDof6 = 5.348120627447;
-  if (loops.empty() || loops.size() < min_loops) return 1.0;
+  if (loops.empty()) return 1.0;
+  if (loops.size() < min_loops) {
+    double check = max_scale;
+    for (const LoopInnovation& loop : loops)
+      check = std::min(check, std::isfinite(loop.check_scale) ? loop.check_scale : 0.0);
+    if (!(check > 1.0)) return 1.0;
+    max_scale = check;
+  }
   std::vector<double> nis(loops.size());
   const auto median_nis = [&](double k) {
     for (std::size_t n = 0; n < loops.size(); ++n) {
@@ -122,6 +129,14 @@ double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, s
   return std::exp(hi);
 }
 
+double odometry_check_scale(const Matrix6d& odometry_cov, double sigma_i_m, double sigma_j_m) {
+  const double growth_m2 = sigma_i_m * sigma_i_m - sigma_j_m * sigma_j_m;
+  const double trace_m2 = odometry_cov.topLeftCorner<3, 3>().trace();
+  if (!(std::isfinite(growth_m2) && growth_m2 > 0.0 && std::isfinite(trace_m2) && trace_m2 > 0.0)) return 0.0;
+  const double scale = growth_m2 / trace_m2;
+  return std::isfinite(scale) ? scale : 0.0;
+}
+
 PoseGraph::PoseGraph(const PoseGraphConfig& config) : config_(config) {}
 
 std::size_t PoseGraph::add_node(const Eigen::Isometry3d& T_w_b) {
@@ -130,8 +145,16 @@ std::size_t PoseGraph::add_node(const Eigen::Isometry3d& T_w_b) {
   return initial_.size() - 1;
 }
 
+double loop_loss_scale(const PoseGraphConfig& config, const Matrix6d& odometry_cov,
+                       const Matrix6d& loop_cov) {
+  const Eigen::LDLT<Matrix6d> ldlt(loop_cov);
+  const double spread = ldlt.solve(0.5 * (odometry_cov + odometry_cov.transpose())).trace();
+  if (!(std::isfinite(spread) && spread > 0.0)) return config.loss_scale;
+  return config.loss_scale * std::sqrt(1.0 + spread / 6.0);
+}
+
 void PoseGraph::add_edge(std::size_t a, std::size_t b, EdgeKind kind, const Eigen::Isometry3d& T_a_b,
-                         const Eigen::Matrix<double, 6, 6>& cov) {
+                         const Eigen::Matrix<double, 6, 6>& cov, double loss_scale) {
   if (a >= node_count() || b >= node_count() || a == b)
     throw std::invalid_argument("pose graph edge between unknown or equal nodes");
   const Eigen::LLT<Matrix6d> cov_llt(cov);
@@ -146,6 +169,7 @@ void PoseGraph::add_edge(std::size_t a, std::size_t b, EdgeKind kind, const Eige
   edge.kind = kind;
   edge.T_a_b = T_a_b;
   edge.sqrt_information = llt.matrixU();  // U^T U = information, so |U r|^2 = r^T information r
+  edge.loss_scale = std::isfinite(loss_scale) && loss_scale > 0.0 ? loss_scale : 0.0;
   edges_.push_back(edge);
 }
 
@@ -184,15 +208,27 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(problem_options);
   ceres::EigenQuaternionManifold quaternion;
-  std::unique_ptr<ceres::LossFunction> loss;
-  if (config_.loss == "cauchy") loss = std::make_unique<ceres::CauchyLoss>(config_.loss_scale);
-  if (config_.loss == "huber") loss = std::make_unique<ceres::HuberLoss>(config_.loss_scale);
+  const auto make_loss = [&](double scale) -> std::unique_ptr<ceres::LossFunction> {
+    if (config_.loss == "cauchy") return std::make_unique<ceres::CauchyLoss>(scale);
+    if (config_.loss == "huber") return std::make_unique<ceres::HuberLoss>(scale);
+    return nullptr;
+  };
+  const std::unique_ptr<ceres::LossFunction> loss = make_loss(config_.loss_scale);
+  std::vector<std::unique_ptr<ceres::LossFunction>> edge_losses;  // loop edges with their own scale
   for (const PoseGraphEdge& e : edges_) {
     if (e.outlier) continue;
-    if (e.kind == EdgeKind::kLoop) ++report.loop_edges;
+    ceres::LossFunction* edge_loss = nullptr;
+    if (e.kind == EdgeKind::kLoop) {
+      ++report.loop_edges;
+      edge_loss = loss.get();
+      if (e.loss_scale > 0.0 && loss) {
+        edge_losses.push_back(make_loss(e.loss_scale));
+        edge_loss = edge_losses.back().get();
+      }
+    }
     auto* cost = new RelativePoseCost(e.T_a_b, e.sqrt_information);
-    problem.AddResidualBlock(cost, e.kind == EdgeKind::kLoop ? loss.get() : nullptr, state_[e.a].data(),
-                             state_[e.a].data() + 3, state_[e.b].data(), state_[e.b].data() + 3);
+    problem.AddResidualBlock(cost, edge_loss, state_[e.a].data(), state_[e.a].data() + 3, state_[e.b].data(),
+                             state_[e.b].data() + 3);
   }
   for (std::size_t k = 0; k < state_.size(); ++k) {
     if (!problem.HasParameterBlock(state_[k].data())) continue;

@@ -35,7 +35,7 @@ struct PoseGraphConfig {
   double odometry_sigma_rotation_rad_per_sqrt_m = 0.002;
   double odometry_sigma_rotation_floor_rad = 0.0005;
   std::string loss = "cauchy";   // cauchy | huber | none (loop edges only)
-  double loss_scale = 1.0;       // in whitened units (sigma)
+  double loss_scale = 1.0;       // in whitened units (sigma); a loop edge's own: loop_loss_scale()
   double outlier_chi2 = 22.46;   // chi-square, 6 dof, 0.999
   int max_iterations = 50;       // per solve
   double max_solve_s = 2.0;      // per solve while the stream runs (the final solve has no time bound)
@@ -76,6 +76,12 @@ struct LoopInnovation {
   Eigen::Matrix<double, 6, 1> error = Eigen::Matrix<double, 6, 1>::Zero();
   Eigen::Matrix<double, 6, 6> odometry_cov = Eigen::Matrix<double, 6, 6>::Zero();
   Eigen::Matrix<double, 6, 6> loop_cov = Eigen::Matrix<double, 6, 6>::Identity();
+  // How much less certain the odometry itself says T_j_i is than odometry_cov (0: it does not say): its
+  // absolute position variance's growth from j to i (sigma_i^2 - sigma_j^2, sigma the square root of the
+  // position covariance's trace: the variance the verifier's odometry check judged the loop with) over the
+  // trace of odometry_cov's position block (odometry_check_scale()). A loop that passed that check is
+  // consistent with an odometry this much less certain, no more.
+  double check_scale = 0.0;
 };
 
 // The factor k >= 1 for the odometry's covariances such that the median over the loops of
@@ -83,9 +89,17 @@ struct LoopInnovation {
 // know the relative pose of a loop's two frames better than the verified loops show (a filter's
 // overconfidence) gets its covariance scaled up by what the loops show. Never scaled down (1 when the loops
 // agree at least as well as predicted), at most max_scale; the median lets up to half the loops be wrong.
-// 1 with fewer than min_loops loops.
+// With fewer than min_loops loops (one or two) the median cannot outvote a wrong loop, so the scale they
+// show is taken only as far as the odometry's own sigmas allow it: at most the smallest check_scale among
+// them (1 when one of them has none), the uncertainty the odometry check already granted each loop.
+// 1 without loops.
 double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
                                      double max_scale);
+
+// LoopInnovation::check_scale: (sigma_i_m^2 - sigma_j_m^2) / trace of the position block of odometry_cov,
+// 0 when it is not a finite number > 0 (no sigmas, or the odometry learnt where it is between j and i).
+double odometry_check_scale(const Eigen::Matrix<double, 6, 6>& odometry_cov, double sigma_i_m,
+                            double sigma_j_m);
 
 // What a loop edge between frames j and i would add to what the odometry knows of their relative pose: the
 // fraction by which it shrinks the largest position variance of T_j_i, 1 - lambda_max(P_fused) /
@@ -97,6 +111,16 @@ double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, s
 double loop_information_gain(const Eigen::Matrix<double, 6, 6>& odometry_cov,
                              const Eigen::Matrix<double, 6, 6>& loop_cov);
 
+// The robust loss's scale for a loop edge (in the edge's whitened units): loss_scale times
+// sqrt(1 + tr(C_loop^-1 C_odometry) / 6). Before the solve a true loop's whitened squared residual is spread
+// as chi-square with 6 + tr(C_loop^-1 C_odometry) mean, C_odometry the odometry's covariance of T_j_i (as the
+// graph scales it): the odometry's drift seen through the edge's sigma. A loop that corrects a drift far
+// larger than its own sigma would otherwise start deep in the loss's flat tail, barely pull the graph and be
+// switched off as an outlier although the odometry check found it consistent. Equal to loss_scale when the
+// odometry knows T_j_i exactly.
+double loop_loss_scale(const PoseGraphConfig& config, const Eigen::Matrix<double, 6, 6>& odometry_cov,
+                       const Eigen::Matrix<double, 6, 6>& loop_cov);
+
 enum class EdgeKind { kOdometry, kLoop };
 
 struct PoseGraphEdge {
@@ -104,8 +128,9 @@ struct PoseGraphEdge {
   EdgeKind kind = EdgeKind::kOdometry;
   Eigen::Isometry3d T_a_b = Eigen::Isometry3d::Identity();
   Eigen::Matrix<double, 6, 6> sqrt_information = Eigen::Matrix<double, 6, 6>::Identity();
-  bool outlier = false;  // loop edges switched off by the last solve
-  double chi2 = 0.0;     // whitened squared residual after the last solve
+  double loss_scale = 0.0;  // loop edges: the robust loss's scale (0: posegraph.loss_scale)
+  bool outlier = false;     // loop edges switched off by the last solve
+  double chi2 = 0.0;        // whitened squared residual after the last solve
 };
 
 struct SolveReport {
@@ -125,8 +150,9 @@ class PoseGraph {
   // A node with its initial pose; returns its id (0, 1, ...).
   std::size_t add_node(const Eigen::Isometry3d& T_w_b);
   // Throws std::invalid_argument for an unknown node or a covariance that is not positive definite.
+  // `loss_scale`: a loop edge's robust loss scale (loop_loss_scale()); 0: posegraph.loss_scale.
   void add_edge(std::size_t a, std::size_t b, EdgeKind kind, const Eigen::Isometry3d& T_a_b,
-                const Eigen::Matrix<double, 6, 6>& cov);
+                const Eigen::Matrix<double, 6, 6>& cov, double loss_scale = 0.0);
 
   // Solves from the current estimate (from_initial: from the initial poses, so the result depends only on
   // the graph, not on earlier solves). max_seconds <= 0: no time bound. Loop edges found outliers are

@@ -266,7 +266,14 @@ GeometricVerifier::TrackedPose GeometricVerifier::track_into_i(
   if (!(sigma_m <= config_.sigma_position_m)) {
     r.verified = false;
     out.note += fmt::format(" > {} m", config_.sigma_position_m);
+    return out;
   }
+  // The model's covariance shrinks with the inlier count, but tracked points can be many and still leave the
+  // position loose (far points, a short baseline from j to its neighbour): the edge is taken no more certain
+  // than its inliers' geometry makes it, the model's covariance scaled up to that position sigma.
+  const double model_sigma_m = std::sqrt(r.cov(0, 0));
+  if (model_sigma_m > 0.0 && sigma_m > model_sigma_m)
+    r.cov *= (sigma_m * sigma_m) / (model_sigma_m * model_sigma_m);
   return out;
 }
 
