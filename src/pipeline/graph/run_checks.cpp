@@ -22,8 +22,11 @@ RunCheckInput run_check_input(const PipelineConfig& config, const Dataset& datas
   in.min_tracked_share = config.ekf.min_tracked_share;
   in.frames_processed = c.processed;
   in.odometry_source = odometry_source;
-  in.odometry_expected = odometry_expectation(config.odometry, config.ekf, dataset);
   in.frames_with_pose = c.frames_with_pose;
+  // What the source needed: only for the message of a run where no frame got a pose (a file source reads
+  // its whole trajectory again for it, as much memory as the run's odometry at its end).
+  if (odometry_source != "none" && c.frames_with_pose == 0)
+    in.odometry_expected = odometry_expectation(config.odometry, config.ekf, dataset);
   in.first_odometry_problem = c.first_odometry_problem;
   in.frames_needing_image = c.frames_needing_image;
   in.frames_decoded = c.decoded;

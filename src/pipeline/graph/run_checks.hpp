@@ -25,7 +25,8 @@ struct RunCheckInput {
   std::size_t frames_processed = 0;
   // Odometry: the source's name ("none" = appearance only, no poses expected), what it needed and did not
   // find (names the file: "poses in FILE within ... of the frame times"), frames with an estimated pose, and
-  // the first frame's reason for having none.
+  // the first frame's reason for having none (run_check_input fills odometry_expected only when no frame
+  // got a pose: the only message that uses it).
   std::string odometry_source;
   std::string odometry_expected;
   std::size_t frames_with_pose = 0;

@@ -43,7 +43,7 @@ DirdDistances::DirdDistances(const MethodContext& context, const DirdConfig& dir
 }
 
 void DirdDistances::describe(std::size_t seq, const cv::Mat* image) {
-  if (image && compact_) {
+  if (image && code_config_.compact()) {
     auto raw = std::make_unique<Descriptor>();
     extractor_.extract(*image, *raw);
     pending_.at(seq) = std::move(raw);
@@ -56,6 +56,7 @@ void DirdDistances::describe(std::size_t seq, const cv::Mat* image) {
 }
 
 void DirdDistances::begin_frame(std::size_t seq) {
+  if (released_) throw std::logic_error("DirdDistances: a frame begun after release_codes()");
   if (observed_frame(seq) && valid(seq)) {
     if (coder_) {
       coder_->observe(static_cast<std::int64_t>(seq), raw(seq));
@@ -73,13 +74,14 @@ void DirdDistances::begin_frame(std::size_t seq) {
 }
 
 const Descriptor& DirdDistances::raw(std::size_t seq) const {
-  if (!compact_) return raw_.descriptor(seq);
+  if (!code_config_.compact()) return raw_.descriptor(seq);
   if (!pending_.at(seq)) throw std::logic_error(fmt::format("raw descriptor of seq {} already dropped", seq));
   return *pending_[seq];
 }
 
 std::size_t DirdDistances::distance_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
                                           std::vector<DistanceEntry>& out) {
+  if (released_) throw std::logic_error("DirdDistances: distances asked after release_codes()");
   if (j_begin >= j_end || !code(seq)) return 0;
   for (std::size_t j = j_begin; j < j_end; ++j) {
     if (raw_.state(j) == DescriptorStore::State::kEmpty) {
@@ -117,6 +119,7 @@ std::size_t DirdDistances::distance_range(std::size_t seq, std::size_t j_begin, 
 }
 
 bool DirdDistances::code(std::size_t seq) {
+  if (released_) throw std::logic_error("DirdDistances: coding asked after release_codes()");
   if (coded_[seq]) return true;
   if (!valid(seq)) return false;
   if (!standardized()) {
@@ -145,7 +148,7 @@ double DirdDistances::distance(std::size_t a, std::size_t b) const {
 }
 
 bool DirdDistances::code_like(std::size_t seq, const Descriptor& raw, Descriptor& code, double& norm) {
-  if (compact_) throw std::logic_error("DirdDistances::code_like: not with a compact code");
+  if (code_config_.compact()) throw std::logic_error("DirdDistances::code_like: not with a compact code");
   if (!coded_[seq]) return false;
   norm = 0.0;
   if (!standardizer_) {
@@ -166,7 +169,17 @@ double DirdDistances::distance_to(const Descriptor& code, double norm, std::size
   return static_cast<double>(l1_distance(code, codes_[j]));
 }
 
+void DirdDistances::release_codes() {
+  if (!compact_ || released_) return;
+  released_summary_ = summary();
+  released_ = true;
+  compact_.reset();
+  coder_.reset();
+  std::vector<std::unique_ptr<Descriptor>>().swap(pending_);
+}
+
 nlohmann::json DirdDistances::summary() const {
+  if (released_) return released_summary_;
   if (!standardized()) return nlohmann::json::object();
   if (compact_) {
     return {{"standardize",
@@ -190,7 +203,7 @@ nlohmann::json DirdDistances::summary() const {
 
 std::pair<std::size_t, Descriptor> DirdDistances::example_descriptor(std::optional<std::int64_t> seq) const {
   const Dataset& dataset = context_.images.dataset();
-  if (seq && compact_) {
+  if (seq && code_config_.compact()) {
     // Its raw descriptor was dropped once coded: described again from the dataset.
     const std::size_t frame = context_.seqs.frame(*seq);
     return {frame, extractor_.extract(dataset.load_image(frame))};

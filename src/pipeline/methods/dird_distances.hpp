@@ -39,7 +39,7 @@ class DirdDistances {
   DirdDistances(const MethodContext& context, const DirdConfig& dird, const StandardizeConfig& standardize,
                 const DirdCodeConfig& codes = {});
 
-  bool standardized() const { return standardizer_.has_value() || coder_.has_value(); }
+  bool standardized() const { return standardizer_.has_value() || coder_.has_value() || released_; }
   // Frames whose raw descriptor feeds the statistics.
   bool observed_frame(std::size_t seq) const { return standardized() && seq % observe_every_ == 0; }
 
@@ -52,6 +52,13 @@ class DirdDistances {
   // skipping frames without a descriptor or codes; returns the comparisons made.
   std::size_t distance_range(std::size_t seq, std::size_t j_begin, std::size_t j_end,
                              std::vector<DistanceEntry>& out);
+
+  // After the method's last distance (its finish()): with a compact code, frees the code matrix and the
+  // statistics' snapshots, which nothing reads after the stream (the plots' example descriptor is described
+  // again from the dataset), so that the end of the run (outputs, evaluation, summary) reuses their memory
+  // instead of adding to it. summary() still reports them; distance_range() throws std::logic_error after.
+  // Nothing to free with int8 codes (example_descriptor() reads their raw descriptors).
+  void release_codes();
 
   // Viewpoint tolerance (pipeline/methods/viewpoint_distances.hpp): `raw`, another descriptor of frame seq
   // (a warped image), coded as frame seq is (same statistics); false when seq is not coded. Not with a
@@ -100,6 +107,8 @@ class DirdDistances {
   std::vector<double> distances_;     // the current range's distances (NaN: not compared)
   std::atomic<std::size_t> descriptors_computed_{0};
   std::size_t distances_computed_ = 0, frames_coded_ = 0, frames_before_statistics_ = 0;
+  bool released_ = false;            // release_codes() freed the compact codes
+  nlohmann::json released_summary_;  // summary() as it was then
 };
 
 }  // namespace loopgate

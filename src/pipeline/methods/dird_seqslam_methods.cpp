@@ -176,7 +176,10 @@ class DirdSeqSlamFull final : public DetectionMethod {
     viewpoint_.release_before(seq + 1);
     matching_.push(static_cast<std::int64_t>(seq), row_);
   }
-  void finish() override { matching_.flush(); }
+  void finish() override {
+    matching_.flush();
+    distances_.release_codes();  // no distance after the stream: the end of the run reuses their memory
+  }
 
   std::optional<FrameVerdict> detection(std::size_t seq) override {
     return matching_.detection(seq, distances_.valid(seq), false);
@@ -238,6 +241,7 @@ class DirdSeqSlamGated final : public DetectionMethod {
     rows_.finish(static_cast<std::int64_t>(match_end_seq_),
                  [this](std::int64_t i, const std::vector<DistanceEntry>& row) { matching_.push(i, row); });
     matching_.flush();
+    distances_.release_codes();  // no distance after the stream: the end of the run reuses their memory
   }
 
   void add_frame_cells(const FrameRecord& r, CsvRow& row) const override { cells_.add_frame_cells(r, row); }

@@ -1,6 +1,8 @@
 #include "pipeline/methods/gated_cells.hpp"
 
 #include <algorithm>
+#include <cstdint>
+#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -19,6 +21,9 @@ PoseGatedCells::PoseGatedCells(const MethodContext& context)
       requested_by_(context.capacity),
       feedback_(context.feedback) {
   for (std::atomic<std::int64_t>& by : requested_by_) by.store(-1, std::memory_order_relaxed);
+  if (context.capacity > static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max()))
+    throw std::invalid_argument("PoseGatedCells: more than 2^31 - 1 frames");
+  pose_gate_.reserve(context.capacity);
   context.images.keep_recent(static_cast<std::size_t>(std::max(0, context.config.run.image_cache_frames)));
   if (feedback_) poses_.resize(context.capacity);
 }
@@ -64,43 +69,50 @@ void PoseGatedCells::reanchor_frame(std::size_t seq, Eigen::Isometry3d& T_w_b, E
   const ReanchoredPose pose = reanchor(anchor, T_w_b, P_m2);
   T_w_b = pose.T_w_i;
   P_m2 = pose.P_m2;
-  g.anchor_query = static_cast<std::int64_t>(q);
-  g.anchor_reference = static_cast<std::int64_t>(r);
+  g.anchor_query = static_cast<std::int32_t>(q);
+  g.anchor_reference = static_cast<std::int32_t>(r);
   g.growth_clamped = pose.growth_clamped;
 }
 
 void PoseGatedCells::gate(FrameRecord& r, bool describe_own_frame) {
   const auto seq = static_cast<std::int64_t>(r.seq);
   GateFrame& g = frames_[r.seq];
-  g.decision.frame = seq;
+  GateDecision decision;
+  decision.frame = seq;
   if (r.usable_pose()) {
     try {
       Eigen::Isometry3d T_w_b = r.odometry.pose.T_w_b;
       Eigen::Matrix3d P_m2 = r.odometry.pose.position_cov_m2();
       if (feedback_) reanchor_frame(r.seq, T_w_b, P_m2, g);
-      g.decision = pose_gate_.process(seq, T_w_b.translation(), P_m2);
+      decision = pose_gate_.process(seq, T_w_b.translation(), P_m2);
       if (feedback_) {
         poses_[r.seq] = FramePoses{true, r.odometry.pose.T_w_b, r.odometry.pose.position_cov_m2(), T_w_b,
                                    0.5 * (P_m2 + P_m2.transpose())};
         if (g.anchor_query >= 0) {
           ++frames_reanchored_;
           growth_clamped_ += g.growth_clamped ? 1 : 0;
-          const std::pair anchor(g.anchor_query, g.anchor_reference);
+          const std::pair<std::int64_t, std::int64_t> anchor(g.anchor_query, g.anchor_reference);
           if (anchors_used_.empty() || anchors_used_.back() != anchor) anchors_used_.push_back(anchor);
         }
       }
       g.ran = true;
       ++frames_gate_ran_;
-      if (g.decision.gated) ++frames_gated_;
+      if (decision.gated) ++frames_gated_;
     } catch (const DataError& e) {
       add_message(r.warnings, std::string("gate: pose not usable: ") + e.what());
       ++gate_errors_;
       g.anchor_query = g.anchor_reference = -1;
-      g.decision = GateDecision{};
-      g.decision.frame = seq;
+      decision = GateDecision{};
+      decision.frame = seq;
     }
   }
-  AreaUpdate update = tracker_.update(g.decision);
+  g.distance_m = decision.distance_m;
+  g.threshold_m = decision.threshold_m;
+  g.sigma_m = decision.sigma_m;
+  g.nearest_seq = static_cast<std::int32_t>(decision.nearest_frame);
+  g.has_nearest = decision.has_nearest;
+  g.gated = decision.gated;
+  AreaUpdate update = tracker_.update(decision);
   g.area_id = update.joined_area;
   g.cells = std::move(update.new_cells);
   g.describe = std::move(update.new_descriptor_frames);
@@ -148,14 +160,14 @@ std::vector<CellSpan> PoseGatedCells::take_cells(std::size_t seq) {
 
 void PoseGatedCells::add_frame_cells(const FrameRecord& r, CsvRow& row) const {
   const GateFrame& g = frames_[r.seq];
-  const bool has_nearest = g.ran && g.decision.has_nearest;
-  row.add("nearest_frame", has_nearest ? std::to_string(context_.seqs.label(g.decision.nearest_frame)) : "");
-  row.add("gate_d_m", has_nearest ? format_fixed(g.decision.distance_m, 6) : "");
-  row.add("gate_threshold_m", g.ran ? format_fixed(g.decision.threshold_m, 6) : "");
-  row.add("gated", g.decision.gated ? "y" : "n");
+  const bool has_nearest = g.ran && g.has_nearest;
+  row.add("nearest_frame", has_nearest ? std::to_string(context_.seqs.label(g.nearest_seq)) : "");
+  row.add("gate_d_m", has_nearest ? format_fixed(g.distance_m, 6) : "");
+  row.add("gate_threshold_m", g.ran ? format_fixed(g.threshold_m, 6) : "");
+  row.add("gated", g.gated ? "y" : "n");
   row.add("area_id", std::to_string(g.area_id));
   if (feedback_) {
-    row.add("gate_sigma_m", g.ran ? format_fixed(g.decision.sigma_m, 6) : "");
+    row.add("gate_sigma_m", g.ran ? format_fixed(g.sigma_m, 6) : "");
     const bool anchored = g.anchor_query >= 0;
     row.add("gate_anchor_i", anchored ? std::to_string(context_.seqs.label(g.anchor_query)) : "");
     row.add("gate_anchor_j", anchored ? std::to_string(context_.seqs.label(g.anchor_reference)) : "");

@@ -86,15 +86,19 @@ class PoseGatedCells {
   const CandidateAreaTracker& tracker() const { return tracker_; }
 
  private:
-  struct GateFrame {  // per sequence number
-    bool ran = false;
-    GateDecision decision;
-    int area_id = -1;
+  // Per sequence number (kept for the whole run: 96 bytes a frame): what frames.csv shows of the gate's
+  // decision, the area joined, the loop the pose was re-anchored through, and the frame's lists. Seqs fit in
+  // 32 bits (the constructor checks the capacity).
+  struct GateFrame {
+    double distance_m = 0, threshold_m = 0, sigma_m = 0;  // the decision's (GateDecision)
+    std::int32_t nearest_seq = -1;                        // the decision's nearest_frame (-1: none)
+    std::int32_t area_id = -1;
+    std::int32_t anchor_query = -1;  // gate.feedback: the loop (seqs) the pose was re-anchored through
+    std::int32_t anchor_reference = -1;
+    bool ran = false, has_nearest = false, gated = false;
+    bool growth_clamped = false;         // the odometry's covariance growth since the loop was not PSD
     std::vector<std::int64_t> describe;  // seqs whose descriptors this frame's describe computes
     std::vector<CellSpan> cells;         // cells its match computes
-    std::int64_t anchor_query = -1;      // gate.feedback: the loop (seqs) the pose was re-anchored through
-    std::int64_t anchor_reference = -1;
-    bool growth_clamped = false;  // the odometry's covariance growth since the loop was not PSD
   };
   // gate.feedback: the poses of a frame the gate stored (by seq).
   struct FramePoses {

@@ -37,11 +37,17 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
       visual_odometry_(visual_odometry),
       total_frames_(total_frames),
       closer_(closer),
-      profiler_({kStageNames.begin(), kStageNames.end()}) {
+      profiler_({kStageNames.begin(), kStageNames.end()}, total_frames) {
   const std::string& progress = config.output.progress;
   show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
   keep_step_cov_ = config.posegraph.enabled && config.posegraph.odometry_cov == "odometry" &&
                    (config.verify.enabled || keep_step_cov);
+  // At most one entry a frame: reserved, so that they do not keep up to twice their entries and copy them as
+  // they grow (reserved pages not written take no memory).
+  tracked_poses_.reserve(total_frames);
+  tracked_frames_.reserve(total_frames);
+  tracked_sigma_m_.reserve(total_frames);
+  if (keep_step_cov_) tracked_step_cov_.reserve(total_frames);
 }
 
 // frames.csv: the frame, its pose (x..qw, sigma_m = sqrt of the largest eigenvalue of the position

@@ -26,12 +26,33 @@ LatencyStats compute_stats(std::vector<double> samples_ms) {
   return stats;
 }
 
-StageProfiler::StageProfiler(std::vector<std::string> stage_names)
-    : names_(std::move(stage_names)), service_ms_(names_.size()), wait_ms_(names_.size()) {}
+void SampleSeries::add(double ms) {
+  samples_.push_back(static_cast<float>(ms));
+  total_ms_ += ms;
+  max_ms_ = samples_.size() == 1 ? ms : std::max(max_ms_, ms);
+}
+
+LatencyStats SampleSeries::stats() const {
+  std::vector<double> samples_ms(samples_.size());
+  // The nearest nanosecond of each float: the measured duration itself below 8 ms.
+  std::transform(samples_.begin(), samples_.end(), samples_ms.begin(),
+                 [](float ms) { return 1e-6 * std::round(1e6 * static_cast<double>(ms)); });
+  LatencyStats stats = compute_stats(std::move(samples_ms));
+  stats.total_ms = total_ms_;
+  stats.max_ms = max_ms_;
+  return stats;
+}
+
+StageProfiler::StageProfiler(std::vector<std::string> stage_names, std::size_t expected_frames)
+    : names_(std::move(stage_names)), service_ms_(names_.size()), wait_ms_(names_.size()) {
+  for (SampleSeries& s : service_ms_) s.reserve(expected_frames);
+  for (SampleSeries& s : wait_ms_) s.reserve(expected_frames);
+  latency_ms_.reserve(expected_frames);
+}
 
 void StageProfiler::add(std::size_t stage, double service_ms, double wait_ms) {
-  service_ms_[stage].push_back(service_ms);
-  wait_ms_[stage].push_back(wait_ms);
+  service_ms_[stage].add(service_ms);
+  wait_ms_[stage].add(wait_ms);
 }
 
 nlohmann::json StageProfiler::to_json() const {

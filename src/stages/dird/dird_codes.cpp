@@ -402,41 +402,59 @@ CompactCodeMatrix::CompactCodeMatrix(const DirdCodeConfig& config, double clamp_
       words_(code_words(config.code)),
       kernel_(best_popcount_kernel()),
       bits_(new std::uint64_t[capacity * words_]),
-      count_(new std::int32_t[config.code == DirdCode::kSign ? 0 : capacity]) {
+      count_(new std::int32_t[config.code == DirdCode::kSign ? 0 : capacity]),
+      row_of_(new std::uint32_t[capacity]) {
   config_.validate();
   if (words_ == 0) throw std::invalid_argument("CompactCodeMatrix: int8 is not a compact code");
+  if (capacity >= kNoRow) throw std::invalid_argument("CompactCodeMatrix: capacity beyond 2^32 - 1 frames");
+  std::fill_n(row_of_.get(), capacity, kNoRow);
 }
 
-std::uint64_t* CompactCodeMatrix::row(std::size_t seq) {
+std::size_t CompactCodeMatrix::row_index(std::size_t seq, bool create) {
   if (seq >= capacity_) {
     throw std::out_of_range("CompactCodeMatrix: seq " + std::to_string(seq) + " beyond capacity " +
                             std::to_string(capacity_));
   }
-  return bits_.get() + seq * words_;
+  if (row_of_[seq] == kNoRow) {
+    if (!create) throw std::logic_error("CompactCodeMatrix: seq " + std::to_string(seq) + " not coded");
+    row_of_[seq] = static_cast<std::uint32_t>(rows_++);
+  }
+  return row_of_[seq];
+}
+
+std::size_t CompactCodeMatrix::row_index(std::size_t seq) const {
+  if (seq >= capacity_ || row_of_[seq] == kNoRow)
+    throw std::logic_error("CompactCodeMatrix: seq " + std::to_string(seq) + " not coded");
+  return row_of_[seq];
+}
+
+void CompactCodeMatrix::store_count(std::size_t row, std::int32_t count) {
+  if (config_.code != DirdCode::kSign) count_[row] = count;
 }
 
 void CompactCodeMatrix::set(std::size_t seq, const Descriptor& standard) {
-  const std::int32_t count = make_compact_code(config_, clamp_sigma_, standard, row(seq));
-  if (config_.code != DirdCode::kSign) count_[seq] = count;
+  const std::size_t row = row_index(seq, true);
+  store_count(row, make_compact_code(config_, clamp_sigma_, standard, bits_.get() + row * words_));
 }
 
 void CompactCodeMatrix::set(std::size_t seq, CausalCompactCoder& coder, std::int64_t frame,
                             const Descriptor& raw) {
-  const std::int32_t count = coder.code(frame, raw, row(seq));
-  if (config_.code != DirdCode::kSign) count_[seq] = count;
+  const std::size_t row = row_index(seq, true);
+  store_count(row, coder.code(frame, raw, bits_.get() + row * words_));
 }
 
 double CompactCodeMatrix::distance(std::size_t a, const CompactCodeMatrix& other, std::size_t b) const {
-  const std::uint64_t* ca = bits_.get() + a * words_;
-  const std::uint64_t* cb = other.bits_.get() + b * other.words_;
+  const std::size_t ra = row_index(a), rb = other.row_index(b);
+  const std::uint64_t* ca = bits_.get() + ra * words_;
+  const std::uint64_t* cb = other.bits_.get() + rb * other.words_;
   switch (config_.code) {
     case DirdCode::kSign: return sign_distance_of(hamming_words(ca, cb, kCodePlaneWords, kernel_));
     case DirdCode::kTernary: {
-      if (count_[a] == 0 || other.count_[b] == 0) return 1.0;
-      return ternary_distance_of(ternary_dot(ca, cb, kCodePlaneWords, kernel_), count_[a], other.count_[b]);
+      if (count_[ra] == 0 || other.count_[rb] == 0) return 1.0;
+      return ternary_distance_of(ternary_dot(ca, cb, kCodePlaneWords, kernel_), count_[ra], other.count_[rb]);
     }
     case DirdCode::kInt2:
-      return int2_distance_of(int2_pair_term(ca, cb, kCodePlaneWords, kernel_), count_[a], other.count_[b]);
+      return int2_distance_of(int2_pair_term(ca, cb, kCodePlaneWords, kernel_), count_[ra], other.count_[rb]);
     case DirdCode::kInt8: break;
   }
   return 1.0;
@@ -444,13 +462,19 @@ double CompactCodeMatrix::distance(std::size_t a, const CompactCodeMatrix& other
 
 namespace {
 
-// One pass over rows [j_begin, j_end) of a matrix: `pair` is the kernel of one (query, row) pair, inlined
-// into the loop with the query's words staying in cache.
+// One pass over the rows of frames [j_begin, j_end) of a matrix (row_of: the row of each frame): `pair` is
+// the kernel of one (query, row) pair, given the row's code and index, inlined into the loop with the query's
+// words staying in cache.
 template <class Pair>
-inline void row_pass(const std::uint64_t* bits, std::size_t words, std::size_t j_begin, std::size_t j_end,
-                     const std::uint8_t* coded, double* out, Pair pair) {
+inline void row_pass(const std::uint64_t* bits, std::size_t words, const std::uint32_t* row_of,
+                     std::size_t j_begin, std::size_t j_end, const std::uint8_t* coded, double* out,
+                     Pair pair) {
   for (std::size_t j = j_begin; j < j_end; ++j) {
-    if (coded[j]) out[j - j_begin] = pair(bits + j * words, j);
+    if (!coded[j]) continue;
+    const std::uint32_t r = row_of[j];
+    if (r == 0xffffffffu)
+      throw std::logic_error("CompactCodeMatrix::distances: seq " + std::to_string(j) + " not coded");
+    out[j - j_begin] = pair(bits + static_cast<std::size_t>(r) * words, r);
   }
 }
 
@@ -459,24 +483,25 @@ inline void row_pass(const std::uint64_t* bits, std::size_t words, std::size_t j
 #pragma GCC diagnostic ignored "-Wuninitialized"
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 LOOPGATE_AVX512_TARGET void row_avx512(DirdCode code, const std::uint64_t* bits, std::size_t words,
-                                       const std::int32_t* count, std::size_t a, std::size_t j_begin,
-                                       std::size_t j_end, const std::uint8_t* coded, double* out) {
-  const std::uint64_t* q = bits + a * words;
+                                       const std::int32_t* count, const std::uint32_t* row_of, std::size_t qa,
+                                       std::size_t j_begin, std::size_t j_end, const std::uint8_t* coded,
+                                       double* out) {
+  const std::uint64_t* q = bits + qa * words;
   switch (code) {
     case DirdCode::kSign:
-      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t) {
+      row_pass(bits, words, row_of, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t) {
         return sign_distance_of(hamming_words_avx512(q, c, kCodePlaneWords));
       });
       break;
     case DirdCode::kTernary:
-      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t j) {
-        if (count[a] == 0 || count[j] == 0) return 1.0;
-        return ternary_distance_of(ternary_dot_avx512(q, c, kCodePlaneWords), count[a], count[j]);
+      row_pass(bits, words, row_of, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t r) {
+        if (count[qa] == 0 || count[r] == 0) return 1.0;
+        return ternary_distance_of(ternary_dot_avx512(q, c, kCodePlaneWords), count[qa], count[r]);
       });
       break;
     case DirdCode::kInt2:
-      row_pass(bits, words, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t j) {
-        return int2_distance_of(int2_pair_term_avx512(q, c, kCodePlaneWords), count[a], count[j]);
+      row_pass(bits, words, row_of, j_begin, j_end, coded, out, [&](const std::uint64_t* c, std::size_t r) {
+        return int2_distance_of(int2_pair_term_avx512(q, c, kCodePlaneWords), count[qa], count[r]);
       });
       break;
     case DirdCode::kInt8: break;
@@ -491,14 +516,29 @@ void CompactCodeMatrix::distances(std::size_t a, std::size_t j_begin, std::size_
                                   const std::uint8_t* coded, double* out) const {
   if (a >= capacity_ || j_end > capacity_)
     throw std::out_of_range("CompactCodeMatrix::distances: beyond capacity");
+  const std::size_t qa = row_index(a);
 #if defined(LOOPGATE_CODES_SIMD_DISPATCH)
   if (kernel_ == PopcountKernel::kAvx512) {
-    row_avx512(config_.code, bits_.get(), words_, count_.get(), a, j_begin, j_end, coded, out);
+    row_avx512(config_.code, bits_.get(), words_, count_.get(), row_of_.get(), qa, j_begin, j_end, coded,
+               out);
     return;
   }
 #endif
-  row_pass(bits_.get(), words_, j_begin, j_end, coded, out,
-           [&](const std::uint64_t*, std::size_t j) { return distance(a, *this, j); });
+  const std::uint64_t* q = bits_.get() + qa * words_;
+  row_pass(
+      bits_.get(), words_, row_of_.get(), j_begin, j_end, coded, out,
+      [&](const std::uint64_t* c, std::size_t r) {
+        switch (config_.code) {
+          case DirdCode::kSign: return sign_distance_of(hamming_words(q, c, kCodePlaneWords, kernel_));
+          case DirdCode::kTernary:
+            if (count_[qa] == 0 || count_[r] == 0) return 1.0;
+            return ternary_distance_of(ternary_dot(q, c, kCodePlaneWords, kernel_), count_[qa], count_[r]);
+          case DirdCode::kInt2:
+            return int2_distance_of(int2_pair_term(q, c, kCodePlaneWords, kernel_), count_[qa], count_[r]);
+          case DirdCode::kInt8: break;
+        }
+        return 1.0;
+      });
 }
 
 }  // namespace loopgate

@@ -171,34 +171,51 @@ class CausalCompactCoder {
   CutSnapshots cuts_;
 };
 
-// Compact codes of one run, by sequence number: a contiguous matrix (capacity x code_words words),
-// allocated uninitialised so memory is committed only as frames are coded, and each code's count.
-// One writer (set) and readers of codes already set; not synchronised itself.
+// Compact codes of one run, in the order frames are coded: row r of a contiguous matrix (rows x code_words
+// words) is the r-th frame set, and a table gives each sequence number its row. A gated run codes only the
+// frames its candidate areas reach, late and out of sequence order; by sequence number the pages of the
+// frames never coded between coded ones were committed too. The matrix is allocated uninitialised for
+// `capacity` rows and filled from the front, so memory is committed only for the frames coded: code_words x 8
+// bytes each, plus 4 bytes of row table per sequence number (and 4 bytes of count per coded frame, ternary
+// and int2). One writer (set) and readers of codes already set; not synchronised itself.
 class CompactCodeMatrix {
  public:
   CompactCodeMatrix(const DirdCodeConfig& config, double clamp_sigma, std::size_t capacity);
 
-  // Codes frame `seq` from its int8 codes.
+  // Codes frame `seq` from its int8 codes (a frame set again keeps its row).
   void set(std::size_t seq, const Descriptor& standard);
   // Codes frame `seq` from its raw descriptor with `coder` (frame p = `frame`).
   void set(std::size_t seq, CausalCompactCoder& coder, std::int64_t frame, const Descriptor& raw);
+  // Whether frame `seq` was set (false beyond the capacity).
+  bool has(std::size_t seq) const { return seq < capacity_ && row_of_[seq] != kNoRow; }
+  // Frames set so far (rows in use).
+  std::size_t rows() const { return rows_; }
+  // Both frames must have been set (std::logic_error otherwise).
   double distance(std::size_t a, std::size_t b) const { return distance(a, *this, b); }
   // Frame a of this matrix against frame b of `other` (the same code; two-sequence runs).
   double distance(std::size_t a, const CompactCodeMatrix& other, std::size_t b) const;
-  // The distances of frame a to frames [j_begin, j_end) into out[0 .. j_end - j_begin), one pass over the
-  // matrix; frames whose `coded` byte is 0 are skipped (out left as it is).
+  // The distances of frame a to frames [j_begin, j_end) into out[0 .. j_end - j_begin), one pass over their
+  // rows; frames whose `coded` byte is 0 are skipped (out left as it is), the others must have been set.
   void distances(std::size_t a, std::size_t j_begin, std::size_t j_end, const std::uint8_t* coded,
                  double* out) const;
   std::size_t bytes_per_code() const { return words_ * sizeof(std::uint64_t); }
 
  private:
-  std::uint64_t* row(std::size_t seq);
+  static constexpr std::uint32_t kNoRow = 0xffffffffu;
+  // The row of frame seq, made when `create` (std::out_of_range beyond the capacity; std::logic_error for a
+  // frame not set when !create).
+  std::size_t row_index(std::size_t seq, bool create);
+  std::size_t row_index(std::size_t seq) const;
+  const std::uint64_t* code(std::size_t seq) const { return bits_.get() + row_index(seq) * words_; }
+  void store_count(std::size_t row, std::int32_t count);
+
   DirdCodeConfig config_;
   double clamp_sigma_;
-  std::size_t capacity_, words_;
+  std::size_t capacity_, words_, rows_ = 0;
   PopcountKernel kernel_;
-  std::unique_ptr<std::uint64_t[]> bits_;  // default-initialised: pages committed when written
-  std::unique_ptr<std::int32_t[]> count_;  // ternary: nonzero dimensions; int2: magnitude bits
+  std::unique_ptr<std::uint64_t[]> bits_;    // by row; default-initialised: pages committed as rows fill
+  std::unique_ptr<std::int32_t[]> count_;    // by row; ternary: nonzero dimensions; int2: magnitude bits
+  std::unique_ptr<std::uint32_t[]> row_of_;  // by sequence number; kNoRow until set
 };
 
 }  // namespace loopgate

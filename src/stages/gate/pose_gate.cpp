@@ -37,6 +37,20 @@ struct PositionCloud {
   }
 };
 
+// A symmetric 3x3 covariance as its upper triangle (48 bytes a frame instead of 72): the gate symmetrises
+// every covariance first (0.5 (P + P^T) is exactly symmetric), so matrix() gives back the same matrix.
+struct SymmetricCov {
+  double xx, xy, xz, yy, yz, zz;
+  static SymmetricCov of(const Eigen::Matrix3d& P) {
+    return {P(0, 0), P(0, 1), P(0, 2), P(1, 1), P(1, 2), P(2, 2)};
+  }
+  Eigen::Matrix3d matrix() const {
+    Eigen::Matrix3d P;
+    P << xx, xy, xz, xy, yy, yz, xz, yz, zz;
+    return P;
+  }
+};
+
 using Metric = nanoflann::L2_Simple_Adaptor<double, PositionCloud, double, std::uint32_t>;
 using Tree = nanoflann::KDTreeSingleIndexDynamicAdaptor<Metric, PositionCloud, 3, std::uint32_t>;
 
@@ -72,9 +86,9 @@ struct PoseGate::Impl {
   // Every frame seen, in order (index k = storage index, also the KD-tree index).
   std::vector<std::int64_t> frames;
   std::vector<Eigen::Vector3d> positions_m;
-  std::vector<Eigen::Matrix3d> covariances_m2;
-  std::vector<double> max_eigen_m2;  // lambda_max(P_k), clamped at 0
-  std::vector<double> travel_m;      // path length of the positions from the first frame to frame k
+  std::vector<SymmetricCov> covariances_m2;  // symmetrised: the upper triangle holds it exactly
+  std::vector<double> max_eigen_m2;          // lambda_max(P_k), clamped at 0
+  std::vector<double> travel_m;              // path length of the positions from the first frame to frame k
 
   PositionCloud cloud;
   std::unique_ptr<Tree> tree;
@@ -119,7 +133,7 @@ struct PoseGate::Impl {
   // Exact combined distance to stored frame k; keeps the minimum, ties to the smallest frame.
   void rescore(std::uint32_t k, const Eigen::Vector3d& p_m, const Eigen::Matrix3d& P_m2,
                GateDecision& best) const {
-    const double d = combined_distance(p_m, P_m2, positions_m[k], covariances_m2[k]);
+    const double d = combined_distance(p_m, P_m2, positions_m[k], covariances_m2[k].matrix());
     ++best.candidates_rescored;
     const std::int64_t j = frames[k];
     if (!best.has_nearest || d < best.distance_m || (d == best.distance_m && j < best.nearest_frame)) {
@@ -174,7 +188,7 @@ struct PoseGate::Impl {
     frames.push_back(frame);
     travel_m.push_back(travel_now_m);
     positions_m.push_back(p_m);
-    covariances_m2.push_back(P_m2);
+    covariances_m2.push_back(SymmetricCov::of(P_m2));
     max_eigen_m2.push_back(lmax_m2);
     return decision;
   }
@@ -261,6 +275,14 @@ GateDecision PoseGate::query(std::int64_t frame, const Eigen::Vector3d& p_w_m,
   const auto [P_sym_m2, lmax_m2] = impl_->checked_covariance(frame, p_w_m, P_m2);
   Impl::Scratch buffers;
   return impl_->decide(frame, p_w_m, P_sym_m2, lmax_m2, buffers);
+}
+
+void PoseGate::reserve(std::size_t frames) {
+  impl_->frames.reserve(frames);
+  impl_->positions_m.reserve(frames);
+  impl_->covariances_m2.reserve(frames);
+  impl_->max_eigen_m2.reserve(frames);
+  impl_->travel_m.reserve(frames);
 }
 
 std::size_t PoseGate::frames_seen() const {

@@ -52,6 +52,10 @@ class PoseGate {
   // diagnostics.
   GateDecision query(std::int64_t frame, const Eigen::Vector3d& p_w_m, const Eigen::Matrix3d& P_m2) const;
 
+  // Room for `frames` frames (what the run may release), so that the per-frame storage neither keeps up to
+  // twice its frames nor copies them as it grows (reserved pages not written take no memory).
+  void reserve(std::size_t frames);
+
   std::size_t frames_seen() const;
   std::size_t frames_in_tree() const;
   // Running max of lambda_max(P_j) over the frames in the tree (m^2; 0 when empty).

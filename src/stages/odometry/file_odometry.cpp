@@ -7,13 +7,20 @@
 
 namespace loopgate {
 
-FileOdometry::FileOdometry(const OdometryConfig& config, std::vector<StampedPose> poses)
-    : config_(config), poses_(std::move(poses)) {
-  if (poses_.empty()) throw std::invalid_argument("FileOdometry: empty trajectory");
-  cumulative_m_.resize(poses_.size(), 0.0);
-  for (std::size_t i = 1; i < poses_.size(); ++i) {
+StampedPose FileOdometry::FilePose::pose() const {
+  StampedPose p{t_ns, Eigen::Isometry3d::Identity()};
+  p.T_w_b.matrix().topRows<3>() = top_rows;
+  return p;
+}
+
+FileOdometry::FileOdometry(const OdometryConfig& config, std::vector<StampedPose> poses) : config_(config) {
+  if (poses.empty()) throw std::invalid_argument("FileOdometry: empty trajectory");
+  poses_.reserve(poses.size());
+  for (const StampedPose& p : poses) poses_.push_back({p.t_ns, p.T_w_b.matrix().topRows<3>()});
+  cumulative_m_.resize(poses.size(), 0.0);
+  for (std::size_t i = 1; i < poses.size(); ++i) {
     cumulative_m_[i] =
-        cumulative_m_[i - 1] + (poses_[i].T_w_b.translation() - poses_[i - 1].T_w_b.translation()).norm();
+        cumulative_m_[i - 1] + (poses[i].T_w_b.translation() - poses[i - 1].T_w_b.translation()).norm();
   }
 }
 
@@ -21,7 +28,7 @@ double FileOdometry::distance_at(Timestamp t_ns) const {
   if (t_ns <= poses_.front().t_ns) return 0.0;
   if (t_ns >= poses_.back().t_ns) return cumulative_m_.back();
   const auto it = std::upper_bound(poses_.begin(), poses_.end(), t_ns,
-                                   [](Timestamp t, const StampedPose& p) { return t < p.t_ns; });
+                                   [](Timestamp t, const FilePose& p) { return t < p.t_ns; });
   const std::size_t b = static_cast<std::size_t>(it - poses_.begin());
   const std::size_t a = b - 1;
   const double alpha =
@@ -35,17 +42,17 @@ OdometryOutput FileOdometry::process(const OdometryInput& input) {
   out.pose.t_ns = t_ns;
   const auto max_gap_ns = static_cast<Timestamp>(config_.file_max_gap_s * 1e9);
   const auto it = std::upper_bound(poses_.begin(), poses_.end(), t_ns,
-                                   [](Timestamp t, const StampedPose& p) { return t < p.t_ns; });
+                                   [](Timestamp t, const FilePose& p) { return t < p.t_ns; });
   bool lost = false;
   if (it == poses_.begin() || it == poses_.end()) {
     // Outside the trajectory's span: the nearest end, lost unless it is the exact last pose.
-    const StampedPose& nearest = it == poses_.begin() ? poses_.front() : poses_.back();
+    const StampedPose nearest = (it == poses_.begin() ? poses_.front() : poses_.back()).pose();
     out.pose.T_w_b = nearest.T_w_b;
     lost = nearest.t_ns != t_ns;
     if (lost) out.reason = "frame time outside the trajectory file's span";
   } else {
-    const StampedPose& a = *(it - 1);
-    const StampedPose& b = *it;
+    const StampedPose a = (it - 1)->pose();
+    const StampedPose b = it->pose();
     out.pose.T_w_b = interpolate_pose(a, b, t_ns);
     out.pose.v_w_mps = (b.T_w_b.translation() - a.T_w_b.translation()) / ns_to_s(b.t_ns - a.t_ns);
     out.pose.has_velocity = true;

@@ -4,6 +4,7 @@
 // d the distance travelled along the trajectory up to the frame time.
 #pragma once
 
+#include <Eigen/Core>
 #include <optional>
 #include <vector>
 
@@ -24,8 +25,17 @@ class FileOdometry : public OdometrySource {
   double distance_at(Timestamp t_ns) const;
 
  private:
+  // A pose of the trajectory as its time and the top three rows of its matrix (104 bytes instead of the 136
+  // of a StampedPose, kept for every pose of the file for the whole run): an isometry's last row is
+  // (0 0 0 1), so pose() gives back the same pose.
+  struct FilePose {
+    Timestamp t_ns = 0;
+    Eigen::Matrix<double, 3, 4> top_rows;
+    StampedPose pose() const;
+  };
+
   OdometryConfig config_;
-  std::vector<StampedPose> poses_;
+  std::vector<FilePose> poses_;
   std::vector<double> cumulative_m_;
   std::optional<double> previous_d_m_;  // distance at the previous tracked pose (step_cov)
 };
