@@ -121,7 +121,7 @@ void expect_matches_brute_force(const GateConfig& config, const std::vector<Samp
 }
 
 struct BruteForceCase {
-  std::string sigma_norm;
+  SigmaNorm sigma_norm;
   int gap;
   CovKind kind;
   bool skip_frames;
@@ -130,7 +130,7 @@ struct BruteForceCase {
 };
 
 void PrintTo(const BruteForceCase& c, std::ostream* os) {
-  *os << c.sigma_norm << "/gap" << c.gap << (c.kind == CovKind::kWild ? "/wild" : "/realistic")
+  *os << enum_name(c.sigma_norm) << "/gap" << c.gap << (c.kind == CovKind::kWild ? "/wild" : "/realistic")
       << (c.skip_frames ? "/skips" : "") << "/seeds" << c.seed_neighbours << "/travel"
       << static_cast<int>(c.min_travel_m);
 }
@@ -152,25 +152,25 @@ TEST_P(PoseGateBruteForce, KdTreeSearchEqualsBruteForce) {
   expect_matches_brute_force(config, samples);
 }
 
-INSTANTIATE_TEST_SUITE_P(Cases, PoseGateBruteForce,
-                         ::testing::Values(BruteForceCase{"max_eigen", 30, CovKind::kRealistic, false, 4},
-                                           BruteForceCase{"trace", 30, CovKind::kRealistic, false, 1},
-                                           BruteForceCase{"max_eigen", 1, CovKind::kWild, false, 1},
-                                           BruteForceCase{"trace", 7, CovKind::kWild, true, 3},
-                                           BruteForceCase{"max_eigen", 200, CovKind::kWild, true, 8},
-                                           BruteForceCase{"trace", 2, CovKind::kRealistic, true, 2},
-                                           BruteForceCase{"max_eigen", 30, CovKind::kWild, false, 32},
-                                           BruteForceCase{"trace", 1, CovKind::kRealistic, true, 4, 0.0},
-                                           BruteForceCase{"max_eigen", 1, CovKind::kWild, false, 4, 40.0},
-                                           BruteForceCase{"trace", 30, CovKind::kRealistic, false, 2, 150.0}),
-                         [](const ::testing::TestParamInfo<BruteForceCase>& param_info) {
-                           const BruteForceCase& c = param_info.param;
-                           return c.sigma_norm + "_gap" + std::to_string(c.gap) +
-                                  (c.kind == CovKind::kWild ? "_wild" : "_realistic") +
-                                  (c.skip_frames ? "_skips" : "") + "_seeds" +
-                                  std::to_string(c.seed_neighbours) + "_travel" +
-                                  std::to_string(static_cast<int>(c.min_travel_m));
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    Cases, PoseGateBruteForce,
+    ::testing::Values(BruteForceCase{SigmaNorm::kMaxEigen, 30, CovKind::kRealistic, false, 4},
+                      BruteForceCase{SigmaNorm::kTrace, 30, CovKind::kRealistic, false, 1},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 1, CovKind::kWild, false, 1},
+                      BruteForceCase{SigmaNorm::kTrace, 7, CovKind::kWild, true, 3},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 200, CovKind::kWild, true, 8},
+                      BruteForceCase{SigmaNorm::kTrace, 2, CovKind::kRealistic, true, 2},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 30, CovKind::kWild, false, 32},
+                      BruteForceCase{SigmaNorm::kTrace, 1, CovKind::kRealistic, true, 4, 0.0},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 1, CovKind::kWild, false, 4, 40.0},
+                      BruteForceCase{SigmaNorm::kTrace, 30, CovKind::kRealistic, false, 2, 150.0}),
+    [](const ::testing::TestParamInfo<BruteForceCase>& param_info) {
+      const BruteForceCase& c = param_info.param;
+      return std::string(enum_name(c.sigma_norm)) + "_gap" + std::to_string(c.gap) +
+             (c.kind == CovKind::kWild ? "_wild" : "_realistic") + (c.skip_frames ? "_skips" : "") +
+             "_seeds" + std::to_string(c.seed_neighbours) + "_travel" +
+             std::to_string(static_cast<int>(c.min_travel_m));
+    });
 
 TEST(PoseGate, AllPositionsEqualTiesGoToSmallestFrame) {
   GateConfig config;
@@ -320,7 +320,7 @@ TEST(PoseGate, BadInputIsDataError) {
 
 TEST(PoseGate, InvalidConfigIsRejected) {
   GateConfig config;
-  config.sigma_norm = "frobenius";
+  config.gap_frames = 0;
   EXPECT_THROW(PoseGate{config}, ConfigError);
 }
 

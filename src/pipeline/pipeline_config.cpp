@@ -135,11 +135,8 @@ void PipelineConfig::validate_gate_feedback() const {
 }
 
 void DirdSeqSlamConfig::validate() const {
-  require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
-  require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
-  require_one_of("dird_seqslam.standardize", standardize, {"off", "causal", "batch"});
   codes.validate();
-  if (codes.compact() && standardize == "off") {
+  if (codes.compact() && standardize == StandardizeMode::kOff) {
     throw ConfigError("dird_seqslam.code: '" + std::string(enum_name(codes.code)) +
                       "' codes the standardised descriptor: needs dird_seqslam.standardize causal or batch");
   }
@@ -164,7 +161,6 @@ void EvalConfig::validate() const {
 }
 
 void OutputConfig::validate() const {
-  require_one_of("output.progress", progress, {"auto", "on", "off"});
   require_in("output.flush_every", flush_every, 1, 1'000'000, "frames");
 }
 

@@ -135,10 +135,19 @@ struct DatasetConfig {
   void validate() const;
 };
 
+// output.progress: the progress line on stderr when it is a terminal ("auto"), always ("on") or never
+// ("off").
+enum class Progress { kAuto, kOn, kOff };
+inline constexpr EnumName<Progress> kProgressNames[] = {
+    {Progress::kAuto, "auto"}, {Progress::kOn, "on"}, {Progress::kOff, "off"}};
+constexpr std::span<const EnumName<Progress>> enum_names(Progress) {
+  return kProgressNames;
+}
+
 struct OutputConfig {
-  bool trace = false;             // write trace.json (Chrome trace-event format, opens in Perfetto)
-  std::string progress = "auto";  // auto (when stderr is a terminal) | on | off
-  int flush_every = 100;          // frames between flushes of the streamed CSV/TUM files
+  bool trace = false;                   // write trace.json (Chrome trace-event format, opens in Perfetto)
+  Progress progress = Progress::kAuto;  // auto (when stderr is a terminal) | on | off
+  int flush_every = 100;                // frames between flushes of the streamed CSV/TUM files
 
   // The keys, in order, for loading, printing and the JSON echo (Self is OutputConfig or const OutputConfig).
   template <class Self, class V>
@@ -210,12 +219,13 @@ struct EvalConfig {
 // (sensor noise averaged before sampling) and causal standardisation (per-dimension statistics of the recent
 // frames). Needs no logistic constants: the search's score is in units of the local spread of distances.
 struct DirdSeqSlamConfig {
-  std::string normalization = "l2";  // replaces dird.normalization for this method: libdird | l2
-  std::string resize = "area";       // replaces dird.resize: nearest | area
+  // replaces dird.normalization for this method: libdird | l2
+  DirdNormalization normalization = DirdNormalization::kL2;
+  DirdResize resize = DirdResize::kArea;  // replaces dird.resize: nearest | area
   // off | causal | batch (two sequences only): replaces standardize.mode for this method; the statistics
   // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
   // of section standardize.
-  std::string standardize = "causal";
+  StandardizeMode standardize = StandardizeMode::kCausal;
   DirdCodeConfig codes;  // keys code, ternary_threshold_sigma, int2_threshold_sigma (docs/codes.md)
   ContrastSearchConfig search;
   // Viewpoint tolerance: keys viewpoint_* (stages/dird/viewpoint.hpp, docs/viewpoint.md).
@@ -248,7 +258,7 @@ struct DirdSeqSlamConfig {
 
 inline SeqSlamConfig single_sequence_seqslam() {
   SeqSlamConfig config;
-  config.exclusion = "past";
+  config.exclusion = SeqSlamExclusionKind::kPast;
   config.exclusion_margin_frames = 200;
   return config;
 }

@@ -72,7 +72,8 @@ void add_truth_pairs(const RunParts& parts, std::size_t first, std::size_t n,
   const bool seqslam = parts.config.run.seqslam();
   const char* margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
   int margin_frames = seqslam ? parts.config.seqslam.exclusion_margin_frames : parts.config.match.margin;
-  if (seqslam && parts.config.seqslam.exclusion == "none") margin_frames = 0;  // every pair is compared
+  if (seqslam && parts.config.seqslam.exclusion == SeqSlamExclusionKind::kNone)
+    margin_frames = 0;  // every pair is compared
   const auto margin = static_cast<std::size_t>(std::max(0, margin_frames));
   std::vector<std::pair<std::size_t, std::size_t>> used;
   std::size_t in_run = 0, too_close = 0;

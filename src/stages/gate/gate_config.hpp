@@ -2,9 +2,20 @@
 // the paper §4 eq. 8-10). Section "gate".
 #pragma once
 
-#include <string>
+#include <span>
+
+#include "core/enum_names.hpp"
 
 namespace loopgate {
+
+// gate.sigma_norm: sigma_i of eq. 10 from the position covariance P_i: sqrt(lambda_max(P_i)) ("max_eigen")
+// or sqrt(trace(P_i)) ("trace").
+enum class SigmaNorm { kMaxEigen, kTrace };
+inline constexpr EnumName<SigmaNorm> kSigmaNormNames[] = {{SigmaNorm::kMaxEigen, "max_eigen"},
+                                                          {SigmaNorm::kTrace, "trace"}};
+constexpr std::span<const EnumName<SigmaNorm>> enum_names(SigmaNorm) {
+  return kSigmaNormNames;
+}
 
 struct GateConfig {
   // Only past frames j <= i - gap_frames are searched (paper: 30; should follow the frame rate).
@@ -17,7 +28,7 @@ struct GateConfig {
   // beta: allowed drift between j and i, added to the threshold, in metres (per environment).
   double beta_m = 5.0;
   // sigma_i = sqrt(lambda_max(P_i)) ("max_eigen", the default) or sqrt(trace(P_i)) ("trace").
-  std::string sigma_norm = "max_eigen";
+  SigmaNorm sigma_norm = SigmaNorm::kMaxEigen;
   // Threshold = confidence_scale * sigma_i + beta (1.96: 95 % of a Gaussian, eq. 10).
   double confidence_scale = 1.96;
   // Numerical noise allowed in a position covariance: eigenvalues down to -covariance_tolerance_m2 are
@@ -68,7 +79,7 @@ struct GateConfig {
     v("feedback", self.feedback);
   }
   // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], min_travel_m in [0, 1e6],
-  // beta_m in [0, 1e5], sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000],
+  // beta_m in [0, 1e5], confidence_scale in [0, 1000],
   // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000],
   // area_* in [0, 1e4] (query rows) or [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].
   void validate() const;
