@@ -90,8 +90,8 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   GateConfig::fields(config, [&](const char*, auto&) { ++keys; });
   EXPECT_EQ(keys, 14);
   EXPECT_EQ(config.gap_frames, 30);
-  EXPECT_DOUBLE_EQ(config.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
-  EXPECT_FALSE(config.feedback);               // gate.feedback is off by default
+  EXPECT_DOUBLE_EQ(config.revisit.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
+  EXPECT_FALSE(config.feedback);                       // gate.feedback is off by default
   EXPECT_EQ(config.sigma_norm, SigmaNorm::kMaxEigen);
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);
 }
@@ -108,8 +108,8 @@ TEST(GateConfig, ErrorsNameTheKey) {
     }
   };
   expect_error([](GateConfig& c) { c.gap_frames = 0; }, "gate.gap_frames");
-  expect_error([](GateConfig& c) { c.min_travel_m = -1; }, "gate.min_travel_m");
-  expect_error([](GateConfig& c) { c.min_travel_m = NAN; }, "gate.min_travel_m");
+  expect_error([](GateConfig& c) { c.revisit.min_travel_m = -1; }, "gate.min_travel_m");
+  expect_error([](GateConfig& c) { c.revisit.min_travel_m = NAN; }, "gate.min_travel_m");
   expect_error([](GateConfig& c) { c.beta_m = -1; }, "gate.beta_m");
   expect_error([](GateConfig& c) { c.beta_m = NAN; }, "gate.beta_m");
   expect_error([](GateConfig& c) { c.confidence_scale = -1; }, "gate.confidence_scale");

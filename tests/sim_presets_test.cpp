@@ -64,7 +64,7 @@ TEST(SimPresets, FilesHoldWhatTheCodePresetsSet) {
   EXPECT_EQ(demo.illumination.transition_start, 0.70);
   EXPECT_EQ(demo.illumination.night_model, sim::NightModel::kLamps);
   EXPECT_EQ(make_preset("demo-dusk", "").illumination.night_noise_sigma, 3.0);
-  EXPECT_EQ(demo.loops.min_travel_m, 10.0);
+  EXPECT_EQ(demo.loops.revisit.min_travel_m, 10.0);
 
   const SimulationConfig aliasing = make_preset("aliasing", "");
   EXPECT_EQ(aliasing.simulation.max_frames, 490);

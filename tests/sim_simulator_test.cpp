@@ -414,9 +414,9 @@ TEST(LoopTruth, StandingStillIsNotARevisitWithMinTravel) {
   LoopTruthSettings settings;
   settings.min_gap_frames = 20;
   EXPECT_EQ(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).size(), 40u);  // every j >= 20
-  settings.min_travel_m = 1.0;
+  settings.revisit.min_travel_m = 1.0;
   EXPECT_TRUE(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).empty());
-  settings.min_travel_m = -1.0;
+  settings.revisit.min_travel_m = -1.0;
   EXPECT_THROW(settings.validate(), ConfigError);
 }
 

@@ -155,7 +155,7 @@ void EvalConfig::validate() const {
           "in (0, 10000] m", std::to_string(truth_radius_m));
   require_in("eval.truth_gap_frames", truth_gap_frames, 0, 1'000'000, "frames");
   require_in("eval.accept_radius_m", accept_radius_m, 0.0, 1e4, "m (0 = eval.truth_radius_m)");
-  require_in("eval.min_travel_m", min_travel_m, 0.0, 1e5, "m (0 = no travel needed)");
+  revisit.validate("eval.min_travel_m");
   require_in("eval.aligned_tolerance_frames", aligned_tolerance_frames, -1, 1'000'000,
              "frames (-1 = not aligned)");
 }

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 #include "io/dataset.hpp"
 #include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_config.hpp"
@@ -184,8 +185,8 @@ struct EvalConfig {
   // standing still within truth_radius_m is not a loop (on an EuRoC flight many "positives" within 0.2 m and
   // 20 frames are the drone hovering; on KITTI 00, 21 are the car stopped). 2 m: what the simulator's
   // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (the former
-  // behaviour). Not used with truth_pairs_file.
-  double min_travel_m = 2.0;
+  // behaviour). Not used with truth_pairs_file. Key min_travel_m.
+  RevisitRule revisit{2.0};
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
@@ -204,7 +205,7 @@ struct EvalConfig {
     v("truth_gap_frames", self.truth_gap_frames);
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("aligned_tolerance_frames", self.aligned_tolerance_frames);
     v("truth_pairs_file", self.truth_pairs_file);
   }

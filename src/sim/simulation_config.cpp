@@ -121,7 +121,7 @@ ImuCalibration ImuNoiseSettings::calibration(double rate_hz) const {
 void LoopTruthSettings::validate() const {
   require(radius_m > 0.0, "loops.radius_m", "> 0", std::to_string(radius_m));
   require(min_gap_frames >= 1, "loops.min_gap_frames", ">= 1", std::to_string(min_gap_frames));
-  require(min_travel_m >= 0.0, "loops.min_travel_m", ">= 0", std::to_string(min_travel_m));
+  revisit.validate("loops.min_travel_m");
   require(max_view_angle_deg > 0.0 && max_view_angle_deg <= 180.0, "loops.max_view_angle_deg", "in (0, 180]",
           std::to_string(max_view_angle_deg));
 }

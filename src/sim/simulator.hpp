@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 #include "core/types.hpp"
 #include "sim/illumination.hpp"
 #include "sim/imu_synth.hpp"
@@ -185,7 +186,7 @@ struct ImuNoiseSettings {
 struct LoopTruthSettings {
   double radius_m = 2.0;
   int min_gap_frames = 20;
-  double min_travel_m = 0.0;
+  RevisitRule revisit;  // key min_travel_m
   bool horizontal_only = true;
   double max_view_angle_deg = 180.0;
 
@@ -195,7 +196,7 @@ struct LoopTruthSettings {
   static void fields(Self& self, V&& v) {
     v("radius_m", self.radius_m);
     v("min_gap_frames", self.min_gap_frames);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("horizontal_only", self.horizontal_only);
     v("max_view_angle_deg", self.max_view_angle_deg);
   }

@@ -114,13 +114,13 @@ void add_truth_rule_counts(const Dataset& dataset, const SequenceEvaluationInput
   const auto positives = [&](const std::string& plane, double min_travel_m) {
     GroundTruthConfig truth = input.truth;
     truth.plane = plane;
-    truth.min_travel_m = min_travel_m;
+    truth.revisit.min_travel_m = min_travel_m;
     return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
   };
   const std::string horizontal = horizontal_plane(dataset, input.p_w);
-  truth_json["positives_3d"] = positives("xyz", input.truth.min_travel_m);
+  truth_json["positives_3d"] = positives("xyz", input.truth.revisit.min_travel_m);
   truth_json["horizontal_plane"] = horizontal;
-  truth_json["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
+  truth_json["positives_horizontal"] = positives(horizontal, input.truth.revisit.min_travel_m);
   truth_json["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
 }
 
@@ -175,7 +175,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
                       : dataset.layout() == "kitti"   ? "xz"
                                                       : "xyz";
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
-  input.truth.min_travel_m = eval.min_travel_m;
+  input.truth.revisit = eval.revisit;
   const MethodEvaluation method = parts.method.evaluation();
   const auto within_range = [first](const std::vector<Detection>& detections) {
     std::vector<Detection> out;

@@ -5,6 +5,7 @@
 #include <span>
 
 #include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 
 namespace loopgate {
 
@@ -23,8 +24,8 @@ struct GateConfig {
   // ... and only frames the odometry has travelled at least min_travel_m from since (the path length of the
   // positions the gate was given, from j to i): standing still or hovering, a camera sees the place it has
   // not left, and such a "revisit" is no loop. The same definition of a revisit as eval.min_travel_m's on the
-  // ground truth (2 m). 0: no travel needed (the paper's gate: the frame gap only).
-  double min_travel_m = 2.0;
+  // ground truth (2 m). 0: no travel needed (the paper's gate: the frame gap only). Key min_travel_m.
+  RevisitRule revisit{2.0};
   // beta: allowed drift between j and i, added to the threshold, in metres (per environment).
   double beta_m = 5.0;
   // sigma_i = sqrt(lambda_max(P_i)) ("max_eigen", the default) or sqrt(trace(P_i)) ("trace").
@@ -64,7 +65,7 @@ struct GateConfig {
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
     v("gap_frames", self.gap_frames);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("beta_m", self.beta_m);
     v("sigma_norm", self.sigma_norm);
     v("confidence_scale", self.confidence_scale);
