@@ -24,7 +24,8 @@ cv::Mat bench_image() {
   return image;
 }
 
-void run(benchmark::State& state, const char* normalization, bool colour, const char* resize = "nearest") {
+void run(benchmark::State& state, loopgate::DirdNormalization normalization, bool colour,
+         loopgate::DirdResize resize = loopgate::DirdResize::kNearest) {
   cv::Mat image = bench_image();
   if (colour) {
     cv::Mat channels[3] = {image, image, image};
@@ -44,20 +45,20 @@ void run(benchmark::State& state, const char* normalization, bool colour, const 
 }
 
 void BM_DirdExtractLibdird(benchmark::State& state) {
-  run(state, "libdird", false);
+  run(state, loopgate::DirdNormalization::kLibdird, false);
 }
 void BM_DirdExtractL2(benchmark::State& state) {
-  run(state, "l2", false);
+  run(state, loopgate::DirdNormalization::kL2, false);
 }
 void BM_DirdExtractColourBgr(benchmark::State& state) {
-  run(state, "libdird", true);
+  run(state, loopgate::DirdNormalization::kLibdird, true);
 }
 // dird.resize area: the box filter over every source pixel before the working image.
 void BM_DirdExtractAreaL2(benchmark::State& state) {
-  run(state, "l2", false, "area");
+  run(state, loopgate::DirdNormalization::kL2, false, loopgate::DirdResize::kArea);
 }
 void BM_DirdExtractAreaLibdird(benchmark::State& state) {
-  run(state, "libdird", false, "area");
+  run(state, loopgate::DirdNormalization::kLibdird, false, loopgate::DirdResize::kArea);
 }
 
 }  // namespace

@@ -38,7 +38,7 @@ const std::vector<loopgate::Descriptor>& kitti_thumbs() {
     std::vector<loopgate::Descriptor> out;
     const auto dir = std::filesystem::path(LOOPGATE_SHARED_DATA_DIR) / "kitti/00/thumbs/image_0";
     loopgate::DirdConfig config;
-    config.normalization = "l2";
+    config.normalization = loopgate::DirdNormalization::kL2;
     const loopgate::DirdExtractor extractor(config);
     for (std::size_t f = 0;; ++f) {
       char name[32];
@@ -97,7 +97,7 @@ void all_pairs_kitti_thumbs(benchmark::State& state) {
     return;
   }
   loopgate::DirdConfig config;
-  config.normalization = "l2";
+  config.normalization = loopgate::DirdNormalization::kL2;
   config.mu = 48477.5;  // loopgate calibrate kitti/00/thumbs --normalization l2
   config.sigma = 1796.7769;
   run_all_pairs(state, all, config);

@@ -50,7 +50,7 @@ const std::vector<Descriptor>& raw_set() {
 
 loopgate::StandardizeConfig causal_config(std::int64_t refresh, std::int64_t window) {
   loopgate::StandardizeConfig c;
-  c.mode = "causal";
+  c.mode = loopgate::StandardizeMode::kCausal;
   c.refresh_every = refresh;
   c.window = window;
   return c;

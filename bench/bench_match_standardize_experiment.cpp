@@ -398,7 +398,7 @@ Result evaluate(const Variant& v, const Matrix& m, const Truth& truth, bool two_
   // Quantiles.
   std::vector<float> diff, same;
   lg::OnlineScaleConfig online_config;
-  online_config.mode = "online";
+  online_config.mode = lg::ScaleMode::kOnline;
   lg::OnlineScale all(online_config, kTau1, fixed);
   for (std::size_t i = 0; i < m.rows; ++i) {
     const float* row = m.row(i);
@@ -553,7 +553,8 @@ void run_jobs(const std::vector<Job>& jobs, const Options& options, const Truth&
     std::string fixed_name = "config";
     if (!job.raw) {
       lg::StandardizeConfig c = options.standardize;
-      c.distance = job.metric == Metric::kCosine ? "cosine" : "l1";
+      c.distance =
+          job.metric == Metric::kCosine ? lg::StandardizeDistance::kCosine : lg::StandardizeDistance::kL1;
       fixed = lg::standard_default_scale(c);
       if (job.query->rep == Rep::kFloat && job.metric == Metric::kL1) {
         // Floats: the scale in mean |z| per dimension times 3456.
@@ -850,10 +851,10 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  options.standardize.mode = "causal";
+  options.standardize.mode = lg::StandardizeMode::kCausal;
   options.standardize.validate();
   lg::DirdConfig dird;
-  dird.normalization = "l2";
+  dird.normalization = lg::DirdNormalization::kL2;
   const lg::DirdExtractor extractor(dird);
   std::printf("standardize: clamp_sigma %g, min_stddev %g, warm_up %lld, window %lld, refresh_every %lld\n",
               options.standardize.clamp_sigma, options.standardize.min_stddev,

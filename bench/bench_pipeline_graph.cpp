@@ -83,7 +83,7 @@ void BM_GraphDecodeAll(benchmark::State& state) {
   PipelineConfig config;
   config.run.threads = static_cast<int>(state.range(0));
   config.run.decode = DecodePolicy::kAll;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   config.odometry.heading_axis = "z";
   config.match.margin = 50;  // below the 120 frames: a run that cannot compare any pair fails
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline";
@@ -118,7 +118,7 @@ void BM_GraphKittiThumbs(benchmark::State& state) {
   PipelineConfig config;
   config.run.threads = static_cast<int>(state.range(0));
   config.run.decode = DecodePolicy::kAll;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline-thumbs";
   double wall_s = 0, cpu_s = 0, data_s = 0, frames = 0;
   for (auto _ : state) {

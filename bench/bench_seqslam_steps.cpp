@@ -97,7 +97,7 @@ void BM_KittiThumbsRun(benchmark::State& state) {
   }
   const SeqSlamImages ref = load_thumbs(thumbs / "image_0"), query = load_thumbs(thumbs / "image_1");
   SeqSlamConfig config;
-  config.exclusion = "band";
+  config.exclusion = loopgate::SeqSlamExclusionKind::kBand;
   config.exclusion_margin_frames = 101;
   const SeqSlam seqslam(config);
   for (auto _ : state) benchmark::DoNotOptimize(seqslam.run(ref, query));

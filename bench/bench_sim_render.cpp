@@ -139,7 +139,7 @@ const Scene& hall_scene() {
     std::vector<Eigen::Vector3d> path;
     for (const auto& T : s.poses) path.push_back(T.translation());
     sim::WorldConfig config;
-    config.kind = "hall";
+    config.kind = sim::WorldKind::kHall;
     config.aliasing_fraction = 0.1;
     s.world = sim::build_world(config, path, Eigen::Vector3d(0, 0, 1));
     return s;
@@ -166,7 +166,7 @@ void render_along(benchmark::State& state, const Scene& scene, const CameraCalib
 
 // Every frame at full night under `night_model`, along the scene's poses.
 void render_night(benchmark::State& state, const Scene& scene, const CameraCalibration& camera,
-                  const std::string& night_model) {
+                  sim::NightModel night_model) {
   const sim::Renderer renderer(scene.world, camera);
   sim::IlluminationSchedule schedule;
   schedule.night_model = night_model;
@@ -191,22 +191,22 @@ void render_night(benchmark::State& state, const Scene& scene, const CameraCalib
 }
 
 void BM_RenderStreet640x200NightAmbientNoise(benchmark::State& state) {
-  render_night(state, street_scene(), kitti_camera(640, 200), "ambient_noise");
+  render_night(state, street_scene(), kitti_camera(640, 200), sim::NightModel::kAmbientNoise);
 }
 void BM_RenderStreet640x200NightLamps(benchmark::State& state) {
-  render_night(state, street_scene(), kitti_camera(640, 200), "lamps");
+  render_night(state, street_scene(), kitti_camera(640, 200), sim::NightModel::kLamps);
 }
 void BM_RenderStreet1241x376NightAmbientNoise(benchmark::State& state) {
-  render_night(state, street_scene(), kitti_camera(1241, 376), "ambient_noise");
+  render_night(state, street_scene(), kitti_camera(1241, 376), sim::NightModel::kAmbientNoise);
 }
 void BM_RenderStreet1241x376NightLamps(benchmark::State& state) {
-  render_night(state, street_scene(), kitti_camera(1241, 376), "lamps");
+  render_night(state, street_scene(), kitti_camera(1241, 376), sim::NightModel::kLamps);
 }
 void BM_RenderHall752x480NightAmbientNoise(benchmark::State& state) {
-  render_night(state, hall_scene(), euroc_camera(), "ambient_noise");
+  render_night(state, hall_scene(), euroc_camera(), sim::NightModel::kAmbientNoise);
 }
 void BM_RenderHall752x480NightLamps(benchmark::State& state) {
-  render_night(state, hall_scene(), euroc_camera(), "lamps");
+  render_night(state, hall_scene(), euroc_camera(), sim::NightModel::kLamps);
 }
 
 void BM_RenderStreet1241x376(benchmark::State& state) {

@@ -213,7 +213,7 @@ TEST(DirdCodes, CausalCoderKeepsTheCutsOfEachSnapshotAndCodesAsTheStandardizer) 
   // 400 frames: 39 snapshots, more than one key of the snapshots' differences (dird_cut_snapshots.hpp).
   const std::vector<Descriptor> set = raw_descriptors(rng, 400);
   StandardizeConfig standardize;
-  standardize.mode = "causal";
+  standardize.mode = StandardizeMode::kCausal;
   standardize.warm_up = 10;
   standardize.window = 20;
   standardize.refresh_every = 5;

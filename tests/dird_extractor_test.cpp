@@ -14,6 +14,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -116,9 +117,16 @@ cv::Mat pattern() {
   return make_image(192, 192, [](int x, int y) { return (7 * x + 13 * y + 5 * ((x * y) % 17)) % 256; });
 }
 
+// The normalisation named `word` (libdird or l2) through the config's name table.
+DirdNormalization normalization_named(const std::string& word) {
+  for (const EnumName<DirdNormalization>& n : enum_names(DirdNormalization{}))
+    if (n.name == word) return n.value;
+  throw std::invalid_argument("no dird.normalization " + word);
+}
+
 Descriptor extract(const cv::Mat& image, const std::string& normalization = "libdird", bool flip = false) {
   DirdConfig config;
-  config.normalization = normalization;
+  config.normalization = normalization_named(normalization);
   config.flip_vertical = flip;
   return DirdExtractor(config).extract(image);
 }
@@ -291,9 +299,9 @@ TEST(DirdExtractor, FlipVertical) {
 
 Descriptor extract_area(const cv::Mat& image, const std::string& normalization = "l2", bool flip = false) {
   DirdConfig config;
-  config.normalization = normalization;
+  config.normalization = normalization_named(normalization);
   config.flip_vertical = flip;
-  config.resize = "area";
+  config.resize = DirdResize::kArea;
   return DirdExtractor(config).extract(image);
 }
 

@@ -51,7 +51,7 @@ class KittiThumbs : public ::testing::Test {
   static constexpr double kDifferentM = 50.0;
   static constexpr double kSameHeadingRad = 0.5;  // revisits driven in the same direction (~29 deg)
 
-  void load(const std::string& normalization) {
+  void load(DirdNormalization normalization) {
     const auto dir = testing::shared_data_dir() / "kitti/00/thumbs";
     positions_ = read_positions(dir / "poses.txt");
     ASSERT_EQ(positions_.size(), 4540u);
@@ -98,7 +98,7 @@ class KittiThumbs : public ::testing::Test {
 
 TEST_F(KittiThumbs, LibdirdModeCollapsesOnLowContrast) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs/image_0/000000.png");
-  load("libdird");
+  load(DirdNormalization::kLibdird);
   std::size_t zeros = 0;
   for (const Descriptor& d : descriptors_)
     zeros += static_cast<std::size_t>(std::count(d.begin(), d.end(), 0));
@@ -110,7 +110,7 @@ TEST_F(KittiThumbs, LibdirdModeCollapsesOnLowContrast) {
 
 TEST_F(KittiThumbs, L2ModeSeparatesRevisitsAndCalibrates) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs/poses.txt");
-  load("l2");
+  load(DirdNormalization::kL2);
   std::vector<double> revisit, different, all;
   distances(revisit, different, all);
   ASSERT_GT(revisit.size(), 100u);

@@ -50,8 +50,8 @@ TEST(DirdViewpoint, WarpedImageMatchesItsOriginalBetterWithTheTolerance) {
   const double cx = 319.5;
   const cv::Mat query = warp_lateral(reference, 0.3, cx);  // seen from 0.3 x the side distance to the right
   DirdConfig dird;
-  dird.normalization = "l2";
-  dird.resize = "area";
+  dird.normalization = DirdNormalization::kL2;
+  dird.resize = DirdResize::kArea;
   const DirdExtractor extractor(dird);
   const Descriptor r = extractor.extract(reference);
   const double without = static_cast<double>(l1_distance(extractor.extract(query), r));

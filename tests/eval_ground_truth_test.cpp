@@ -115,7 +115,7 @@ TEST(EvalGroundTruth, ARevisitNeedsTravelInBetween) {
   const auto hovering = LoopGroundTruth::from_positions(p, config);
   EXPECT_TRUE(hovering.is_positive(35));  // 20+ frames of hovering within 0.5 m: a "loop" without the rule
   EXPECT_TRUE(hovering.is_true_match(35, 12));
-  config.min_travel_m = 2.0;
+  config.revisit.min_travel_m = 2.0;
   const auto gt = LoopGroundTruth::from_positions(p, config);
   for (std::size_t i = 0; i < 50; ++i) EXPECT_FALSE(gt.is_positive(i)) << i;
   EXPECT_FALSE(gt.is_true_match(35, 12));

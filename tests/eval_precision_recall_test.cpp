@@ -110,7 +110,7 @@ TEST(EvalPrecisionRecall, SamePlaceWithoutTravelIsNotJudged) {
   config.radius_m = 0.5;
   config.gap_frames = 3;
   config.plane = "xy";
-  config.min_travel_m = 2.0;
+  config.revisit.min_travel_m = 2.0;
   const auto gt = LoopGroundTruth::from_positions(p, config);
   // q15 -> 9 and q18 -> 11: the hover (x = 9, 0 m of path): not judged; q18's next detection, -> 2, is 7 m
   // away: false; q25 -> 4: x = 4 both, 10 m of path: true; q26 -> 0: false.
@@ -123,7 +123,7 @@ TEST(EvalPrecisionRecall, SamePlaceWithoutTravelIsNotJudged) {
   EXPECT_EQ(pr.curve[1].true_positives, 1u);  // q25 -> 4
   EXPECT_EQ(pr.curve[2].detections, 3u);
   // Without the travel rule the hovering pairs are true matches and judged.
-  config.min_travel_m = 0.0;
+  config.revisit.min_travel_m = 0.0;
   const PrResult without_rule = evaluate_precision_recall(d, LoopGroundTruth::from_positions(p, config));
   EXPECT_EQ(without_rule.not_judged, 0u);
   EXPECT_EQ(without_rule.queries_with_detection, 4u);

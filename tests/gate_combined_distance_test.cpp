@@ -71,11 +71,11 @@ TEST(Sigma, MaxEigenAndTrace) {
   const Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix();
   const Eigen::Matrix3d P = R * Eigen::Vector3d(9, 4, 1).asDiagonal() * R.transpose();
   EXPECT_NEAR(max_eigenvalue_m2(P), 9.0, 1e-12);
-  EXPECT_NEAR(position_sigma_m(P, "max_eigen"), 3.0, 1e-12);
-  EXPECT_NEAR(position_sigma_m(P, "trace"), std::sqrt(14.0), 1e-12);
-  EXPECT_EQ(position_sigma_m(Eigen::Matrix3d::Zero(), "max_eigen"), 0.0);
-  EXPECT_EQ(position_sigma_m(-1e-15 * Eigen::Matrix3d::Identity(), "trace"), 0.0);
-  EXPECT_THROW(position_sigma_m(P, "frobenius"), ConfigError);
+  EXPECT_NEAR(position_sigma_m(P, SigmaNorm::kMaxEigen), 3.0, 1e-12);
+  EXPECT_NEAR(position_sigma_m(P, SigmaNorm::kTrace), std::sqrt(14.0), 1e-12);
+  EXPECT_EQ(position_sigma_m(Eigen::Matrix3d::Zero(), SigmaNorm::kMaxEigen), 0.0);
+  EXPECT_EQ(position_sigma_m(-1e-15 * Eigen::Matrix3d::Identity(), SigmaNorm::kTrace), 0.0);
+  EXPECT_THROW(position_sigma_m(P, static_cast<SigmaNorm>(7)), ConfigError);  // not in the table
 }
 
 TEST(Threshold, Equation10) {
@@ -90,9 +90,9 @@ TEST(GateConfig, DefaultsAreValidAndVisitListsEveryKey) {
   GateConfig::fields(config, [&](const char*, auto&) { ++keys; });
   EXPECT_EQ(keys, 14);
   EXPECT_EQ(config.gap_frames, 30);
-  EXPECT_DOUBLE_EQ(config.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
-  EXPECT_FALSE(config.feedback);               // gate.feedback is off by default
-  EXPECT_EQ(config.sigma_norm, "max_eigen");
+  EXPECT_DOUBLE_EQ(config.revisit.min_travel_m, 2.0);  // eval.min_travel_m's definition of a revisit
+  EXPECT_FALSE(config.feedback);                       // gate.feedback is off by default
+  EXPECT_EQ(config.sigma_norm, SigmaNorm::kMaxEigen);
   EXPECT_DOUBLE_EQ(config.confidence_scale, 1.96);
 }
 
@@ -108,11 +108,10 @@ TEST(GateConfig, ErrorsNameTheKey) {
     }
   };
   expect_error([](GateConfig& c) { c.gap_frames = 0; }, "gate.gap_frames");
-  expect_error([](GateConfig& c) { c.min_travel_m = -1; }, "gate.min_travel_m");
-  expect_error([](GateConfig& c) { c.min_travel_m = NAN; }, "gate.min_travel_m");
+  expect_error([](GateConfig& c) { c.revisit.min_travel_m = -1; }, "gate.min_travel_m");
+  expect_error([](GateConfig& c) { c.revisit.min_travel_m = NAN; }, "gate.min_travel_m");
   expect_error([](GateConfig& c) { c.beta_m = -1; }, "gate.beta_m");
   expect_error([](GateConfig& c) { c.beta_m = NAN; }, "gate.beta_m");
-  expect_error([](GateConfig& c) { c.sigma_norm = "det"; }, "max_eigen, trace");
   expect_error([](GateConfig& c) { c.confidence_scale = -1; }, "gate.confidence_scale");
   expect_error([](GateConfig& c) { c.covariance_tolerance_m2 = 1.0; }, "gate.covariance_tolerance_m2");
   expect_error([](GateConfig& c) { c.kdtree_leaf_size = 0; }, "gate.kdtree_leaf_size");

@@ -95,7 +95,7 @@ void expect_matches_brute_force(const GateConfig& config, const std::vector<Samp
     double best_d = 0.0;
     for (std::size_t m = 0; m < k; ++m) {
       if (samples[m].frame > s.frame - config.gap_frames) break;
-      if (travel_m[m] > travel_m[k] - config.min_travel_m) break;
+      if (travel_m[m] > travel_m[k] - config.revisit.min_travel_m) break;
       const double d = combined_distance(s.p_m, s.P_m2, samples[m].p_m, samples[m].P_m2);
       if (!has || d < best_d) {
         has = true;
@@ -121,7 +121,7 @@ void expect_matches_brute_force(const GateConfig& config, const std::vector<Samp
 }
 
 struct BruteForceCase {
-  std::string sigma_norm;
+  SigmaNorm sigma_norm;
   int gap;
   CovKind kind;
   bool skip_frames;
@@ -130,7 +130,7 @@ struct BruteForceCase {
 };
 
 void PrintTo(const BruteForceCase& c, std::ostream* os) {
-  *os << c.sigma_norm << "/gap" << c.gap << (c.kind == CovKind::kWild ? "/wild" : "/realistic")
+  *os << enum_name(c.sigma_norm) << "/gap" << c.gap << (c.kind == CovKind::kWild ? "/wild" : "/realistic")
       << (c.skip_frames ? "/skips" : "") << "/seeds" << c.seed_neighbours << "/travel"
       << static_cast<int>(c.min_travel_m);
 }
@@ -145,37 +145,37 @@ TEST_P(PoseGateBruteForce, KdTreeSearchEqualsBruteForce) {
   config.beta_m = 2.0;
   config.kdtree_seed_neighbours = c.seed_neighbours;
   config.kdtree_leaf_size = 4;
-  config.min_travel_m = c.min_travel_m;
+  config.revisit.min_travel_m = c.min_travel_m;
   const auto samples =
       make_samples(1000 + static_cast<std::uint64_t>(c.gap) * 7 + (c.kind == CovKind::kWild ? 1 : 0), 2000,
                    c.kind, c.skip_frames);
   expect_matches_brute_force(config, samples);
 }
 
-INSTANTIATE_TEST_SUITE_P(Cases, PoseGateBruteForce,
-                         ::testing::Values(BruteForceCase{"max_eigen", 30, CovKind::kRealistic, false, 4},
-                                           BruteForceCase{"trace", 30, CovKind::kRealistic, false, 1},
-                                           BruteForceCase{"max_eigen", 1, CovKind::kWild, false, 1},
-                                           BruteForceCase{"trace", 7, CovKind::kWild, true, 3},
-                                           BruteForceCase{"max_eigen", 200, CovKind::kWild, true, 8},
-                                           BruteForceCase{"trace", 2, CovKind::kRealistic, true, 2},
-                                           BruteForceCase{"max_eigen", 30, CovKind::kWild, false, 32},
-                                           BruteForceCase{"trace", 1, CovKind::kRealistic, true, 4, 0.0},
-                                           BruteForceCase{"max_eigen", 1, CovKind::kWild, false, 4, 40.0},
-                                           BruteForceCase{"trace", 30, CovKind::kRealistic, false, 2, 150.0}),
-                         [](const ::testing::TestParamInfo<BruteForceCase>& param_info) {
-                           const BruteForceCase& c = param_info.param;
-                           return c.sigma_norm + "_gap" + std::to_string(c.gap) +
-                                  (c.kind == CovKind::kWild ? "_wild" : "_realistic") +
-                                  (c.skip_frames ? "_skips" : "") + "_seeds" +
-                                  std::to_string(c.seed_neighbours) + "_travel" +
-                                  std::to_string(static_cast<int>(c.min_travel_m));
-                         });
+INSTANTIATE_TEST_SUITE_P(
+    Cases, PoseGateBruteForce,
+    ::testing::Values(BruteForceCase{SigmaNorm::kMaxEigen, 30, CovKind::kRealistic, false, 4},
+                      BruteForceCase{SigmaNorm::kTrace, 30, CovKind::kRealistic, false, 1},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 1, CovKind::kWild, false, 1},
+                      BruteForceCase{SigmaNorm::kTrace, 7, CovKind::kWild, true, 3},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 200, CovKind::kWild, true, 8},
+                      BruteForceCase{SigmaNorm::kTrace, 2, CovKind::kRealistic, true, 2},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 30, CovKind::kWild, false, 32},
+                      BruteForceCase{SigmaNorm::kTrace, 1, CovKind::kRealistic, true, 4, 0.0},
+                      BruteForceCase{SigmaNorm::kMaxEigen, 1, CovKind::kWild, false, 4, 40.0},
+                      BruteForceCase{SigmaNorm::kTrace, 30, CovKind::kRealistic, false, 2, 150.0}),
+    [](const ::testing::TestParamInfo<BruteForceCase>& param_info) {
+      const BruteForceCase& c = param_info.param;
+      return std::string(enum_name(c.sigma_norm)) + "_gap" + std::to_string(c.gap) +
+             (c.kind == CovKind::kWild ? "_wild" : "_realistic") + (c.skip_frames ? "_skips" : "") +
+             "_seeds" + std::to_string(c.seed_neighbours) + "_travel" +
+             std::to_string(static_cast<int>(c.min_travel_m));
+    });
 
 TEST(PoseGate, AllPositionsEqualTiesGoToSmallestFrame) {
   GateConfig config;
   config.gap_frames = 3;
-  config.min_travel_m = 0.0;  // the paper's gate: the frame gap only
+  config.revisit.min_travel_m = 0.0;  // the paper's gate: the frame gap only
   PoseGate gate(config);
   const Eigen::Vector3d p(1.0, 2.0, 3.0);
   for (std::int64_t i = 0; i < 50; ++i) {
@@ -212,7 +212,7 @@ TEST(PoseGate, DelayedInsertionRespectsGap) {
 TEST(PoseGate, GapsInFrameNumbering) {
   GateConfig config;
   config.gap_frames = 10;
-  config.min_travel_m = 0.0;
+  config.revisit.min_travel_m = 0.0;
   PoseGate gate(config);
   gate.process(0, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
   gate.process(5, Eigen::Vector3d(1, 0, 0), Eigen::Matrix3d::Zero());
@@ -246,7 +246,7 @@ TEST(PoseGate, UsesPoseEstimatePositionAndCovariance) {
 TEST(PoseGate, RunningMaxEigenvalueOfTree) {
   GateConfig config;
   config.gap_frames = 2;
-  config.min_travel_m = 0.0;
+  config.revisit.min_travel_m = 0.0;
   PoseGate gate(config);
   gate.process(0, Eigen::Vector3d::Zero(), Eigen::Vector3d(1, 4, 2).asDiagonal().toDenseMatrix());
   gate.process(1, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Identity() * 9);
@@ -262,7 +262,7 @@ TEST(PoseGate, RunningMaxEigenvalueOfTree) {
 TEST(PoseGate, StandingStillGivesNoCandidateUntilTheOdometryTravelled) {
   GateConfig config;
   config.gap_frames = 3;
-  config.min_travel_m = 2.0;
+  config.revisit.min_travel_m = 2.0;
   PoseGate gate(config);
   std::int64_t frame = 0;
   // 100 frames at the origin with 1 mm of jitter: 2 mm of path per frame at most, 0.2 m in all.
@@ -290,7 +290,7 @@ TEST(PoseGate, StandingStillGivesNoCandidateUntilTheOdometryTravelled) {
   EXPECT_TRUE(back.gated);
   EXPECT_LE(back.nearest_frame, 100);
   // With min_travel_m 0 the gate searches every frame older than the gap, stationary ones too.
-  config.min_travel_m = 0.0;
+  config.revisit.min_travel_m = 0.0;
   PoseGate paper(config);
   for (std::int64_t f = 0; f < 10; ++f) paper.process(f, Eigen::Vector3d::Zero(), Eigen::Matrix3d::Zero());
   EXPECT_EQ(paper.frames_in_tree(), 10u - 3u);
@@ -320,7 +320,7 @@ TEST(PoseGate, BadInputIsDataError) {
 
 TEST(PoseGate, InvalidConfigIsRejected) {
   GateConfig config;
-  config.sigma_norm = "frobenius";
+  config.gap_frames = 0;
   EXPECT_THROW(PoseGate{config}, ConfigError);
 }
 

@@ -44,7 +44,7 @@ TEST(MatchKittiThumbs, FullModeFindsRevisits) {
   ASSERT_EQ(positions.size(), 4540u);
 
   DirdConfig dird;
-  dird.normalization = "l2";
+  dird.normalization = DirdNormalization::kL2;
   dird.mu = 48477.5;
   dird.sigma = 1796.7769;
   const DirdExtractor extractor(dird);

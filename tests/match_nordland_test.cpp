@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <opencv2/imgcodecs.hpp>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -38,10 +39,17 @@ std::vector<Descriptor> load(const std::filesystem::path& dir, const DirdExtract
   return out;
 }
 
+// The normalisation named `word` (libdird or l2) through the config's name table.
+DirdNormalization normalization_named(const std::string& word) {
+  for (const EnumName<DirdNormalization>& n : enum_names(DirdNormalization{}))
+    if (n.name == word) return n.value;
+  throw std::invalid_argument("no dird.normalization " + word);
+}
+
 void run(const std::string& normalization, std::size_t* correct_out, std::size_t* total_out) {
   const auto root = testing::shared_data_dir() / "nordland-64x32";
   DirdConfig dird;
-  dird.normalization = normalization;
+  dird.normalization = normalization_named(normalization);
   const DirdExtractor extractor(dird);
   const std::vector<Descriptor> summer = load(root / "summer", extractor);
   const std::vector<Descriptor> winter = load(root / "winter", extractor);

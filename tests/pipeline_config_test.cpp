@@ -193,12 +193,12 @@ TEST(PipelineConfig, BoundErrorsNameWhereTheKeyWasSet) {
     FAIL() << "expected ConfigError";
   } catch (const ConfigError& e) {
     EXPECT_EQ(std::string(e.what()),
-              "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got -1) (" + file.string() +
+              "eval.min_travel_m: must be in [0, 1e+06] m (0 = no travel needed) (got -1) (" + file.string() +
                   ":3)");
   }
   std::filesystem::remove(file);
   EXPECT_EQ(error_of({"eval.min_travel_m=1e9"}),
-            "eval.min_travel_m: must be in [0, 1e+05] m (0 = no travel needed) (got 1e+09) (--set "
+            "eval.min_travel_m: must be in [0, 1e+06] m (0 = no travel needed) (got 1e+09) (--set "
             "eval.min_travel_m=1e9)");
 }
 

@@ -34,9 +34,9 @@ constexpr std::size_t kLaps = 3;
 
 PipelineConfig seqslam_config(RunMode mode, int threads = 2) {
   PipelineConfig config = testing::revisit_config(Detector::kDirdSeqSlam, mode, threads);
-  config.dird_seqslam.normalization = "l2";
-  config.dird_seqslam.resize = "area";
-  config.dird_seqslam.standardize = "causal";
+  config.dird_seqslam.normalization = DirdNormalization::kL2;
+  config.dird_seqslam.resize = DirdResize::kArea;
+  config.dird_seqslam.standardize = StandardizeMode::kCausal;
   testing::small_standardize(config.standardize);
   config.dird_seqslam.search.contrast_half_window_frames = 5;
   config.validate();
@@ -154,7 +154,7 @@ TEST(PipelineDirdSeqSlam, CausalAPrefixRunGivesTheWholeRunsRowsRestrictedToIt) {
 TEST(PipelineDirdSeqSlam, RawDistancesWhenStandardisationIsOff) {
   const RevisitDataset dataset(kPeriod, kLaps);
   PipelineConfig config = seqslam_config(RunMode::kFull);
-  config.dird_seqslam.standardize = "off";
+  config.dird_seqslam.standardize = StandardizeMode::kOff;
   const auto out = testing::make_temp_dir("pipeline-dseq-raw");
   ASSERT_FALSE(run_pipeline(config, dataset, out).failed);
   expect_run_is(out, reference_search(reference_rows(dataset, config, kPeriod * kLaps), config));
@@ -178,16 +178,16 @@ TEST(PipelineDirdSeqSlam, TakesItsDescriptorsFromItsOwnSection) {
   // dird / standardize.mode are the DIRD DP's (the paper's descriptor, bit-exact); dird-seqslam's defaults
   // are l2 normalisation, area resize, causal standardisation, whatever those say.
   const PipelineConfig loaded = load_config<PipelineConfig>("", {"run.method=dird-seqslam"});
-  EXPECT_EQ(loaded.dird.normalization, "libdird");
-  EXPECT_EQ(loaded.standardize.mode, "off");
+  EXPECT_EQ(loaded.dird.normalization, DirdNormalization::kLibdird);
+  EXPECT_EQ(loaded.standardize.mode, StandardizeMode::kOff);
   const DirdConfig dird = loaded.dird_seqslam.descriptor(loaded.dird);
-  EXPECT_EQ(dird.normalization, "l2");
-  EXPECT_EQ(dird.resize, "area");
-  EXPECT_EQ(loaded.dird_seqslam.standardization(loaded.standardize).mode, "causal");
+  EXPECT_EQ(dird.normalization, DirdNormalization::kL2);
+  EXPECT_EQ(dird.resize, DirdResize::kArea);
+  EXPECT_EQ(loaded.dird_seqslam.standardization(loaded.standardize).mode, StandardizeMode::kCausal);
   // A single sequence streams: batch statistics are refused, naming the key.
   const RevisitDataset dataset(kPeriod, 1);
   PipelineConfig batch = seqslam_config(RunMode::kFull);
-  batch.dird_seqslam.standardize = "batch";
+  batch.dird_seqslam.standardize = StandardizeMode::kBatch;
   try {
     run_pipeline(batch, dataset, testing::make_temp_dir("pipeline-dseq-batch"));
     FAIL() << "dird_seqslam.standardize batch accepted";

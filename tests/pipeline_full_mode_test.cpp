@@ -36,7 +36,7 @@ PipelineConfig full_config(int threads = 2, int margin = 30) {
   PipelineConfig config;
   config.run.mode = RunMode::kFull;
   config.run.threads = threads;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   config.match.margin = margin;
   config.match.sequence_length = 10;
   config.match.tau3 = 0.05;
@@ -180,7 +180,7 @@ TEST(PipelineFullMode, ModeIsValidatedAndNamesTheModes) {
   }
   PipelineConfig odometry_only;
   odometry_only.run.mode = RunMode::kOdometry;
-  odometry_only.output.progress = "off";
+  odometry_only.output.progress = Progress::kOff;
   const RevisitDataset dataset(kPeriod, 1);
   const auto out = testing::make_temp_dir("pipeline-odometry-mode");
   const RunResult result = run_pipeline(odometry_only, dataset, out);

@@ -24,7 +24,7 @@ PipelineConfig base_config(int threads = 2) {
   config.run.threads = threads;
   config.run.mode = RunMode::kOdometry;  // the graph itself; detection modes have their own tests
   config.run.decode = DecodePolicy::kAll;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   return config;
 }
 

@@ -32,7 +32,8 @@ TEST(MethodRegistry, NamesAreUniqueAndEveryRowIsFoundByItsWords) {
     EXPECT_EQ(find_method_entry(m.name), &m);
     // The words of a row find it, or the first row with the same words (a later row over the same
     // detector, mode and standardisation is reached by its name: run.method_row).
-    const MethodEntry* by_words = find_method_entry(enum_name(m.detector), enum_name(m.mode), m.standardize);
+    const MethodEntry* by_words =
+        find_method_entry(enum_name(m.detector), enum_name(m.mode), enum_name(m.standardize));
     ASSERT_NE(by_words, nullptr) << m.name;
     EXPECT_LE(by_words, &m) << m.name;
     EXPECT_EQ(by_words->detector, m.detector) << m.name;
@@ -56,7 +57,7 @@ TEST(MethodRegistry, RunMethodNamesARow) {
   const PipelineConfig s = load("run:\n  method: std-full\n");
   EXPECT_EQ(s.run.method, Detector::kDird);
   EXPECT_EQ(s.run.mode, RunMode::kFull);
-  EXPECT_EQ(s.standardize.mode, "causal");
+  EXPECT_EQ(s.standardize.mode, StandardizeMode::kCausal);
   EXPECT_EQ(method_entry(s)->name, std::string("std-full"));
 }
 

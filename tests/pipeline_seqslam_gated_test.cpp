@@ -36,7 +36,7 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 PipelineConfig gated_config(int threads = 2) {
   PipelineConfig config = testing::revisit_config(Detector::kSeqSlam, RunMode::kGated, threads);
-  config.seqslam.exclusion = "past";
+  config.seqslam.exclusion = SeqSlamExclusionKind::kPast;
   config.seqslam.exclusion_margin_frames = 30;  // = match.margin
   config.eval.truth_radius_m = 2.0;
   return config;

@@ -36,8 +36,8 @@ constexpr std::size_t kLaps = 3;
 PipelineConfig standard_config(RunMode mode, int threads = 2) {
   PipelineConfig config = testing::revisit_config(Detector::kDird, mode, threads);
   config.match.nms_half_window = 20;
-  config.dird.normalization = "l2";
-  config.standardize.mode = "causal";
+  config.dird.normalization = DirdNormalization::kL2;
+  config.standardize.mode = StandardizeMode::kCausal;
   testing::small_standardize(config.standardize);
   return config;
 }
@@ -149,7 +149,7 @@ TEST(PipelineStandardDird, OneAndTwoThreadsGiveIdenticalOutputs) {
 TEST(PipelineStandardDird, OnlineScaleIsEstimatedFromTheRunsDistances) {
   const RevisitDataset dataset(kPeriod, kLaps);
   PipelineConfig config = standard_config(RunMode::kFull);
-  config.scale.mode = "online";
+  config.scale.mode = ScaleMode::kOnline;
   config.scale.min_distances = 5000;
   const auto out = testing::make_temp_dir("pipeline-std-online");
   ASSERT_FALSE(run_pipeline(config, dataset, out).failed);
@@ -163,7 +163,7 @@ TEST(PipelineStandardDird, OnlineScaleIsEstimatedFromTheRunsDistances) {
 TEST(PipelineStandardDird, OptionsASingleSequenceCannotTakeAreRefused) {
   const RevisitDataset dataset(kPeriod, 1);
   PipelineConfig batch = standard_config(RunMode::kFull);
-  batch.standardize.mode = "batch";
+  batch.standardize.mode = StandardizeMode::kBatch;
   const auto out = testing::make_temp_dir("pipeline-std-refused");
   try {
     run_pipeline(batch, dataset, out);
@@ -172,7 +172,7 @@ TEST(PipelineStandardDird, OptionsASingleSequenceCannotTakeAreRefused) {
     EXPECT_NE(std::string(e.what()).find("standardize.mode"), std::string::npos) << e.what();
   }
   PipelineConfig online_gated = standard_config(RunMode::kGated);
-  online_gated.scale.mode = "online";
+  online_gated.scale.mode = ScaleMode::kOnline;
   try {
     run_pipeline(online_gated, dataset, out);
     FAIL() << "scale.mode online with run.mode gated was accepted";

@@ -40,7 +40,7 @@ constexpr std::size_t kPeriod = 120;
 PipelineConfig dird_config() {
   PipelineConfig config;
   config.run.threads = 2;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   config.match.margin = 30;
   config.match.sequence_length = 10;
   config.match.tau3 = 0.05;
@@ -52,7 +52,7 @@ PipelineConfig seqslam_config(int threads = 2) {
   PipelineConfig config;
   config.run.method = Detector::kSeqSlam;
   config.run.threads = threads;
-  config.output.progress = "off";
+  config.output.progress = Progress::kOff;
   config.eval.aligned_tolerance_frames = 1;
   // config.seqslam keeps the single-sequence default (exclusion "past", margin 200): two-sequence mode
   // must replace it by "none", else nothing could match.
@@ -165,8 +165,8 @@ TEST(PipelineTwoSequence, OnlineScaleFollowsTheRuleOnEveryPair) {
   const RevisitDataset query(kPeriod, 1, 12345);
   PipelineConfig config = dird_config();
   config.eval.aligned_tolerance_frames = 1;
-  config.dird.normalization = "l2";
-  config.scale.mode = "online";
+  config.dird.normalization = DirdNormalization::kL2;
+  config.scale.mode = ScaleMode::kOnline;
   config.scale.min_distances = 1000;
   const auto out = testing::make_temp_dir("pipeline-two-seq-online");
   run_two_sequences(config, reference, query, out);
@@ -201,7 +201,7 @@ TEST(PipelineTwoSequence, OnlineScaleFollowsTheRuleOnEveryPair) {
   EXPECT_NEAR(scale.at("sigma").get<double>(), sigma, sigma * 0.05);
 
   PipelineConfig fixed = config;
-  fixed.scale.mode = "off";
+  fixed.scale.mode = ScaleMode::kOff;
   fixed.dird.mu = scale.at("mu").get<double>();
   fixed.dird.sigma = scale.at("sigma").get<double>();
   const auto fixed_out = testing::make_temp_dir("pipeline-two-seq-fixed");
@@ -399,9 +399,9 @@ TEST(PipelineTwoSequence, DirdAndDirdSeqSlamOutputsDoNotDependOnTheThreadCount) 
       config.run.method = method;
       config.run.threads = threads;
       config.eval.aligned_tolerance_frames = 1;
-      config.standardize.mode = "causal";
+      config.standardize.mode = StandardizeMode::kCausal;
       config.standardize.warm_up = 20;
-      config.scale.mode = "online";
+      config.scale.mode = ScaleMode::kOnline;
       config.scale.min_distances = 1000;
       config.dird_seqslam.codes.code = DirdCode::kSign;
       outs[threads] = testing::make_temp_dir("pipeline-two-seq-threads");

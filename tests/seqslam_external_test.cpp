@@ -124,7 +124,7 @@ TEST(SeqSlamExternal, KittiThumbsAgreeWithAuthors) {
   ASSERT_EQ(p_w.size(), kKittiThumbs);
 
   SeqSlamConfig config;
-  config.exclusion = "band";
+  config.exclusion = SeqSlamExclusionKind::kBand;
   config.exclusion_margin_frames = kBandMargin;
   const auto ours = run_parallel(ref, query, config);
 

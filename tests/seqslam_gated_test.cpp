@@ -27,7 +27,7 @@ constexpr std::size_t kPixels = 64;
 
 SeqSlamConfig past_config() {
   SeqSlamConfig config;  // OpenSeqSLAM defaults: ds 10, R 10, moves 8..12, Rwindow 10
-  config.exclusion = "past";
+  config.exclusion = SeqSlamExclusionKind::kPast;
   config.exclusion_margin_frames = 30;
   config.validate();
   return config;

@@ -13,7 +13,7 @@ SeqSlamConfig config() {
   c.sequence_length_frames = 10;
   c.ratio_threshold = 0.9;
   c.second_best_window_rows = 10;
-  c.exclusion = "past";
+  c.exclusion = SeqSlamExclusionKind::kPast;
   c.exclusion_margin_frames = 200;
   return c;
 }

@@ -219,11 +219,11 @@ SeqSlamImages looping_run() {
 TEST(SeqSlamRun, SingleSequenceFindsTheLoopOnlyWithTheExclusion) {
   const SeqSlamImages run = looping_run();
   SeqSlamConfig config;
-  config.exclusion = "none";
+  config.exclusion = SeqSlamExclusionKind::kNone;
   const auto self = SeqSlam(config).run(run);
   EXPECT_EQ(self[70].reference, 70u);  // without exclusion every frame matches itself
 
-  config.exclusion = "past";
+  config.exclusion = SeqSlamExclusionKind::kPast;
   config.exclusion_margin_frames = 20;
   const auto matches = SeqSlam(config).run(run);
   ASSERT_EQ(matches.size(), 90u);
@@ -238,7 +238,7 @@ TEST(SeqSlamRun, SingleSequenceFindsTheLoopOnlyWithTheExclusion) {
     }
   }
 
-  config.exclusion = "band";
+  config.exclusion = SeqSlamExclusionKind::kBand;
   const auto band = SeqSlam(config).run(run);
   EXPECT_EQ(band[70].reference, 20u);
   EXPECT_EQ(band[20].reference, 70u);  // the band allows the future too
@@ -249,7 +249,7 @@ TEST(SeqSlamRun, SingleSequenceFindsTheLoopOnlyWithTheExclusion) {
 TEST(SeqSlamRun, ColumnBlocksEqualTheWholeRun) {
   const SeqSlamImages run = looping_run();
   SeqSlamConfig config;
-  config.exclusion = "past";
+  config.exclusion = SeqSlamExclusionKind::kPast;
   config.exclusion_margin_frames = 20;
   const auto whole = SeqSlam(config).run(run);
   const std::size_t n = run.size();

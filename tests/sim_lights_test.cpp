@@ -47,7 +47,7 @@ World wall_world(float wall_z, bool wall_behind = false) {
   world.textures.emplace_back(
       px, px, std::vector<std::uint8_t>(static_cast<std::size_t>(px * px), kWallTexel), false);
   Structure s;
-  s.kind = "wall";
+  s.kind = StructureKind::kWall;
   world.structures.push_back(s);
   for (const float z : wall_behind ? std::vector<float>{wall_z, -wall_z} : std::vector<float>{wall_z}) {
     Quad q;
@@ -262,7 +262,7 @@ TEST(Lights, LampsAlongTheStreetAndUnderTheHallCeiling) {
   for (const Eigen::Isometry3d& T : plan.T_w_c) path.push_back(T.translation());
   const World street = build_world(config.world, path, plan.up_w);
   int posts = 0;
-  for (const Structure& s : street.structures) posts += s.kind == "pole" ? 1 : 0;
+  for (const Structure& s : street.structures) posts += s.kind == StructureKind::kPole ? 1 : 0;
   const Lamps lamps = make_lamps(street, config.lights, path, 1);
   ASSERT_EQ(static_cast<int>(lamps.lights.size()), posts);
   ASSERT_GE(posts, 8);
@@ -290,7 +290,7 @@ TEST(Lights, LampsAlongTheStreetAndUnderTheHallCeiling) {
 
   // Hall: a grid under the ceiling, pointing down.
   WorldConfig hall_config;
-  hall_config.kind = "hall";
+  hall_config.kind = sim::WorldKind::kHall;
   std::vector<Eigen::Vector3d> flight;
   for (int k = 0; k < 200; ++k) flight.emplace_back(8.0 * std::sin(0.03 * k), 5.0 * std::cos(0.05 * k), 1.5);
   const World hall = build_world(hall_config, flight, Eigen::Vector3d::UnitZ());
@@ -393,7 +393,7 @@ TEST(Lights, TheAmbientNoiseNightIsTheDefaultAndUnchanged) {
   // The default night model renders exactly what the renderer renders without lights (as before the lamps
   // model), and its simulation.json carries none of the lamps model's keys.
   SimulationConfig config = make_preset("demo-dusk", "");
-  EXPECT_EQ(config.illumination.night_model, "ambient_noise");
+  EXPECT_EQ(config.illumination.night_model, sim::NightModel::kAmbientNoise);
   const SimulationPlan plan = plan_simulation(config);
   EXPECT_FALSE(config.world.street_ground_exact_cells);
   std::vector<Eigen::Vector3d> path;
@@ -431,7 +431,7 @@ TEST(Lights, AnyPresetSwitchesToTheLampsNightWithSet) {
     RawConfig raw;
     raw.apply_override("illumination.night_model=lamps");
     apply_config(raw, config);
-    EXPECT_EQ(config.illumination.night_model, "lamps") << name;
+    EXPECT_EQ(config.illumination.night_model, sim::NightModel::kLamps) << name;
   }
   SimulationConfig config = make_preset("demo", "");
   RawConfig raw;

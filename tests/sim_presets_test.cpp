@@ -49,7 +49,7 @@ TEST(SimPresets, EveryShippedPresetFileLoadsAndValidates) {
 
 TEST(SimPresets, FilesHoldWhatTheCodePresetsSet) {
   const SimulationConfig demo = make_preset("demo", "");
-  EXPECT_EQ(demo.route.shape, "waypoints");
+  EXPECT_EQ(demo.route.shape, sim::RouteShape::kWaypoints);
   EXPECT_EQ(demo.route.waypoints,
             "-25,-25; 40,-25; 40,25; -40,25; -40,-140.6; 40,-140.6; 40,25; -5,25; -5,60");
   EXPECT_EQ(demo.route.frames, 600);
@@ -62,9 +62,9 @@ TEST(SimPresets, FilesHoldWhatTheCodePresetsSet) {
   EXPECT_EQ(demo.camera.q_b_c_w, -0.5);  // exactly what Eigen's Quaterniond(R_b_c) gave
   EXPECT_EQ(demo.world.alias_copy_target_y_m, -140.6);
   EXPECT_EQ(demo.illumination.transition_start, 0.70);
-  EXPECT_EQ(demo.illumination.night_model, "lamps");
+  EXPECT_EQ(demo.illumination.night_model, sim::NightModel::kLamps);
   EXPECT_EQ(make_preset("demo-dusk", "").illumination.night_noise_sigma, 3.0);
-  EXPECT_EQ(demo.loops.min_travel_m, 10.0);
+  EXPECT_EQ(demo.loops.revisit.min_travel_m, 10.0);
 
   const SimulationConfig aliasing = make_preset("aliasing", "");
   EXPECT_EQ(aliasing.simulation.max_frames, 490);
@@ -73,7 +73,7 @@ TEST(SimPresets, FilesHoldWhatTheCodePresetsSet) {
   EXPECT_EQ(aliasing.world.alias_copy_target_x_m, 51.3);
   EXPECT_EQ(aliasing.world.alias_copy_rotation_deg, 180.0);
   EXPECT_EQ(aliasing.world.street_pole_spacing_m, 0.0);
-  EXPECT_EQ(aliasing.illumination.kind, "constant");
+  EXPECT_EQ(aliasing.illumination.kind, sim::IlluminationKind::kConstant);
 
   // Input files under the shared-data folder, as the code joined them (simulation.json records them).
   const SimulationConfig kitti = make_preset("kitti00", "../shared/data");

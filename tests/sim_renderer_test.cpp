@@ -88,7 +88,7 @@ World checkerboard_world() {
   }
   world.textures.emplace_back(w, h, texels, false);
   Structure s;
-  s.kind = "checkerboard";
+  s.kind = StructureKind::kWall;
   world.structures.push_back(s);
   Quad q;
   q.origin_w = Eigen::Vector3f(-2.0f, -1.5f, 6.0f);
@@ -230,7 +230,7 @@ TEST(Renderer, KltTracksEnoughCornersInStreetAndHall) {
   const Eigen::Isometry3d T_street = look(Eigen::Vector3d(0, 0, 50), Eigen::Vector3d::UnitZ(), kKittiUp);
   const Eigen::Vector3d step_street(0.0, 0.0, 0.1);
   WorldConfig hall_config;
-  hall_config.kind = "hall";
+  hall_config.kind = sim::WorldKind::kHall;
   const World hall = build_world(hall_config, hall_path(), kEurocUp);
   const Eigen::Isometry3d T_hall =
       look(Eigen::Vector3d(0.5, 0.5, 1.3), Eigen::Vector3d(1.0, 0.3, 0.0), kEurocUp);
@@ -255,13 +255,11 @@ TEST(Illumination, ScheduleGoesFromDayToNight) {
   EXPECT_GT(dusk.ambient, night.ambient);
   EXPECT_GT(night.noise_sigma, day.noise_sigma);
   EXPECT_GT(day.sky_brightness, night.sky_brightness);
-  schedule.kind = "jump";
+  schedule.kind = sim::IlluminationKind::kJump;
   EXPECT_DOUBLE_EQ(schedule.at(0.49).ambient, day.ambient);
   EXPECT_DOUBLE_EQ(schedule.at(0.5).noise_sigma, night.noise_sigma);
-  schedule.kind = "constant";
+  schedule.kind = sim::IlluminationKind::kConstant;
   EXPECT_DOUBLE_EQ(schedule.at(1.0).ambient, day.ambient);
-  schedule.kind = "sunset";
-  EXPECT_THROW(schedule.validate(), ConfigError);
   schedule = IlluminationSchedule{};
   schedule.transition_end = 0.1;
   EXPECT_THROW(schedule.validate(), ConfigError);

@@ -91,7 +91,7 @@ TEST(SimulatorPresets, KnownNamesAndClearErrorForOthers) {
     EXPECT_NE(std::string(e.what()).find("kitti01"), std::string::npos) << e.what();
   }
   SimulationConfig bad = make_preset("demo", "");
-  bad.simulation.imu_source = "magic";
+  bad.simulation.imu_source = ImuSource::kFile;  // a file IMU needs a recorded trajectory
   EXPECT_THROW(bad.validate(), ConfigError);
 }
 
@@ -103,11 +103,11 @@ TEST(SimulatorPresets, KittiAndEurocPresetParameters) {
   EXPECT_DOUBLE_EQ(k.camera.fx, 718.856);
   EXPECT_DOUBLE_EQ(k.camera.cx, 607.1928);
   EXPECT_DOUBLE_EQ(k.simulation.up_y, -1.0);
-  EXPECT_EQ(k.world.kind, "street");
+  EXPECT_EQ(k.world.kind, sim::WorldKind::kStreet);
   const SimulationConfig e = make_preset("euroc-mh05", "/data");
-  EXPECT_EQ(e.simulation.imu_source, "file");
-  EXPECT_EQ(e.world.kind, "hall");
-  EXPECT_EQ(e.camera.distortion_model, "radtan");
+  EXPECT_EQ(e.simulation.imu_source, sim::ImuSource::kFile);
+  EXPECT_EQ(e.world.kind, sim::WorldKind::kHall);
+  EXPECT_EQ(e.camera.distortion_model, SimDistortion::kRadTan);
 }
 
 // Frames (of the first `frames`) whose camera is within radius_m (horizontally) of c, as [first, last] runs.
@@ -154,7 +154,7 @@ TEST(SimulatorPresets, AliasingPresetCopiesOnePlaceOntoAFarPlaceDrivenOnce) {
     const Structure& s = world.structures[k];
     if (s.aliased_from < 0) continue;
     EXPECT_TRUE(s.copied) << k;
-    EXPECT_EQ(s.kind, "facade");
+    EXPECT_EQ(s.kind, StructureKind::kFacade);
     const Structure& src = world.structures[static_cast<std::size_t>(s.aliased_from)];
     EXPECT_EQ(s.texture_seed, src.texture_seed);
     EXPECT_EQ(s.style, src.style);
@@ -213,7 +213,7 @@ TEST(SimulatorPresets, DemoPresetShowsARevisitAtNightNewStreetsAndAnAliasedPlace
   ASSERT_EQ(plan.frames_used, 600u);
   EXPECT_EQ(plan.camera.width_px, 640);
   EXPECT_EQ(plan.camera.height_px, 200);
-  EXPECT_EQ(config.route.shape, "waypoints");
+  EXPECT_EQ(config.route.shape, sim::RouteShape::kWaypoints);
 
   // 1. One genuine revisit: every ground-truth query frame lies in one run of frames late in the drive, at
   // full night (night factor 1), and revisits frames of the first loop, by day, more than 200 frames (the
@@ -274,7 +274,7 @@ TEST(SimulatorPresets, DemoPresetShowsARevisitAtNightNewStreetsAndAnAliasedPlace
     const Eigen::Vector2d c = centre(static_cast<int>(k));
     const Eigen::Vector2d c_src = centre(s.aliased_from);
     EXPECT_GT((c - c_src).norm(), 100.0) << k;
-    if (s.kind != "facade") continue;
+    if (s.kind != StructureKind::kFacade) continue;
     ++facades;
     EXPECT_LT((c - (c_src + shift)).norm(), 0.75) << "facade " << k << " at " << c.transpose();
     const auto at_copy = passes_near(plan.T_w_c, plan.frames_used, c, 12.0);
@@ -303,7 +303,7 @@ std::vector<LoopInterval> preset_loops(SimulationConfig& config, SimulationPlan*
 
 TEST(SimulatorPresets, NightLoopClosesTheLoopAtFullNightUnderLamps) {
   SimulationConfig config = make_preset("night-loop", "");
-  EXPECT_EQ(config.illumination.night_model, "lamps");
+  EXPECT_EQ(config.illumination.night_model, sim::NightModel::kLamps);
   SimulationPlan plan;
   const std::vector<LoopInterval> loops = preset_loops(config, &plan);
   ASSERT_EQ(plan.frames_used, 470u);
@@ -346,7 +346,7 @@ TEST(SimulatorPresets, TheDemoIsTheDuskDemoWithItsRevisitAtFullNight) {
     (*j)["simulation"].erase("preset");
   }
   EXPECT_EQ(a, b);
-  EXPECT_EQ(night.illumination.night_model, "lamps");
+  EXPECT_EQ(night.illumination.night_model, sim::NightModel::kLamps);
   SimulationPlan plan;
   const std::vector<LoopInterval> loops = preset_loops(night, &plan);
   SimulationPlan demo_plan;
@@ -414,9 +414,9 @@ TEST(LoopTruth, StandingStillIsNotARevisitWithMinTravel) {
   LoopTruthSettings settings;
   settings.min_gap_frames = 20;
   EXPECT_EQ(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).size(), 40u);  // every j >= 20
-  settings.min_travel_m = 1.0;
+  settings.revisit.min_travel_m = 1.0;
   EXPECT_TRUE(find_loop_truth(parked, Eigen::Vector3d::UnitZ(), settings).empty());
-  settings.min_travel_m = -1.0;
+  settings.revisit.min_travel_m = -1.0;
   EXPECT_THROW(settings.validate(), ConfigError);
 }
 

@@ -19,6 +19,7 @@
 
 #include "app/commands.hpp"
 #include "core/error.hpp"
+#include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
@@ -60,9 +61,9 @@ int run_calibrate(const CalibrateOptions& opt) {
   if (!dataset->has_images()) throw DataError(opt.dataset, "the dataset has no images to describe");
 
   DirdConfig config;
-  config.normalization = opt.normalization;
+  config.normalization = enum_value<DirdNormalization>(opt.normalization).value();
   config.flip_vertical = opt.flip_vertical;
-  config.metric = opt.metric;
+  config.metric = enum_value<DirdMetric>(opt.metric).value();
   config.tau1 = opt.tau1;
   if (config.l2_metric()) {  // scale-only starting values so the config validates; calibration replaces them
     config.mu = kDirdScaleMuL2;

@@ -147,7 +147,7 @@ PipelineConfig method_config(const PipelineConfig& base, const std::string& meth
   config.run.method_row = m.name;
   // Standardised codes take the fixed standardised scale (docs/standardize.md: the online rule's 1% cut-off
   // keeps too few entries across conditions); scale.mode online is for raw DIRD (full, gated refuses it).
-  if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = "off";
+  if (config.standardize.enabled() || m.mode == RunMode::kGated) config.scale.mode = ScaleMode::kOff;
   // Geometric verification and the pose graph compare the trajectory, not the detectors: the stream runs
   // without them unless the policy verifies while streaming (compare's, LoopCorrection::kAfterRun, does not),
   // so every column times the same loop-detection work (a full method's thousands of loops would each be

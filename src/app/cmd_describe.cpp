@@ -15,6 +15,7 @@
 
 #include "app/commands.hpp"
 #include "core/error.hpp"
+#include "io/config.hpp"
 #include "io/dataset.hpp"
 #include "io/file_guard.hpp"
 #include "io/writers.hpp"
@@ -75,7 +76,7 @@ std::filesystem::path picture_path(const std::filesystem::path& dir, const std::
 
 int run_describe(const DescribeOptions& opt) {
   DirdConfig config;
-  config.normalization = opt.normalization;
+  config.normalization = enum_value<DirdNormalization>(opt.normalization).value();
   config.flip_vertical = opt.flip_vertical;
   const DirdExtractor extractor(config);
 

@@ -36,9 +36,9 @@ struct SimulateOptions {
   bool force = false;
 };
 
-// "kitti" (12 numbers per row), "tum" (8 numbers) or "euroc" (a .csv), from the file itself.
-std::string detect_trajectory_format(const std::filesystem::path& file) {
-  if (file.extension() == ".csv") return "euroc";
+// kitti (12 numbers per row), tum (8 numbers) or euroc (a .csv), from the file itself.
+sim::TrajectorySource detect_trajectory_format(const std::filesystem::path& file) {
+  if (file.extension() == ".csv") return sim::TrajectorySource::kEuroc;
   std::ifstream in(file);
   if (!in) throw DataError(file, "cannot open trajectory file");
   std::string line;
@@ -48,8 +48,8 @@ std::string detect_trajectory_format(const std::filesystem::path& file) {
     int count = 0;
     double value = 0.0;
     while (row >> value) ++count;
-    if (count == 12) return "kitti";
-    if (count == 8) return "tum";
+    if (count == 12) return sim::TrajectorySource::kKitti;
+    if (count == 8) return sim::TrajectorySource::kTum;
     throw DataError(file, 1,
                     "cannot tell the trajectory format (expected 12 numbers per row for KITTI poses, 8 for "
                     "TUM, or a .csv EuRoC ground truth); pass --trajectory-format");
@@ -63,28 +63,29 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
   if (!opt.trajectory.empty()) {
     const std::filesystem::path file = opt.trajectory;
     require_regular_file(file, "the trajectory file");  // missing, a directory, a FIFO: say which
-    s.trajectory_format =
-        opt.trajectory_format.empty() ? detect_trajectory_format(file) : opt.trajectory_format;
+    s.trajectory_format = opt.trajectory_format.empty()
+                              ? detect_trajectory_format(file)
+                              : enum_value<sim::TrajectorySource>(opt.trajectory_format).value();
     s.trajectory_file = file.string();
-    if (s.trajectory_format == "kitti") {
+    if (s.trajectory_format == sim::TrajectorySource::kKitti) {
       s.times_file = (file.parent_path() / "times.txt").string();
       s.frame_times_file.clear();  // KITTI: times.txt gives each pose's time
-    } else if (s.trajectory_format == "euroc") {
+    } else if (s.trajectory_format == sim::TrajectorySource::kEuroc) {
       // .../mav0/state_groundtruth_estimate0/data.csv -> .../mav0/cam0/data.csv and imu0/data.csv
       const std::filesystem::path mav0 = file.parent_path().parent_path();
       const std::filesystem::path cam_csv = mav0 / "cam0" / "data.csv";
       s.frame_times_file = std::filesystem::is_regular_file(cam_csv) ? cam_csv.string() : std::string{};
       const std::filesystem::path imu_csv = mav0 / "imu0" / "data.csv";
-      if (s.imu_source == "file" && opt.imu.empty()) {
+      if (s.imu_source == sim::ImuSource::kFile && opt.imu.empty()) {
         if (std::filesystem::is_regular_file(imu_csv)) {
           s.imu_file = imu_csv.string();
         } else {
-          s.imu_source = "synthesised";
+          s.imu_source = sim::ImuSource::kSynthesised;
         }
       }
     } else {
       s.frame_times_file.clear();
-      if (opt.imu.empty()) s.imu_source = "synthesised";
+      if (opt.imu.empty()) s.imu_source = sim::ImuSource::kSynthesised;
     }
   } else if (!opt.trajectory_format.empty()) {
     throw ConfigError("--trajectory-format needs --trajectory");
@@ -95,7 +96,7 @@ void apply_input_overrides(const SimulateOptions& opt, sim::SimulationConfig& co
   }
   if (!opt.imu.empty()) {
     require_regular_file(opt.imu, "the IMU file");
-    s.imu_source = "file";
+    s.imu_source = sim::ImuSource::kFile;
     s.imu_file = opt.imu;
   }
 }
@@ -142,7 +143,7 @@ int run_simulate(const SimulateOptions& opt) {
   std::printf("  loops         %zu ground-truth pairs, %zu query frames\n", summary.loop_pairs,
               summary.loop_query_frames);
   std::printf("  imu           %zu samples (%s)\n", summary.imu_samples,
-              config.simulation.imu_source.c_str());
+              std::string(enum_name(config.simulation.imu_source)).c_str());
   std::printf("  ground truth  %zu rows\n", summary.ground_truth_rows);
   std::printf("  time          %.2f s (rendering %.2f s, %.1f frames/s)\n", summary.elapsed_s,
               summary.render_s, fps);

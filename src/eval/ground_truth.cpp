@@ -42,8 +42,7 @@ void GroundTruthConfig::validate() const {
     throw ConfigError("ground_truth.plane: '" + plane + "' is not one of: xz, xy, yz, xyz");
   }
   if (!std::isfinite(accept_radius_m)) throw ConfigError("ground_truth.accept_radius_m: must be finite");
-  if (!(min_travel_m >= 0.0) || !std::isfinite(min_travel_m))
-    throw ConfigError("ground_truth.min_travel_m: must be finite and >= 0");
+  revisit.validate("ground_truth.min_travel_m");
 }
 
 LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3d>& p_w,
@@ -55,7 +54,7 @@ LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3
   gt.positions_.reserve(n);
   for (const auto& p : p_w) gt.positions_.push_back(project_to_plane(p, config.plane));
   gt.accept_radius_m_ = config.effective_accept_radius_m();
-  gt.min_travel_m_ = config.min_travel_m;
+  gt.min_travel_m_ = config.revisit.min_travel_m;
   gt.travel_m_.assign(n, 0.0);
   const Eigen::Vector3d* last = nullptr;
   double travel_m = 0.0;
@@ -86,7 +85,7 @@ LoopGroundTruth LoopGroundTruth::from_positions(const std::vector<Eigen::Vector3
           if (it == grid.end()) continue;
           for (const std::size_t j : it->second) {
             if ((gt.positions_[j] - gt.positions_[i]).squaredNorm() <= r2 &&
-                gt.travel_m_[i] - gt.travel_m_[j] >= config.min_travel_m)
+                gt.travel_m_[i] - gt.travel_m_[j] >= config.revisit.min_travel_m)
               refs.push_back(j);
           }
         }

@@ -8,6 +8,8 @@
 #include <utility>
 #include <vector>
 
+#include "core/revisit_rule.hpp"
+
 namespace loopgate {
 
 struct GroundTruthConfig {
@@ -17,8 +19,8 @@ struct GroundTruthConfig {
   double accept_radius_m = 0.0;  // r_accept for scoring a detection; <= 0 means r_true
   // A revisit needs travel in between: a pair (query, reference) is a loop only when the ground-truth path
   // between them (3-D, summed over consecutive frames) is at least this long. Hovering or standing still
-  // within r_true is not a loop. 0 = no such rule.
-  double min_travel_m = 0.0;
+  // within r_true is not a loop. 0 = no such rule. Key min_travel_m.
+  RevisitRule revisit;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is GroundTruthConfig or const
   // GroundTruthConfig).
@@ -28,7 +30,7 @@ struct GroundTruthConfig {
     v("gap_frames", self.gap_frames);
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
   }
   void validate() const;  // throws ConfigError naming the key
   double effective_accept_radius_m() const { return accept_radius_m > 0.0 ? accept_radius_m : radius_m; }

@@ -68,7 +68,7 @@ SequenceEvaluation evaluate_sequence(const SequenceEvaluationInput& input) {
                   {"gap_frames", input.truth.gap_frames},
                   {"plane", input.truth.plane},
                   {"accept_radius_m", input.truth.effective_accept_radius_m()},
-                  {"min_travel_m", input.truth.min_travel_m},
+                  {"min_travel_m", input.truth.revisit.min_travel_m},
                   {"positives", out.truth.positive_count()}}}};
   }
   out.truth_pairs = out.truth.pairs();

@@ -21,6 +21,7 @@
 #include <filesystem>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <type_traits>
@@ -67,6 +68,15 @@ class RawConfig {
  private:
   std::map<std::string, std::map<std::string, RawConfigValue>> sections_;
 };
+
+// The value of the enum E named `name`, or nullopt when it is not one of the words of its table (for a word
+// read outside the configuration, e.g. a command-line option checked against the same words).
+template <class E>
+requires std::is_enum_v<E> std::optional<E> enum_value(std::string_view name) {
+  for (const EnumName<E>& n : enum_names(E{}))
+    if (n.name == name) return n.value;
+  return std::nullopt;
+}
 
 namespace config_detail {
 

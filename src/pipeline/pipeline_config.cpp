@@ -135,11 +135,8 @@ void PipelineConfig::validate_gate_feedback() const {
 }
 
 void DirdSeqSlamConfig::validate() const {
-  require_one_of("dird_seqslam.normalization", normalization, {"libdird", "l2"});
-  require_one_of("dird_seqslam.resize", resize, {"nearest", "area"});
-  require_one_of("dird_seqslam.standardize", standardize, {"off", "causal", "batch"});
   codes.validate();
-  if (codes.compact() && standardize == "off") {
+  if (codes.compact() && standardize == StandardizeMode::kOff) {
     throw ConfigError("dird_seqslam.code: '" + std::string(enum_name(codes.code)) +
                       "' codes the standardised descriptor: needs dird_seqslam.standardize causal or batch");
   }
@@ -158,13 +155,12 @@ void EvalConfig::validate() const {
           "in (0, 10000] m", std::to_string(truth_radius_m));
   require_in("eval.truth_gap_frames", truth_gap_frames, 0, 1'000'000, "frames");
   require_in("eval.accept_radius_m", accept_radius_m, 0.0, 1e4, "m (0 = eval.truth_radius_m)");
-  require_in("eval.min_travel_m", min_travel_m, 0.0, 1e5, "m (0 = no travel needed)");
+  revisit.validate("eval.min_travel_m");
   require_in("eval.aligned_tolerance_frames", aligned_tolerance_frames, -1, 1'000'000,
              "frames (-1 = not aligned)");
 }
 
 void OutputConfig::validate() const {
-  require_one_of("output.progress", progress, {"auto", "on", "off"});
   require_in("output.flush_every", flush_every, 1, 1'000'000, "frames");
 }
 

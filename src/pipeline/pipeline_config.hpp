@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 #include "io/dataset.hpp"
 #include "stages/dird/dird_codes.hpp"
 #include "stages/dird/dird_config.hpp"
@@ -135,10 +136,19 @@ struct DatasetConfig {
   void validate() const;
 };
 
+// output.progress: the progress line on stderr when it is a terminal ("auto"), always ("on") or never
+// ("off").
+enum class Progress { kAuto, kOn, kOff };
+inline constexpr EnumName<Progress> kProgressNames[] = {
+    {Progress::kAuto, "auto"}, {Progress::kOn, "on"}, {Progress::kOff, "off"}};
+constexpr std::span<const EnumName<Progress>> enum_names(Progress) {
+  return kProgressNames;
+}
+
 struct OutputConfig {
-  bool trace = false;             // write trace.json (Chrome trace-event format, opens in Perfetto)
-  std::string progress = "auto";  // auto (when stderr is a terminal) | on | off
-  int flush_every = 100;          // frames between flushes of the streamed CSV/TUM files
+  bool trace = false;                   // write trace.json (Chrome trace-event format, opens in Perfetto)
+  Progress progress = Progress::kAuto;  // auto (when stderr is a terminal) | on | off
+  int flush_every = 100;                // frames between flushes of the streamed CSV/TUM files
 
   // The keys, in order, for loading, printing and the JSON echo (Self is OutputConfig or const OutputConfig).
   template <class Self, class V>
@@ -175,8 +185,8 @@ struct EvalConfig {
   // standing still within truth_radius_m is not a loop (on an EuRoC flight many "positives" within 0.2 m and
   // 20 frames are the drone hovering; on KITTI 00, 21 are the car stopped). 2 m: what the simulator's
   // euroc-mh05 preset uses, and below the smallest loop of a drone in a room; 0 = no such rule (the former
-  // behaviour). Not used with truth_pairs_file.
-  double min_travel_m = 2.0;
+  // behaviour). Not used with truth_pairs_file. Key min_travel_m.
+  RevisitRule revisit{2.0};
   // Two-sequence runs of aligned sequences (reference frame k and query frame k show the same place, e.g.
   // Nordland): a loop (query i, reference j) is correct when |i - j| <= this; -1 = not aligned, no check.
   int aligned_tolerance_frames = -1;
@@ -195,7 +205,7 @@ struct EvalConfig {
     v("truth_gap_frames", self.truth_gap_frames);
     v("plane", self.plane);
     v("accept_radius_m", self.accept_radius_m);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("aligned_tolerance_frames", self.aligned_tolerance_frames);
     v("truth_pairs_file", self.truth_pairs_file);
   }
@@ -210,12 +220,13 @@ struct EvalConfig {
 // (sensor noise averaged before sampling) and causal standardisation (per-dimension statistics of the recent
 // frames). Needs no logistic constants: the search's score is in units of the local spread of distances.
 struct DirdSeqSlamConfig {
-  std::string normalization = "l2";  // replaces dird.normalization for this method: libdird | l2
-  std::string resize = "area";       // replaces dird.resize: nearest | area
+  // replaces dird.normalization for this method: libdird | l2
+  DirdNormalization normalization = DirdNormalization::kL2;
+  DirdResize resize = DirdResize::kArea;  // replaces dird.resize: nearest | area
   // off | causal | batch (two sequences only): replaces standardize.mode for this method; the statistics
   // parameters (window, warm_up, refresh_every, observe_every, distance, clamp_sigma, min_stddev) are those
   // of section standardize.
-  std::string standardize = "causal";
+  StandardizeMode standardize = StandardizeMode::kCausal;
   DirdCodeConfig codes;  // keys code, ternary_threshold_sigma, int2_threshold_sigma (docs/codes.md)
   ContrastSearchConfig search;
   // Viewpoint tolerance: keys viewpoint_* (stages/dird/viewpoint.hpp, docs/viewpoint.md).
@@ -248,7 +259,7 @@ struct DirdSeqSlamConfig {
 
 inline SeqSlamConfig single_sequence_seqslam() {
   SeqSlamConfig config;
-  config.exclusion = "past";
+  config.exclusion = SeqSlamExclusionKind::kPast;
   config.exclusion_margin_frames = 200;
   return config;
 }

@@ -26,10 +26,6 @@ void require(bool ok, const std::string& key, const std::string& what) {
 }  // namespace
 
 void IlluminationSchedule::validate() const {
-  require(kind == "constant" || kind == "day-to-night" || kind == "jump", "kind",
-          "'" + kind + "' is not one of constant, day-to-night, jump");
-  require(night_model == "ambient_noise" || night_model == "lamps", "night_model",
-          "'" + night_model + "' is not one of ambient_noise, lamps");
   require(day_exposure > 0.0, "day_exposure", "must be > 0");
   require(night_exposure > 0.0, "night_exposure", "must be > 0");
   require(day_ambient >= 0.0, "day_ambient", "must be >= 0");
@@ -53,8 +49,8 @@ void IlluminationSchedule::validate() const {
 
 double IlluminationSchedule::night_factor(double phase) const {
   phase = std::clamp(phase, 0.0, 1.0);
-  if (kind == "constant") return 0.0;
-  if (kind == "jump") return phase >= jump_phase ? 1.0 : 0.0;
+  if (kind == IlluminationKind::kConstant) return 0.0;
+  if (kind == IlluminationKind::kJump) return phase >= jump_phase ? 1.0 : 0.0;
   if (phase <= transition_start) return 0.0;
   if (phase >= transition_end) return 1.0;
   const double x = (phase - transition_start) / (transition_end - transition_start);

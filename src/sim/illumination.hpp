@@ -3,8 +3,10 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <span>
 #include <string>
 
+#include "core/enum_names.hpp"
 #include "sim/sensor.hpp"
 
 namespace loopgate::sim {
@@ -28,14 +30,33 @@ struct Illumination {
   SensorConfig sensor;
 };
 
+// illumination.kind: the day stays ("constant"), turns to night smoothly ("day-to-night") or at once
+// ("jump").
+enum class IlluminationKind { kConstant, kDayToNight, kJump };
+inline constexpr EnumName<IlluminationKind> kIlluminationKindNames[] = {
+    {IlluminationKind::kConstant, "constant"},
+    {IlluminationKind::kDayToNight, "day-to-night"},
+    {IlluminationKind::kJump, "jump"}};
+constexpr std::span<const EnumName<IlluminationKind>> enum_names(IlluminationKind) {
+  return kIlluminationKindNames;
+}
+
+// illumination.night_model: "ambient_noise" or "lamps" (see IlluminationSchedule::night_model).
+enum class NightModel { kAmbientNoise, kLamps };
+inline constexpr EnumName<NightModel> kNightModelNames[] = {{NightModel::kAmbientNoise, "ambient_noise"},
+                                                            {NightModel::kLamps, "lamps"}};
+constexpr std::span<const EnumName<NightModel>> enum_names(NightModel) {
+  return kNightModelNames;
+}
+
 struct IlluminationSchedule {
-  std::string kind = "day-to-night";  // "constant" | "day-to-night" | "jump"
+  IlluminationKind kind = IlluminationKind::kDayToNight;  // constant | day-to-night | jump
   // What the night is: "ambient_noise" = ambient light only and additive Gaussian noise (night_noise_sigma):
   // the harsh night of the first presets; "lamps" = street / hall lamps and a headlight (section "lights",
   // sim/lights.hpp) seen through the photon sensor with auto-exposure (section "sensor", sim/sensor.hpp);
   // the day_* / night_* end points below still apply except night_ambient and night_sky_brightness (the
   // lights section's), the exposures and the noise sigmas (the sensor's).
-  std::string night_model = "ambient_noise";
+  NightModel night_model = NightModel::kAmbientNoise;
   // Day (phase 0) and night (phase 1) end points.
   double day_exposure = 0.9;
   double night_exposure = 1.8;

@@ -73,7 +73,7 @@ void street_lamps(const World& world, const LightsConfig& config, const std::vec
   for (const Quad& q : world.quads) {
     if (q.structure < 0) continue;
     const std::size_t s = static_cast<std::size_t>(q.structure);
-    if (world.structures[s].kind != "pole") continue;
+    if (world.structures[s].kind != StructureKind::kPole) continue;
     base_sum[s] += q.origin_w.cast<double>();
     ++faces[s];
     height[s] = std::max(height[s], static_cast<double>(q.height_m));
@@ -107,7 +107,8 @@ void hall_lamps(const World& world, const LightsConfig& config, std::vector<Spot
   // The ceiling tiles span the room; their edges are the hall's horizontal axes.
   const Quad* first = nullptr;
   for (const Quad& q : world.quads) {
-    if (q.structure >= 0 && world.structures[static_cast<std::size_t>(q.structure)].kind == "ceiling") {
+    if (q.structure >= 0 &&
+        world.structures[static_cast<std::size_t>(q.structure)].kind == StructureKind::kCeiling) {
       first = &q;
       break;
     }
@@ -118,7 +119,8 @@ void hall_lamps(const World& world, const LightsConfig& config, std::vector<Spot
   double lo1 = std::numeric_limits<double>::infinity(), hi1 = -lo1, lo2 = lo1, hi2 = -lo1;
   double ceiling = -std::numeric_limits<double>::infinity();
   for (const Quad& q : world.quads) {
-    if (q.structure < 0 || world.structures[static_cast<std::size_t>(q.structure)].kind != "ceiling")
+    if (q.structure < 0 ||
+        world.structures[static_cast<std::size_t>(q.structure)].kind != StructureKind::kCeiling)
       continue;
     const Eigen::Vector3d o = q.origin_w.cast<double>();
     const Eigen::Vector3d du = q.axis_u_w.cast<double>() * q.width_m;
@@ -248,7 +250,7 @@ SceneLighting::SceneLighting(const IlluminationSchedule& schedule, const LightsC
       config_(lights),
       sensor_(sensor),
       kind_(world.kind),
-      lamps_model_(schedule.night_model == "lamps") {
+      lamps_model_(schedule.night_model == NightModel::kLamps) {
   schedule_.validate();
   config_.validate();
   sensor_.validate();

@@ -40,7 +40,7 @@ std::vector<LoopInterval> find_loop_truth(const std::vector<Eigen::Isometry3d>& 
     LoopInterval current;
     for (std::size_t i = 0; i + gap <= j; ++i) {
       const bool match = (p[i] - p[j]).squaredNorm() <= radius2 &&
-                         travel_m[j] - travel_m[i] >= settings.min_travel_m &&
+                         travel_m[j] - travel_m[i] >= settings.revisit.min_travel_m &&
                          (!check_angle || axis[i].dot(axis[j]) >= cos_max);
       if (match) {
         if (!open) {

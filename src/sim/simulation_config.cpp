@@ -15,8 +15,6 @@ namespace loopgate::sim {
 // Config sections
 
 void SimulationSettings::validate() const {
-  require_one_of("simulation.trajectory_format", trajectory_format, {"procedural", "kitti", "euroc", "tum"});
-  require_one_of("simulation.imu_source", imu_source, {"synthesised", "file"});
   require(max_frames >= 0 && max_frames <= 10'000'000, "simulation.max_frames", "in [0, 10000000] (0 = all)",
           std::to_string(max_frames));
   require(imu_padding_s >= 0.0, "simulation.imu_padding_s", ">= 0", std::to_string(imu_padding_s));
@@ -29,14 +27,15 @@ void SimulationSettings::validate() const {
           std::to_string(png_compression));
   require(render_batch_frames >= 1 && render_batch_frames <= 10'000, "simulation.render_batch_frames",
           "in [1, 10000]", std::to_string(render_batch_frames));
-  if (!frame_times_file.empty() && trajectory_format != "euroc" && trajectory_format != "tum") {
+  if (!frame_times_file.empty() && trajectory_format != TrajectorySource::kEuroc &&
+      trajectory_format != TrajectorySource::kTum) {
     throw ConfigError(
         "simulation.frame_times_file: frame times replace the poses' times of an euroc or tum "
         "trajectory; trajectory_format " +
-        trajectory_format + " has its own (" +
-        (trajectory_format == "kitti" ? "times_file, one per pose" : "the route's") + ")");
+        std::string(enum_name(trajectory_format)) + " has its own (" +
+        (trajectory_format == TrajectorySource::kKitti ? "times_file, one per pose" : "the route's") + ")");
   }
-  if (trajectory_format == "procedural" && imu_source == "file") {
+  if (trajectory_format == TrajectorySource::kProcedural && imu_source == ImuSource::kFile) {
     throw ConfigError("simulation.imu_source: 'file' needs a recorded trajectory (not 'procedural')");
   }
 }
@@ -45,7 +44,6 @@ void CameraSettings::validate() const {
   require(width_px > 0 && height_px > 0 && width_px <= 8192 && height_px <= 8192, "camera.width_px/height_px",
           "in [1, 8192] px", std::to_string(width_px) + "x" + std::to_string(height_px));
   require(fx > 0.0 && fy > 0.0, "camera.fx/fy", "> 0", std::to_string(fx) + "," + std::to_string(fy));
-  require_one_of("camera.distortion_model", distortion_model, {"none", "radtan"});
   require(Eigen::Vector4d(q_b_c_w, q_b_c_x, q_b_c_y, q_b_c_z).norm() > 0.5, "camera.q_b_c_*",
           "a unit quaternion", "~0");
 }
@@ -65,7 +63,7 @@ CameraCalibration CameraSettings::calibration(double rate_hz) const {
   c.fy = fy;
   c.cx = cx;
   c.cy = cy;
-  if (distortion_model == "radtan") {
+  if (distortion_model == SimDistortion::kRadTan) {
     c.distortion_model = DistortionModel::kRadTan;
     c.distortion = {k1, k2, p1, p2};
   }
@@ -83,7 +81,7 @@ CameraSettings CameraSettings::from_calibration(const CameraCalibration& c) {
   s.cx = c.cx;
   s.cy = c.cy;
   if (c.distortion_model == DistortionModel::kRadTan && c.distortion.size() == 4) {
-    s.distortion_model = "radtan";
+    s.distortion_model = SimDistortion::kRadTan;
     s.k1 = c.distortion[0];
     s.k2 = c.distortion[1];
     s.p1 = c.distortion[2];
@@ -123,17 +121,19 @@ ImuCalibration ImuNoiseSettings::calibration(double rate_hz) const {
 void LoopTruthSettings::validate() const {
   require(radius_m > 0.0, "loops.radius_m", "> 0", std::to_string(radius_m));
   require(min_gap_frames >= 1, "loops.min_gap_frames", ">= 1", std::to_string(min_gap_frames));
-  require(min_travel_m >= 0.0, "loops.min_travel_m", ">= 0", std::to_string(min_travel_m));
+  revisit.validate("loops.min_travel_m");
   require(max_view_angle_deg > 0.0 && max_view_angle_deg <= 180.0, "loops.max_view_angle_deg", "in (0, 180]",
           std::to_string(max_view_angle_deg));
 }
 
 void SimulationConfig::validate() const {
   sections(*this, [](std::string_view, const auto& section) { section.validate(); });
-  if (route.revisit_lateral_offset_m != 0.0 && simulation.trajectory_format != "procedural") {
+  if (route.revisit_lateral_offset_m != 0.0 &&
+      simulation.trajectory_format != TrajectorySource::kProcedural) {
     throw ConfigError(
         "route.revisit_lateral_offset_m: needs simulation.trajectory_format procedural (it is '" +
-        simulation.trajectory_format + "': the revisits of a recorded trajectory stay as recorded)");
+        std::string(enum_name(simulation.trajectory_format)) +
+        "': the revisits of a recorded trajectory stay as recorded)");
   }
 }
 

@@ -101,19 +101,19 @@ TrajectoryInput load_trajectory(const SimulationConfig& config, SimulationPlan& 
   TrajectoryInput input;
   std::vector<StampedPose>& samples = input.samples;
   std::vector<GroundTruthState>& recorded_states = input.recorded_states;
-  if (s.trajectory_format == "procedural") {
+  if (s.trajectory_format == TrajectorySource::kProcedural) {
     samples = make_procedural_route(config.route);
     if (config.route.revisit_lateral_offset_m != 0.0)
       plan.revisit_shift_w = apply_revisit_offset(config.route, samples);
     for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
     plan.frame_times = "the procedural route";
-  } else if (s.trajectory_format == "kitti") {
+  } else if (s.trajectory_format == TrajectorySource::kKitti) {
     require_file(s.trajectory_file, "KITTI poses file");
     require_file(s.times_file, "KITTI times file");
     samples = load_kitti_trajectory(s.trajectory_file, s.times_file);
     for (const StampedPose& pose : samples) plan.frame_t_ns.push_back(pose.t_ns);
     plan.frame_times = s.times_file;
-  } else if (s.trajectory_format == "tum") {
+  } else if (s.trajectory_format == TrajectorySource::kTum) {
     require_file(s.trajectory_file, "TUM trajectory file");
     samples = load_tum_trajectory(s.trajectory_file);
     if (s.frame_times_file.empty()) {
@@ -148,7 +148,8 @@ TrajectoryInput load_trajectory(const SimulationConfig& config, SimulationPlan& 
     plan.frame_t_ns = read_frame_times(s.frame_times_file);
     plan.frame_times = s.frame_times_file;
   }
-  input.name = s.trajectory_format == "procedural" ? std::string("<procedural>") : s.trajectory_file;
+  input.name =
+      s.trajectory_format == TrajectorySource::kProcedural ? std::string("<procedural>") : s.trajectory_file;
   if (samples.size() < 2) throw DataError(input.name, "needs at least 2 poses");
   if (plan.frame_t_ns.empty()) throw DataError(input.name, "no frames to render");
   for (std::size_t i = 1; i < plan.frame_t_ns.size(); ++i) {
@@ -209,7 +210,7 @@ void plan_imu_and_ground_truth(const SimulationConfig& config, const SplineTraje
   plan.imu_calibration = config.imu_noise.calibration(config.imu.rate_hz);
   std::vector<Eigen::Vector3d> imu_gyro_bias;
   std::vector<Eigen::Vector3d> imu_accel_bias;
-  if (s.imu_source == "synthesised") {
+  if (s.imu_source == ImuSource::kSynthesised) {
     const Timestamp t_lo = std::max(trajectory.start_t_ns(), first_frame_ns - pad_ns);
     const Timestamp t_hi = std::min(trajectory.end_t_ns(), last_frame_ns + pad_ns);
     SyntheticImu synth =
@@ -268,7 +269,7 @@ SimulationPlan plan_simulation(SimulationConfig& config) {
   SimulationSettings& s = config.simulation;
   config.world.seed = s.seed;  // one seed drives the whole dataset
   // The lamps light the ground around the camera, where the legacy ground cell keys leave holes.
-  if (config.illumination.night_model == "lamps") config.world.street_ground_exact_cells = true;
+  if (config.illumination.night_model == NightModel::kLamps) config.world.street_ground_exact_cells = true;
   config.validate();
   apply_calibration_files(config);
   config.validate();
@@ -397,7 +398,7 @@ nlohmann::json metadata_parameters(const SimulationConfig& config, bool lamps_mo
 
 nlohmann::json metadata_world(const SimulationConfig& config, const World& world,
                               const Eigen::Vector3d& up_w) {
-  nlohmann::json meta = {{"kind", config.world.kind},
+  nlohmann::json meta = {{"kind", enum_name(config.world.kind)},
                          {"quads", world.quads.size()},
                          {"structures", world.structures.size()},
                          {"aliasable_structures", world.aliasable_structure_count()},
@@ -426,7 +427,8 @@ nlohmann::json metadata_illumination(const SimulationConfig& config, const Simul
     phases.push_back(plan.illumination_phase[f]);
     night.push_back(config.illumination.night_factor(plan.illumination_phase[f]));
   }
-  nlohmann::json meta = {{"schedule", config.illumination.kind}, {"phase", phases}, {"night_factor", night}};
+  nlohmann::json meta = {
+      {"schedule", enum_name(config.illumination.kind)}, {"phase", phases}, {"night_factor", night}};
   if (!lighting.lamps_model()) return meta;
   // Per frame: the auto-exposure's exposure time and analogue gain, and whether lamps and headlight shone.
   nlohmann::json exposure = nlohmann::json::array(), gain = nlohmann::json::array();
@@ -437,7 +439,7 @@ nlohmann::json metadata_illumination(const SimulationConfig& config, const Simul
     lamps_on.push_back(lighting.lamps_on(plan.illumination_phase[f]));
     headlight_on.push_back(lighting.headlight_on(plan.illumination_phase[f]));
   }
-  meta["night_model"] = config.illumination.night_model;
+  meta["night_model"] = enum_name(config.illumination.night_model);
   meta["lamps"] = {{"count", lighting.lamps().lights.size()},
                    {"out_for_the_night", lighting.lamps().out_count()}};
   meta["exposure_time"] = exposure;
@@ -478,7 +480,7 @@ nlohmann::json simulation_metadata(const SimulationConfig& config, const Simulat
   meta["seed"] = s.seed;
   meta["parameters"] = metadata_parameters(config, lighting.lamps_model());
   meta["world"] = metadata_world(config, world, plan.up_w);
-  meta["trajectory"] = {{"format", s.trajectory_format},
+  meta["trajectory"] = {{"format", enum_name(s.trajectory_format)},
                         {"samples", plan.trajectory_samples},
                         {"start_t_ns", plan.trajectory_start_t_ns},
                         {"end_t_ns", plan.trajectory_end_t_ns},
@@ -493,7 +495,8 @@ nlohmann::json simulation_metadata(const SimulationConfig& config, const Simulat
                     {"duration_s", summary.duration_s},
                     {"distance_m", summary.distance_m}};
   meta["illumination"] = metadata_illumination(config, plan, lighting, stats);
-  meta["imu"] = {{"source", s.imu_source}, {"samples", plan.imu.size()}, {"rate_hz", config.imu.rate_hz}};
+  meta["imu"] = {
+      {"source", enum_name(s.imu_source)}, {"samples", plan.imu.size()}, {"rate_hz", config.imu.rate_hz}};
   meta["loops"] = metadata_loops(config.loops, loops, summary);
   return meta;
 }
@@ -515,7 +518,7 @@ SimulationSummary run_simulation(SimulationConfig config, const std::filesystem:
   for (std::size_t f = 0; f < plan.T_w_c.size(); ++f) path_w.push_back(plan.street_T_w_c(f).translation());
   const World world = build_world(config.world, path_w, plan.up_w);
   const Renderer renderer(world, plan.camera);
-  spdlog::info("simulate: world '{}' with {} quads, {} structures ({} aliased)", config.world.kind,
+  spdlog::info("simulate: world '{}' with {} quads, {} structures ({} aliased)", enum_name(config.world.kind),
                world.quads.size(), world.structures.size(), world.aliased_structure_count());
   const SceneLighting lighting(config.illumination, config.lights, config.sensor, world, path_w,
                                static_cast<std::uint64_t>(s.seed));

@@ -10,9 +10,12 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 #include "core/types.hpp"
 #include "sim/illumination.hpp"
 #include "sim/imu_synth.hpp"
@@ -23,13 +26,42 @@
 
 namespace loopgate::sim {
 
+// simulation.trajectory_format: where the camera path comes from: the procedural route (section route) or a
+// recorded trajectory file (KITTI poses, EuRoC ground truth, TUM).
+enum class TrajectorySource { kProcedural, kKitti, kEuroc, kTum };
+inline constexpr EnumName<TrajectorySource> kTrajectorySourceNames[] = {
+    {TrajectorySource::kProcedural, "procedural"},
+    {TrajectorySource::kKitti, "kitti"},
+    {TrajectorySource::kEuroc, "euroc"},
+    {TrajectorySource::kTum, "tum"}};
+constexpr std::span<const EnumName<TrajectorySource>> enum_names(TrajectorySource) {
+  return kTrajectorySourceNames;
+}
+
+// simulation.imu_source: "synthesised" (from the fitted trajectory) or "file" (a recorded EuRoC imu0/data.csv
+// passed through).
+enum class ImuSource { kSynthesised, kFile };
+inline constexpr EnumName<ImuSource> kImuSourceNames[] = {{ImuSource::kSynthesised, "synthesised"},
+                                                          {ImuSource::kFile, "file"}};
+constexpr std::span<const EnumName<ImuSource>> enum_names(ImuSource) {
+  return kImuSourceNames;
+}
+
+// camera.distortion_model of the simulated camera: none or radial-tangential ("radtan", k1 k2 p1 p2).
+enum class SimDistortion { kNone, kRadTan };
+inline constexpr EnumName<SimDistortion> kSimDistortionNames[] = {{SimDistortion::kNone, "none"},
+                                                                  {SimDistortion::kRadTan, "radtan"}};
+constexpr std::span<const EnumName<SimDistortion>> enum_names(SimDistortion) {
+  return kSimDistortionNames;
+}
+
 // Section "simulation": what to simulate and from which inputs.
 struct SimulationSettings {
   std::string preset = "demo";
   std::int64_t seed = 1;
   std::int64_t max_frames = 0;  // 0 = every frame; N = the first N frames
-  // Trajectory source: "procedural" | "kitti" | "euroc" | "tum".
-  std::string trajectory_format = "procedural";
+  // Trajectory source: procedural | kitti | euroc | tum (TrajectorySource).
+  TrajectorySource trajectory_format = TrajectorySource::kProcedural;
   std::string trajectory_file;  // kitti poses.txt, euroc ground-truth csv or TUM file
   std::string times_file;       // kitti times.txt
   // euroc or tum trajectories: frames at these times instead of (euroc) frame_rate_hz over the ground truth,
@@ -37,8 +69,8 @@ struct SimulationSettings {
   // decimal seconds; io/trajectory_io.hpp read_frame_times).
   std::string frame_times_file;
   std::string camera_yaml;  // when set, the camera section is read from this EuRoC sensor.yaml
-  // IMU: "synthesised" (from the fitted trajectory) | "file" (a real EuRoC imu0/data.csv passed through).
-  std::string imu_source = "synthesised";
+  // IMU: synthesised | file (ImuSource).
+  ImuSource imu_source = ImuSource::kSynthesised;
   std::string imu_file;
   std::string imu_yaml;        // when set, the imu noise section is read from this EuRoC sensor.yaml
   double imu_padding_s = 0.1;  // IMU kept this far beyond the first/last frame (within the trajectory)
@@ -85,7 +117,7 @@ struct CameraSettings {
   double fy = 370.0;
   double cx = 319.5;
   double cy = 99.5;
-  std::string distortion_model = "none";  // "none" | "radtan"
+  SimDistortion distortion_model = SimDistortion::kNone;  // none | radtan
   double k1 = 0.0;
   double k2 = 0.0;
   double p1 = 0.0;
@@ -154,7 +186,7 @@ struct ImuNoiseSettings {
 struct LoopTruthSettings {
   double radius_m = 2.0;
   int min_gap_frames = 20;
-  double min_travel_m = 0.0;
+  RevisitRule revisit;  // key min_travel_m
   bool horizontal_only = true;
   double max_view_angle_deg = 180.0;
 
@@ -164,7 +196,7 @@ struct LoopTruthSettings {
   static void fields(Self& self, V&& v) {
     v("radius_m", self.radius_m);
     v("min_gap_frames", self.min_gap_frames);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("horizontal_only", self.horizontal_only);
     v("max_view_angle_deg", self.max_view_angle_deg);
   }

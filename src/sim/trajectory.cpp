@@ -369,15 +369,12 @@ std::vector<Eigen::Vector2d> parse_route_waypoints(const std::string& text) {
 }
 
 void ProceduralRouteConfig::validate() const {
-  if (shape != "circuit" && shape != "waypoints") {
-    throw ConfigError("route.shape: '" + shape + "' is not one of circuit, waypoints");
-  }
   if (!(corner_radius_m > 0.0)) throw ConfigError("corner_radius_m must be > 0");
-  if (shape == "circuit" &&
+  if (shape == RouteShape::kCircuit &&
       (!(length_x_m >= 2.0 * corner_radius_m) || !(length_y_m >= 2.0 * corner_radius_m))) {
     throw ConfigError("length_x_m and length_y_m must be >= 2 * corner_radius_m");
   }
-  if (shape == "waypoints") waypoint_pieces(parse_route_waypoints(waypoints), corner_radius_m);
+  if (shape == RouteShape::kWaypoints) waypoint_pieces(parse_route_waypoints(waypoints), corner_radius_m);
   if (laps < 1 || laps > 1000) throw ConfigError("route.laps: must be in [1, 1000]");
   if (frames < 2 || frames > 10'000'000) throw ConfigError("route.frames: must be in [2, 10000000]");
   if (!(rate_hz > 0.0 && rate_hz <= 1000.0)) throw ConfigError("route.rate_hz: must be in (0, 1000] Hz");
@@ -462,7 +459,7 @@ std::vector<StampedPose> make_waypoint_route(const ProceduralRouteConfig& config
 
 std::vector<StampedPose> make_procedural_route(const ProceduralRouteConfig& config) {
   config.validate();
-  if (config.shape == "waypoints") return make_waypoint_route(config);
+  if (config.shape == RouteShape::kWaypoints) return make_waypoint_route(config);
   const double r = config.corner_radius_m;
   const double straight_x = config.length_x_m - 2.0 * r;
   const double straight_y = config.length_y_m - 2.0 * r;

@@ -11,9 +11,11 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "core/types.hpp"
 
 namespace loopgate::sim {
@@ -100,8 +102,16 @@ std::vector<StampedPose> load_tum_trajectory(const std::filesystem::path& file);
 //    speed_cycles_per_lap periods of the speed modulation span the whole route, and the lateral offset grows
 //    linearly from 0 to lap_lateral_offset_m along it (two passes of one street run that far apart times the
 //    fraction of the route between them).
+// route.shape: "circuit" or "waypoints" (see ProceduralRouteConfig).
+enum class RouteShape { kCircuit, kWaypoints };
+inline constexpr EnumName<RouteShape> kRouteShapeNames[] = {{RouteShape::kCircuit, "circuit"},
+                                                            {RouteShape::kWaypoints, "waypoints"}};
+constexpr std::span<const EnumName<RouteShape>> enum_names(RouteShape) {
+  return kRouteShapeNames;
+}
+
 struct ProceduralRouteConfig {
-  std::string shape = "circuit";  // "circuit" | "waypoints"
+  RouteShape shape = RouteShape::kCircuit;  // circuit | waypoints
   std::string waypoints;          // shape "waypoints": "x0,y0; x1,y1; ..." in metres, at least 2 points
   double length_x_m = 90.0;       // circuit extent along x
   double length_y_m = 50.0;       // circuit extent along y

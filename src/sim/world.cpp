@@ -147,7 +147,7 @@ struct Builder {
   World world;
   std::vector<PendingStructure> pending;
 
-  int add_structure(const std::string& kind, TextureStyle style, std::uint64_t seed, double width_m,
+  int add_structure(StructureKind kind, TextureStyle style, std::uint64_t seed, double width_m,
                     double height_m, const Eigen::Vector3d& center_w, bool aliasable) {
     PendingStructure s;
     s.info.kind = kind;
@@ -337,8 +337,9 @@ void add_street_ground(Builder& bld, const StreetSite& site) {
     const Eigen::Vector3d p01 = site.f.to_world(x0, y1, ground.vertex_height(ix, iy + 1));
     const Eigen::Vector3d p11 = site.f.to_world(x1, y1, ground.vertex_height(ix + 1, iy + 1));
     const std::uint64_t tile_seed = hash_combine(site.seed, StreetGround::seed_key(ix, iy));
-    const int s = bld.add_structure("ground", TextureStyle::kRoad, tile_seed, cfg.street_ground_tile_m,
-                                    cfg.street_ground_tile_m, 0.25 * (p00 + p10 + p01 + p11), false);
+    const int s =
+        bld.add_structure(StructureKind::kGround, TextureStyle::kRoad, tile_seed, cfg.street_ground_tile_m,
+                          cfg.street_ground_tile_m, 0.25 * (p00 + p10 + p01 + p11), false);
     bld.pending[static_cast<std::size_t>(s)].info.texture =
         road_textures[static_cast<std::size_t>(tile_seed % road_textures.size())];
     bld.add_patch(s, p00, p10 - p00, p01 - p00, true, tpm_road, x0 * tpm_road, y0 * tpm_road);
@@ -385,8 +386,8 @@ void add_street_markings(Builder& bld, const StreetSite& site) {
     const Eigen::Vector3d du = f.to_world(b.x(), b.y(), zb) - origin;
     Eigen::Vector3d dv = f.to_world(n.x(), n.y(), 0.0);
     dv -= du.normalized() * dv.dot(du.normalized());
-    const int s = bld.add_structure("marking", TextureStyle::kMarking, 0, du.norm(), kMarkingWidthM,
-                                    origin + 0.5 * du, false);
+    const int s = bld.add_structure(StructureKind::kMarking, TextureStyle::kMarking, 0, du.norm(),
+                                    kMarkingWidthM, origin + 0.5 * du, false);
     bld.pending[static_cast<std::size_t>(s)].info.texture = marking_texture;
     bld.add_quad(s, origin, du, dv, du.norm(), kMarkingWidthM, cfg.street_road_texels_per_m, 0.0, 0.0);
   };
@@ -431,8 +432,8 @@ void add_street_posts(Builder& bld, const StreetSite& site) {
     const double w = cfg.street_pole_width_m;
     const std::uint64_t pole_seed =
         hash_combine(site.seed, 0x9013ull + static_cast<std::uint64_t>(pole_index));
-    const int sidx = bld.add_structure("pole", TextureStyle::kPillar, pole_seed, 4.0 * w, height,
-                                       f.to_world(c.x(), c.y(), base + 0.5 * height), false);
+    const int sidx = bld.add_structure(StructureKind::kPole, TextureStyle::kPillar, pole_seed, 4.0 * w,
+                                       height, f.to_world(c.x(), c.y(), base + 0.5 * height), false);
     const Eigen::Vector2d corners[4] = {{c.x() - half, c.y() - half},
                                         {c.x() + half, c.y() - half},
                                         {c.x() + half, c.y() + half},
@@ -487,7 +488,7 @@ class FacadePlacer {
         hash_combine(site_.seed, 0xB1D6ull + static_cast<std::uint64_t>(placed_.size()));
     const Eigen::Vector3d origin = f.to_world(a.x(), a.y(), ground - kFacadeBelowGroundM);
     const Eigen::Vector3d du = f.to_world(b.x() - a.x(), b.y() - a.y(), 0.0);
-    const int sidx = bld_.add_structure("facade", style, tex_seed, length_m, height,
+    const int sidx = bld_.add_structure(StructureKind::kFacade, style, tex_seed, length_m, height,
                                         origin + 0.5 * du + f.up * (0.5 * height), true);
     bld_.add_quad(sidx, origin, du, f.up, length_m, height + kFacadeBelowGroundM,
                   cfg_.street_facade_texels_per_m, 0.0,
@@ -604,7 +605,7 @@ void add_hall_shell(Builder& bld, const HallSite& site) {
       const Eigen::Vector3d du = f.to_world(t.x(), t.y(), 0.0);
       const std::uint64_t s_seed =
           hash_combine(site.seed, 0x3A11ull + static_cast<std::uint64_t>(side * 1000 + k));
-      const int s = bld.add_structure("wall", TextureStyle::kHallWall, s_seed, pw, site.room_h,
+      const int s = bld.add_structure(StructureKind::kWall, TextureStyle::kHallWall, s_seed, pw, site.room_h,
                                       origin + du * (0.5 * pw) + f.up * (0.5 * site.room_h), true);
       bld.add_quad(s, origin, du, f.up, pw, site.room_h, tpm, 0.0, 0.0);
     }
@@ -622,8 +623,8 @@ void add_hall_shell(Builder& bld, const HallSite& site) {
         const std::uint64_t s_seed =
             hash_combine(site.seed, 0xF100ull + static_cast<std::uint64_t>((i * 1000 + j) * 2 + level));
         const TextureStyle style = level == 0 ? TextureStyle::kHallFloor : TextureStyle::kHallCeiling;
-        const int s = bld.add_structure(level == 0 ? "floor" : "ceiling", style, s_seed, tx, ty,
-                                        origin + f.to_world(0.5 * tx, 0.5 * ty, 0.0), false);
+        const int s = bld.add_structure(level == 0 ? StructureKind::kFloor : StructureKind::kCeiling, style,
+                                        s_seed, tx, ty, origin + f.to_world(0.5 * tx, 0.5 * ty, 0.0), false);
         bld.add_quad(s, origin, f.e1, f.e2, tx, ty, level == 0 ? tpm : 0.5 * tpm, 0.0, 0.0);
       }
     }
@@ -675,7 +676,7 @@ void add_hall_props(Builder& bld, const HallSite& site) {
     occupied.emplace_back(c, 0.5 * w);
     const std::uint64_t s_seed = hash_combine(site.seed, 0x9177ull + static_cast<std::uint64_t>(pillars));
     // Pillar texture wraps around its four faces: width 4 w.
-    const int s = bld.add_structure("pillar", TextureStyle::kPillar, s_seed, 4.0 * w, room_h,
+    const int s = bld.add_structure(StructureKind::kPillar, TextureStyle::kPillar, s_seed, 4.0 * w, room_h,
                                     f.to_world(c.x(), c.y(), floor_z + 0.5 * room_h), true);
     add_box(s, c, w, room_h, floor_z, false, tpm);
     ++pillars;
@@ -693,7 +694,7 @@ void add_hall_props(Builder& bld, const HallSite& site) {
       const std::uint64_t s_seed =
           hash_combine(site.seed, 0xC7A7Eull + static_cast<std::uint64_t>(crates * 2 + level));
       const double base = floor_z + level * w;
-      const int s = bld.add_structure("crate", TextureStyle::kCrate, s_seed, 4.0 * w, w,
+      const int s = bld.add_structure(StructureKind::kCrate, TextureStyle::kCrate, s_seed, 4.0 * w, w,
                                       f.to_world(c.x(), c.y(), base + 0.5 * w), true);
       add_box(s, c, w, w, base, level == levels - 1, tpm);
     }
@@ -781,7 +782,9 @@ void apply_alias_copy(Builder& bld) {
   const Eigen::Vector2d source_c(cfg.alias_copy_source_x_m, cfg.alias_copy_source_y_m);
   const Eigen::Vector2d target_c(cfg.alias_copy_target_x_m, cfg.alias_copy_target_y_m);
   const Eigen::Rotation2Dd R_target_source(cfg.alias_copy_rotation_deg * std::numbers::pi / 180.0);
-  const auto copyable = [](const Structure& info) { return info.kind != "ground" && info.kind != "marking"; };
+  const auto copyable = [](const Structure& info) {
+    return info.kind != StructureKind::kGround && info.kind != StructureKind::kMarking;
+  };
   std::vector<char> is_source(bld.pending.size(), 0);
   for (const PendingStructure& s : bld.pending) {
     if (s.info.aliased_from >= 0) is_source[static_cast<std::size_t>(s.info.aliased_from)] = 1;
@@ -812,7 +815,7 @@ void apply_alias_copy(Builder& bld) {
     spdlog::debug(
         "world: place copy target {} ({}) at ({:.1f}, {:.1f}): source {} at {:.2f} m from the mapped "
         "position",
-        k, t.info.kind, horizontal(t.center_w).x(), horizontal(t.center_w).y(), best,
+        k, enum_name(t.info.kind), horizontal(t.center_w).x(), horizontal(t.center_w).y(), best,
         best < 0 ? -1.0 : best_m);
     if (best < 0) continue;
     // Copy from the root of an alias (its seed is the root's anyway) so that no chain forms.
@@ -831,14 +834,7 @@ void apply_alias_copy(Builder& bld) {
 
 }  // namespace
 
-WorldKind parse_world_kind(const std::string& kind) {
-  if (kind == "street") return WorldKind::kStreet;
-  if (kind == "hall") return WorldKind::kHall;
-  throw ConfigError("world.kind: '" + kind + "' is not one of street, hall");
-}
-
 void WorldConfig::validate() const {
-  parse_world_kind(kind);
   const auto positive = [](const char* key, double v) {
     if (!(v > 0.0))
       throw ConfigError(std::string("world.") + key + ": must be > 0 (got " + std::to_string(v) + ")");
@@ -920,7 +916,7 @@ World build_world(const WorldConfig& config, const std::vector<Eigen::Vector3d>&
   }
   Builder bld{config, make_frame(up_w), World{}, {}};
   bld.world.config = config;
-  bld.world.kind = parse_world_kind(config.kind);
+  bld.world.kind = config.kind;
   bld.world.up_w = up_w.normalized();
   if (bld.world.kind == WorldKind::kStreet) {
     build_street(bld, path_w);
@@ -935,18 +931,18 @@ World build_world(const WorldConfig& config, const std::vector<Eigen::Vector3d>&
   std::vector<int> texture_of(bld.pending.size(), -1);
   for (std::size_t k = 0; k < bld.pending.size(); ++k) {
     PendingStructure& s = bld.pending[k];
-    const bool shared = s.info.kind == "ground" || s.info.kind == "marking";
+    const bool shared = s.info.kind == StructureKind::kGround || s.info.kind == StructureKind::kMarking;
     if (shared) {
       texture_of[k] = s.info.texture;
       continue;
     }
     if (s.info.aliased_from >= 0) continue;
     double tpm = config.hall_texels_per_m;
-    if (s.info.kind == "pole") {
+    if (s.info.kind == StructureKind::kPole) {
       tpm = 2.0 * tpm_facade;
     } else if (bld.world.kind == WorldKind::kStreet) {
       tpm = tpm_facade;
-    } else if (s.info.kind == "ceiling") {
+    } else if (s.info.kind == StructureKind::kCeiling) {
       tpm = 0.5 * config.hall_texels_per_m;
     }
     const int w_px = std::max(2, static_cast<int>(std::ceil(s.width_m * tpm)));
@@ -969,8 +965,9 @@ World build_world(const WorldConfig& config, const std::vector<Eigen::Vector3d>&
   for (const Texture& t : bld.world.textures) bytes += t.memory_bytes();
   spdlog::info(
       "world: {} ({} quads, {} structures, {} aliased, {} textures, {:.1f} MB of texels, {} BVH nodes)",
-      config.kind, bld.world.quads.size(), bld.world.structures.size(), bld.world.aliased_structure_count(),
-      bld.world.textures.size(), static_cast<double>(bytes) / 1e6, bld.world.bvh_nodes.size());
+      enum_name(config.kind), bld.world.quads.size(), bld.world.structures.size(),
+      bld.world.aliased_structure_count(), bld.world.textures.size(), static_cast<double>(bytes) / 1e6,
+      bld.world.bvh_nodes.size());
   return std::move(bld.world);
 }
 

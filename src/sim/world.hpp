@@ -5,18 +5,25 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "sim/texture.hpp"
 
 namespace loopgate::sim {
 
+// world.kind: a street (facades along the route) or a hall (walls, pillars, crates under a ceiling).
 enum class WorldKind { kStreet, kHall };
-WorldKind parse_world_kind(const std::string& kind);  // throws ConfigError (key "kind")
+inline constexpr EnumName<WorldKind> kWorldKindNames[] = {{WorldKind::kStreet, "street"},
+                                                          {WorldKind::kHall, "hall"}};
+constexpr std::span<const EnumName<WorldKind>> enum_names(WorldKind) {
+  return kWorldKindNames;
+}
 
 struct WorldConfig {
-  std::string kind = "street";  // "street" | "hall"
+  WorldKind kind = WorldKind::kStreet;  // street | hall
   std::int64_t seed = 1;
   double aliasing_fraction = 0.0;  // fraction of structures that reuse another structure's texture seed
   // Deterministic aliasing (a "copied place"): every structure except the ground and the road markings
@@ -134,10 +141,23 @@ struct Quad {
   int structure = -1;  // index into World::structures
 };
 
+// What a structure of the world is (street: facades, ground strips, road markings, lamp posts; hall: wall
+// panels, floor and ceiling tiles, pillars, crates); named in logs and in the world's metadata.
+enum class StructureKind { kFacade, kGround, kMarking, kPole, kWall, kFloor, kCeiling, kPillar, kCrate };
+inline constexpr EnumName<StructureKind> kStructureKindNames[] = {
+    {StructureKind::kFacade, "facade"},   {StructureKind::kGround, "ground"},
+    {StructureKind::kMarking, "marking"}, {StructureKind::kPole, "pole"},
+    {StructureKind::kWall, "wall"},       {StructureKind::kFloor, "floor"},
+    {StructureKind::kCeiling, "ceiling"}, {StructureKind::kPillar, "pillar"},
+    {StructureKind::kCrate, "crate"}};
+constexpr std::span<const EnumName<StructureKind>> enum_names(StructureKind) {
+  return kStructureKindNames;
+}
+
 // A building / wall panel / pillar / crate / ground strip: one texture (from texture_seed) shared by its
 // quads.
 struct Structure {
-  std::string kind;  // "facade", "ground", "marking", "pole", "wall", "floor", "ceiling", "pillar", "crate"
+  StructureKind kind = StructureKind::kFacade;
   TextureStyle style = TextureStyle::kFacadeWindows;
   std::uint64_t texture_seed = 0;
   int aliased_from = -1;  // index of the structure whose texture seed this one reuses, -1 if own

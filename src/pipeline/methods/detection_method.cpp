@@ -51,7 +51,7 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
                                       " needs images, and this dataset has none (use --mode odometry)");
   }
   const PipelineConfig& config = context.config;
-  if (config.standardize.mode == "batch") {
+  if (config.standardize.mode == StandardizeMode::kBatch) {
     throw ConfigError(
         "standardize.mode: 'batch' needs the whole sequence before the first comparison (two-sequence runs); "
         "a single sequence streams: use 'causal'");
@@ -64,7 +64,7 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
   }
   if (run.dird_seqslam()) {
     const DirdSeqSlamConfig& d = config.dird_seqslam;
-    if (d.standardize == "batch") {
+    if (d.standardize == StandardizeMode::kBatch) {
       throw ConfigError(
           "dird_seqslam.standardize: 'batch' needs the whole sequence before the first comparison "
           "(two-sequence runs); a single sequence streams: use 'causal'");
@@ -72,14 +72,14 @@ std::unique_ptr<DetectionMethod> make_detection_method(const MethodContext& cont
     spdlog::info(
         "run: dird-seqslam {} (DIRD {} normalisation, {} resize, {} standardisation): contrast over {} "
         "references, sequences of {} frames at {} velocities; a frame's verdict {} frames after its row",
-        enum_name(run.mode), d.normalization, d.resize, d.standardize,
+        enum_name(run.mode), enum_name(d.normalization), enum_name(d.resize), enum_name(d.standardize),
         2 * d.search.contrast_half_window_frames + 1, config.match.sequence_length,
         d.search.velocities().size(), config.match.sequence_length - 1);
     return method_entry(config)->make(context);
   }
   if (config.standardize.enabled() || config.scale.online()) {
-    spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", config.standardize.mode,
-                 config.standardize.distance, config.scale.mode);
+    spdlog::info("run: DIRD with standardize.mode {} ({}), scale.mode {}", enum_name(config.standardize.mode),
+                 enum_name(config.standardize.distance), enum_name(config.scale.mode));
     // The standardised object also holds the online scale, for raw descriptors too.
     if (!config.standardize.enabled())
       return find_method_entry("dird", enum_name(run.mode), "causal")->make(context);

@@ -183,7 +183,7 @@ nlohmann::json DirdDistances::summary() const {
   if (!standardized()) return nlohmann::json::object();
   if (compact_) {
     return {{"standardize",
-             {{"mode", standardize_.mode},
+             {{"mode", enum_name(standardize_.mode)},
               {"code", enum_name(code_config_.code)},
               {"code_bytes", compact_->bytes_per_code()},
               {"observations", coder_->observations()},
@@ -193,8 +193,8 @@ nlohmann::json DirdDistances::summary() const {
               {"frames_before_statistics", frames_before_statistics_}}}};
   }
   return {{"standardize",
-           {{"mode", standardize_.mode},
-            {"distance", standardize_.distance},
+           {{"mode", enum_name(standardize_.mode)},
+            {"distance", enum_name(standardize_.distance)},
             {"observations", standardizer_->observations()},
             {"snapshots", standardizer_->snapshots()},
             {"frames_coded", frames_coded_},

@@ -20,7 +20,7 @@ const MethodEntry* find_method_entry(std::string_view detector, std::string_view
   const MethodEntry* loose = nullptr;
   for (const MethodEntry& m : kMethods) {
     if (enum_name(m.detector) != detector || enum_name(m.mode) != mode) continue;
-    if (standardize == m.standardize) return &m;
+    if (standardize == enum_name(m.standardize)) return &m;
     if (m.detector != Detector::kDird && loose == nullptr) loose = &m;
   }
   return loose;
@@ -29,7 +29,8 @@ const MethodEntry* find_method_entry(std::string_view detector, std::string_view
 const MethodEntry* method_entry(const PipelineConfig& config) {
   if (!config.run.method_row.empty() && config.run.detects_loops())
     return find_method_entry(config.run.method_row);
-  return find_method_entry(enum_name(config.run.method), enum_name(config.run.mode), config.standardize.mode);
+  return find_method_entry(enum_name(config.run.method), enum_name(config.run.mode),
+                           enum_name(config.standardize.mode));
 }
 
 std::string method_entry_names(bool two_sequence_only) {
@@ -64,7 +65,8 @@ const MethodEntry* expand_method_name(RawConfig& raw) {
   const std::string origin = given.origin + ", run.method " + given.text;
   raw.set("run", "method", std::string(enum_name(entry->detector)), origin);
   raw.set("run", "mode", std::string(enum_name(entry->mode)), origin);
-  if (entry->detector == Detector::kDird) raw.set("standardize", "mode", entry->standardize, origin);
+  if (entry->detector == Detector::kDird)
+    raw.set("standardize", "mode", std::string(enum_name(entry->standardize)), origin);
   return entry;
 }
 

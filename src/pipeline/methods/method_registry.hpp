@@ -34,13 +34,13 @@ using MethodFactory = std::unique_ptr<DetectionMethod> (*)(const MethodContext&)
 using TwoSequenceFactory = std::unique_ptr<TwoSequenceMethod> (*)(const PipelineConfig&);
 
 struct MethodEntry {
-  const char* name;         // run.method / compare --methods name
-  Detector detector;        // the detector it runs (run.method in the config echo)
-  RunMode mode;             // gated or full
-  const char* standardize;  // standardize.mode of the DIRD DP; dird-seqslam has its own section
-  const char* what;         // one line for --help, compare and the docs
-  bool streams_loops;       // loops are decided while the stream runs (gate.feedback can use them)
-  MarginKey margin;         // the key of the frames a loop's two frames must be apart
+  const char* name;             // run.method / compare --methods name
+  Detector detector;            // the detector it runs (run.method in the config echo)
+  RunMode mode;                 // gated or full
+  StandardizeMode standardize;  // standardize.mode of the DIRD DP; dird-seqslam has its own section
+  const char* what;             // one line for --help, compare and the docs
+  bool streams_loops;           // loops are decided while the stream runs (gate.feedback can use them)
+  MarginKey margin;             // the key of the frames a loop's two frames must be apart
   // Its two-sequence form (--reference --query: no poses, so no gate); nullptr when it has none.
   TwoSequenceFactory two_sequence;
   MethodFactory make;  // the stage objects it composes, as one DetectionMethod
@@ -56,23 +56,28 @@ struct MethodEntry {
   }
 
 inline constexpr MethodEntry kMethods[] = {
-    {"full", Detector::kDird, RunMode::kFull, "off", "DIRD on every frame (the paper's baseline)", true,
-     MarginKey::kMatchMargin, make_two_sequence_dird, LOOPGATE_METHOD_FACTORY(make_dird_full)},
-    {"gated", Detector::kDird, RunMode::kGated, "off", "DIRD in the pose gate's candidate areas (the paper)",
-     true, MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_gated)},
-    {"seqslam", Detector::kSeqSlam, RunMode::kFull, "off", "SeqSLAM on every frame", false,
+    {"full", Detector::kDird, RunMode::kFull, StandardizeMode::kOff,
+     "DIRD on every frame (the paper's baseline)", true, MarginKey::kMatchMargin, make_two_sequence_dird,
+     LOOPGATE_METHOD_FACTORY(make_dird_full)},
+    {"gated", Detector::kDird, RunMode::kGated, StandardizeMode::kOff,
+     "DIRD in the pose gate's candidate areas (the paper)", true, MarginKey::kMatchMargin, nullptr,
+     LOOPGATE_METHOD_FACTORY(make_dird_gated)},
+    {"seqslam", Detector::kSeqSlam, RunMode::kFull, StandardizeMode::kOff, "SeqSLAM on every frame", false,
      MarginKey::kSeqSlamExclusion, make_two_sequence_seqslam, LOOPGATE_METHOD_FACTORY(make_seqslam)},
-    {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, "off", "SeqSLAM in the candidate areas", false,
-     MarginKey::kSeqSlamExclusion, nullptr, LOOPGATE_METHOD_FACTORY(make_seqslam_gated)},
-    {"std-full", Detector::kDird, RunMode::kFull, "causal", "standardised DIRD on every frame", true,
-     MarginKey::kMatchMargin, make_two_sequence_dird, LOOPGATE_METHOD_FACTORY(make_standard_dird_full)},
-    {"std-gated", Detector::kDird, RunMode::kGated, "causal", "standardised DIRD in the candidate areas",
-     true, MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_standard_dird_gated)},
-    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, "off",
+    {"seqslam-gated", Detector::kSeqSlam, RunMode::kGated, StandardizeMode::kOff,
+     "SeqSLAM in the candidate areas", false, MarginKey::kSeqSlamExclusion, nullptr,
+     LOOPGATE_METHOD_FACTORY(make_seqslam_gated)},
+    {"std-full", Detector::kDird, RunMode::kFull, StandardizeMode::kCausal,
+     "standardised DIRD on every frame", true, MarginKey::kMatchMargin, make_two_sequence_dird,
+     LOOPGATE_METHOD_FACTORY(make_standard_dird_full)},
+    {"std-gated", Detector::kDird, RunMode::kGated, StandardizeMode::kCausal,
+     "standardised DIRD in the candidate areas", true, MarginKey::kMatchMargin, nullptr,
+     LOOPGATE_METHOD_FACTORY(make_standard_dird_gated)},
+    {"dird-seqslam", Detector::kDirdSeqSlam, RunMode::kFull, StandardizeMode::kOff,
      "DIRD + contrast-enhanced sequence search (robust to day/night, seasons), every frame", true,
      MarginKey::kMatchMargin, make_two_sequence_dird_seqslam,
      LOOPGATE_METHOD_FACTORY(make_dird_seqslam_full)},
-    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, "off",
+    {"dird-seqslam-gated", Detector::kDirdSeqSlam, RunMode::kGated, StandardizeMode::kOff,
      "DIRD + contrast-enhanced sequence search, in the candidate areas (recommended)", true,
      MarginKey::kMatchMargin, nullptr, LOOPGATE_METHOD_FACTORY(make_dird_seqslam_gated)},
 };

@@ -48,7 +48,8 @@ class SeqSlamGated final : public DetectionMethod {
         state_(context.capacity, Preprocessed::kNo),
         wanted_(context.capacity, 0) {
     const SeqSlamConfig& seqslam = context.config.seqslam;
-    if (seqslam.exclusion == "past" && seqslam.exclusion_margin_frames != context.config.match.margin) {
+    if (seqslam.exclusion == SeqSlamExclusionKind::kPast &&
+        seqslam.exclusion_margin_frames != context.config.match.margin) {
       spdlog::warn(
           "gated SeqSLAM: the candidate areas hold the pairs i - j >= match.margin = {}, the search excludes "
           "those closer than seqslam.exclusion_margin_frames = {}: only pairs beyond both are searched",

@@ -98,7 +98,7 @@ class StandardDird {
     out["descriptors_computed"] = distances_.descriptors_computed();
     out["similarities_computed"] = distances_.distances_computed();
     const LogisticScale scale = online_ ? online_->scale() : prior_;
-    out["scale"] = {{"mode", context_.config.scale.mode},
+    out["scale"] = {{"mode", enum_name(context_.config.scale.mode)},
                     {"mu", scale.mu},
                     {"sigma", scale.sigma},
                     {"cutoff_distance", scale.cutoff_distance},

@@ -38,8 +38,8 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
       total_frames_(total_frames),
       closer_(closer),
       profiler_({kStageNames.begin(), kStageNames.end()}, total_frames) {
-  const std::string& progress = config.output.progress;
-  show_progress_ = progress == "on" || (progress == "auto" && ::isatty(STDERR_FILENO));
+  const Progress progress = config.output.progress;
+  show_progress_ = progress == Progress::kOn || (progress == Progress::kAuto && ::isatty(STDERR_FILENO));
   keep_step_cov_ = config.posegraph.enabled && config.posegraph.odometry_cov == "odometry" &&
                    (config.verify.enabled || keep_step_cov);
   // At most one entry a frame: reserved, so that they do not keep up to twice their entries and copy them as

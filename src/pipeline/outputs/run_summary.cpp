@@ -72,7 +72,8 @@ void add_truth_pairs(const RunParts& parts, std::size_t first, std::size_t n,
   const bool seqslam = parts.config.run.seqslam();
   const char* margin_key = seqslam ? "seqslam.exclusion_margin_frames" : "match.margin";
   int margin_frames = seqslam ? parts.config.seqslam.exclusion_margin_frames : parts.config.match.margin;
-  if (seqslam && parts.config.seqslam.exclusion == "none") margin_frames = 0;  // every pair is compared
+  if (seqslam && parts.config.seqslam.exclusion == SeqSlamExclusionKind::kNone)
+    margin_frames = 0;  // every pair is compared
   const auto margin = static_cast<std::size_t>(std::max(0, margin_frames));
   std::vector<std::pair<std::size_t, std::size_t>> used;
   std::size_t in_run = 0, too_close = 0;
@@ -113,13 +114,13 @@ void add_truth_rule_counts(const Dataset& dataset, const SequenceEvaluationInput
   const auto positives = [&](const std::string& plane, double min_travel_m) {
     GroundTruthConfig truth = input.truth;
     truth.plane = plane;
-    truth.min_travel_m = min_travel_m;
+    truth.revisit.min_travel_m = min_travel_m;
     return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
   };
   const std::string horizontal = horizontal_plane(dataset, input.p_w);
-  truth_json["positives_3d"] = positives("xyz", input.truth.min_travel_m);
+  truth_json["positives_3d"] = positives("xyz", input.truth.revisit.min_travel_m);
   truth_json["horizontal_plane"] = horizontal;
-  truth_json["positives_horizontal"] = positives(horizontal, input.truth.min_travel_m);
+  truth_json["positives_horizontal"] = positives(horizontal, input.truth.revisit.min_travel_m);
   truth_json["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
 }
 
@@ -174,7 +175,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
                       : dataset.layout() == "kitti"   ? "xz"
                                                       : "xyz";
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
-  input.truth.min_travel_m = eval.min_travel_m;
+  input.truth.revisit = eval.revisit;
   const MethodEvaluation method = parts.method.evaluation();
   const auto within_range = [first](const std::vector<Detection>& detections) {
     std::vector<Detection> out;

@@ -7,19 +7,10 @@
 namespace loopgate {
 
 void DirdConfig::validate() const {
-  if (normalization != "libdird" && normalization != "l2") {
-    throw ConfigError("dird.normalization: '" + normalization + "' is not one of libdird, l2");
-  }
-  if (resize != "nearest" && resize != "area") {
-    throw ConfigError("dird.resize: '" + resize + "' is not one of nearest, area");
-  }
-  if (metric != "l1" && metric != "l2") {
-    throw ConfigError("dird.metric: '" + metric + "' is not one of l1, l2");
-  }
   if (!std::isfinite(mu)) throw ConfigError("dird.mu: must be a finite number");
   if (!(std::isfinite(sigma) && sigma > 0.0)) throw ConfigError("dird.sigma: must be > 0");
   if (!(tau1 > 0.0 && tau1 < 1.0)) throw ConfigError("dird.tau1: must be in (0, 1)");
-  if (metric == "l2" && mu == kDirdReferenceMuL1 && sigma == kDirdReferenceSigmaL1) {
+  if (l2_metric() && mu == kDirdReferenceMuL1 && sigma == kDirdReferenceSigmaL1) {
     throw ConfigError(
         "dird.mu/dird.sigma: metric l2 needs its own logistic constants (the defaults are the L1 reference "
         "values); calibrate them with `loopgate calibrate` (order of magnitude: mu ~ 644, sigma ~ 68)");

@@ -56,9 +56,6 @@ void bucket_edges(std::size_t bucket, double& lower, double& upper) {
 }  // namespace
 
 void OnlineScaleConfig::validate() const {
-  if (mode != "off" && mode != "online") {
-    throw ConfigError("scale.mode: '" + mode + "' is not one of off, online");
-  }
   if (!(cutoff_quantile > 0.0 && cutoff_quantile < 1.0)) {
     throw ConfigError("scale.cutoff_quantile: must be in (0, 1)");
   }

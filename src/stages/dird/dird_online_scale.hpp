@@ -41,9 +41,17 @@
 
 namespace loopgate {
 
+// scale.mode: "off": dird.mu / dird.sigma as configured; "online": OnlineScale.
+enum class ScaleMode { kOff, kOnline };
+inline constexpr EnumName<ScaleMode> kScaleModeNames[] = {{ScaleMode::kOff, "off"},
+                                                          {ScaleMode::kOnline, "online"}};
+constexpr std::span<const EnumName<ScaleMode>> enum_names(ScaleMode) {
+  return kScaleModeNames;
+}
+
 // Configuration section `scale`.
 struct OnlineScaleConfig {
-  std::string mode = "off";            // "off": dird.mu / dird.sigma as configured; "online": OnlineScale
+  ScaleMode mode = ScaleMode::kOff;    // off | online (ScaleMode)
   double cutoff_quantile = 0.01;       // quantile of the distances where sim = tau1
   double mu_quantile = 0.0005;         // quantile of the distances where sim = 0.5
   std::int64_t min_distances = 20000;  // distances before the estimate replaces the prior
@@ -55,11 +63,11 @@ struct OnlineScaleConfig {
     v("mu_quantile", self.mu_quantile);
     v("min_distances", self.min_distances);
   }
-  // Throws ConfigError naming "scale.<key>": mode in {off, online}, 0 <= mu_quantile < cutoff_quantile < 1,
+  // Throws ConfigError naming "scale.<key>": 0 <= mu_quantile < cutoff_quantile < 1,
   // min_distances >= 1.
   void validate() const;
 
-  bool online() const { return mode == "online"; }
+  bool online() const { return mode == ScaleMode::kOnline; }
 };
 
 // mu / sigma of the logistic in the units of the distance they apply to.

@@ -21,12 +21,6 @@
 namespace loopgate {
 
 void StandardizeConfig::validate() const {
-  if (mode != "off" && mode != "batch" && mode != "causal") {
-    throw ConfigError("standardize.mode: '" + mode + "' is not one of off, batch, causal");
-  }
-  if (distance != "l1" && distance != "cosine") {
-    throw ConfigError("standardize.distance: '" + distance + "' is not one of l1, cosine");
-  }
   if (!(clamp_sigma >= 0.5 && clamp_sigma <= 127.0)) {
     throw ConfigError("standardize.clamp_sigma: must be in [0.5, 127]");
   }

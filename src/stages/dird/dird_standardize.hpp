@@ -52,17 +52,34 @@
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "stages/dird/dird_extractor.hpp"
 
 namespace loopgate {
+
+// standardize.mode: "off" (raw bytes), "batch" (statistics of one whole sequence), "causal" (streaming).
+enum class StandardizeMode { kOff, kBatch, kCausal };
+inline constexpr EnumName<StandardizeMode> kStandardizeModeNames[] = {
+    {StandardizeMode::kOff, "off"}, {StandardizeMode::kBatch, "batch"}, {StandardizeMode::kCausal, "causal"}};
+constexpr std::span<const EnumName<StandardizeMode>> enum_names(StandardizeMode) {
+  return kStandardizeModeNames;
+}
+
+// standardize.distance, on the codes: "cosine" (1 - cos of the codes) or "l1" (SAD, psadbw).
+enum class StandardizeDistance { kCosine, kL1 };
+inline constexpr EnumName<StandardizeDistance> kStandardizeDistanceNames[] = {
+    {StandardizeDistance::kCosine, "cosine"}, {StandardizeDistance::kL1, "l1"}};
+constexpr std::span<const EnumName<StandardizeDistance>> enum_names(StandardizeDistance) {
+  return kStandardizeDistanceNames;
+}
 
 // Configuration section `standardize` (read by the integrator's config system through fields()). Defaults
 // other than `mode` are the measured recommendation (docs/standardize.md): causal statistics over the last
 // 100 observed frames, cosine on int8 codes; L1 on causally standardised codes is fragile (frames
 // standardised with different statistics become hubs or outliers) and is kept for measurements.
 struct StandardizeConfig {
-  std::string mode = "off";         // "off" (raw bytes), "batch" (one sequence), "causal" (streaming)
-  std::string distance = "cosine";  // on the codes: "cosine" (1 - cos of the codes) or "l1" (SAD, psadbw)
+  StandardizeMode mode = StandardizeMode::kOff;                 // off | batch | causal (StandardizeMode)
+  StandardizeDistance distance = StandardizeDistance::kCosine;  // on the codes: cosine | l1
   double clamp_sigma = 4.0;         // z-scores clamped to +-clamp_sigma, mapped to codes +-127
   double min_stddev = 1.0;          // floor of every dimension's standard deviation, in descriptor bytes
   std::int64_t warm_up = 50;        // causal: observations before the statistics are used (>= 2)
@@ -87,13 +104,12 @@ struct StandardizeConfig {
     v("refresh_every", self.refresh_every);
     v("observe_every", self.observe_every);
   }
-  // Throws ConfigError naming "standardize.<key>": mode in {off, batch, causal}, distance in {l1, cosine},
-  // clamp_sigma in [0.5, 127], min_stddev > 0, warm_up >= 2, window == 0 or window >= warm_up,
-  // refresh_every >= 1, observe_every >= 1.
+  // Throws ConfigError naming "standardize.<key>": clamp_sigma in [0.5, 127], min_stddev > 0, warm_up >= 2,
+  // window == 0 or window >= warm_up, refresh_every >= 1, observe_every >= 1.
   void validate() const;
 
-  bool enabled() const { return mode != "off"; }
-  bool cosine() const { return distance == "cosine"; }
+  bool enabled() const { return mode != StandardizeMode::kOff; }
+  bool cosine() const { return distance == StandardizeDistance::kCosine; }
 };
 
 // The configuration in observations for a CausalStandardizer fed every observe_every-th frame: warm_up,

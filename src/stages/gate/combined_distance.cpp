@@ -27,10 +27,12 @@ double max_eigenvalue_m2(const Eigen::Matrix3d& P_m2) {
   return solver.eigenvalues()(2);  // ascending order
 }
 
-double position_sigma_m(const Eigen::Matrix3d& P_m2, const std::string& sigma_norm) {
-  if (sigma_norm == "max_eigen") return std::sqrt(std::max(0.0, max_eigenvalue_m2(P_m2)));
-  if (sigma_norm == "trace") return std::sqrt(std::max(0.0, P_m2.trace()));
-  throw ConfigError("gate.sigma_norm: '" + sigma_norm + "' is not one of: max_eigen, trace");
+double position_sigma_m(const Eigen::Matrix3d& P_m2, SigmaNorm sigma_norm) {
+  switch (sigma_norm) {
+    case SigmaNorm::kMaxEigen: return std::sqrt(std::max(0.0, max_eigenvalue_m2(P_m2)));
+    case SigmaNorm::kTrace: return std::sqrt(std::max(0.0, P_m2.trace()));
+  }
+  throw ConfigError("gate.sigma_norm: not one of " + enum_choices(sigma_norm));
 }
 
 }  // namespace loopgate

@@ -3,7 +3,8 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <string>
+
+#include "stages/gate/gate_config.hpp"
 
 namespace loopgate {
 
@@ -16,9 +17,9 @@ double combined_distance(const Eigen::Vector3d& p_i_m, const Eigen::Matrix3d& P_
 // Largest eigenvalue of a symmetric 3 x 3 matrix (symmetrised first), in m^2.
 double max_eigenvalue_m2(const Eigen::Matrix3d& P_m2);
 
-// sigma_i of eq. 10: sqrt(lambda_max(P)) for "max_eigen", sqrt(trace(P)) for "trace" (negative values from
-// numerical noise count as 0). Throws ConfigError for another norm name.
-double position_sigma_m(const Eigen::Matrix3d& P_m2, const std::string& sigma_norm);
+// sigma_i of eq. 10: sqrt(lambda_max(P)) for max_eigen, sqrt(trace(P)) for trace (negative values from
+// numerical noise count as 0).
+double position_sigma_m(const Eigen::Matrix3d& P_m2, SigmaNorm sigma_norm);
 
 // Threshold of eq. 10: confidence_scale * sigma_m + beta_m.
 inline double gate_threshold_m(double sigma_m, double confidence_scale, double beta_m) {

@@ -11,11 +11,8 @@ namespace loopgate {
 void GateConfig::validate() const {
   // Upper bounds: far beyond any use, so that no value makes a run hang or exhaust memory.
   require_in("gate.gap_frames", gap_frames, 1, 1'000'000, "frames");
-  require_in("gate.min_travel_m", min_travel_m, 0.0, 1e6, "m");
+  revisit.validate("gate.min_travel_m");
   require_in("gate.beta_m", beta_m, 0.0, 1e5, "m");
-  if (sigma_norm != "max_eigen" && sigma_norm != "trace") {
-    throw ConfigError("gate.sigma_norm: '" + sigma_norm + "' is not one of: max_eigen, trace");
-  }
   require_in("gate.confidence_scale", confidence_scale, 0.0, 1000.0);
   // The combined distance needs I + P_i + P_j positive definite: tolerating eigenvalues down to -0.25
   // keeps its smallest eigenvalue >= 0.5.

@@ -2,9 +2,21 @@
 // the paper §4 eq. 8-10). Section "gate".
 #pragma once
 
-#include <string>
+#include <span>
+
+#include "core/enum_names.hpp"
+#include "core/revisit_rule.hpp"
 
 namespace loopgate {
+
+// gate.sigma_norm: sigma_i of eq. 10 from the position covariance P_i: sqrt(lambda_max(P_i)) ("max_eigen")
+// or sqrt(trace(P_i)) ("trace").
+enum class SigmaNorm { kMaxEigen, kTrace };
+inline constexpr EnumName<SigmaNorm> kSigmaNormNames[] = {{SigmaNorm::kMaxEigen, "max_eigen"},
+                                                          {SigmaNorm::kTrace, "trace"}};
+constexpr std::span<const EnumName<SigmaNorm>> enum_names(SigmaNorm) {
+  return kSigmaNormNames;
+}
 
 struct GateConfig {
   // Only past frames j <= i - gap_frames are searched (paper: 30; should follow the frame rate).
@@ -12,12 +24,12 @@ struct GateConfig {
   // ... and only frames the odometry has travelled at least min_travel_m from since (the path length of the
   // positions the gate was given, from j to i): standing still or hovering, a camera sees the place it has
   // not left, and such a "revisit" is no loop. The same definition of a revisit as eval.min_travel_m's on the
-  // ground truth (2 m). 0: no travel needed (the paper's gate: the frame gap only).
-  double min_travel_m = 2.0;
+  // ground truth (2 m). 0: no travel needed (the paper's gate: the frame gap only). Key min_travel_m.
+  RevisitRule revisit{2.0};
   // beta: allowed drift between j and i, added to the threshold, in metres (per environment).
   double beta_m = 5.0;
   // sigma_i = sqrt(lambda_max(P_i)) ("max_eigen", the default) or sqrt(trace(P_i)) ("trace").
-  std::string sigma_norm = "max_eigen";
+  SigmaNorm sigma_norm = SigmaNorm::kMaxEigen;
   // Threshold = confidence_scale * sigma_i + beta (1.96: 95 % of a Gaussian, eq. 10).
   double confidence_scale = 1.96;
   // Numerical noise allowed in a position covariance: eigenvalues down to -covariance_tolerance_m2 are
@@ -53,7 +65,7 @@ struct GateConfig {
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
     v("gap_frames", self.gap_frames);
-    v("min_travel_m", self.min_travel_m);
+    v("min_travel_m", self.revisit.min_travel_m);
     v("beta_m", self.beta_m);
     v("sigma_norm", self.sigma_norm);
     v("confidence_scale", self.confidence_scale);
@@ -68,7 +80,7 @@ struct GateConfig {
     v("feedback", self.feedback);
   }
   // Throws ConfigError naming the key and its bounds: gap_frames in [1, 1e6], min_travel_m in [0, 1e6],
-  // beta_m in [0, 1e5], sigma_norm in {max_eigen, trace}, confidence_scale in [0, 1000],
+  // beta_m in [0, 1e5], confidence_scale in [0, 1000],
   // covariance_tolerance_m2 in [0, 0.25], kdtree_leaf_size in [1, 1e4], kdtree_seed_neighbours in [1, 1000],
   // area_* in [0, 1e4] (query rows) or [0, 1e5] (reference columns), row_horizon_frames in [0, 1e7].
   void validate() const;

@@ -118,7 +118,7 @@ struct PoseGate::Impl {
   // enter the tree (both hold for a prefix of the stored frames: frames and travel never decrease).
   void insert_up_to(std::int64_t frame, double travel_now_m) {
     const std::int64_t last_allowed = frame - static_cast<std::int64_t>(config.gap_frames);
-    const double last_travel_m = travel_now_m - config.min_travel_m;
+    const double last_travel_m = travel_now_m - config.revisit.min_travel_m;
     const std::size_t first = cloud.count;
     std::size_t end = first;
     while (end < frames.size() && frames[end] <= last_allowed && travel_m[end] <= last_travel_m) {

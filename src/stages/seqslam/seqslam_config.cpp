@@ -20,8 +20,6 @@ void SeqSlamConfig::validate() const {
   // make a run hang or exhaust memory).
   require(image_width_px > 0 && image_width_px <= 4096, "image_width_px", "must be in [1, 4096] px");
   require(image_height_px > 0 && image_height_px <= 4096, "image_height_px", "must be in [1, 4096] px");
-  require(resize_method == "lanczos3" || resize_method == "area", "resize_method",
-          "'" + resize_method + "' is not one of: lanczos3, area");
   require(patch_size_px >= 0 && patch_size_px <= 4096, "patch_size_px",
           "must be in [0, 4096] px (0 disables patch normalisation)");
   require(patch_mean_grey >= 0.0 && patch_mean_grey <= 255.0, "patch_mean_grey", "must be in 0..255");
@@ -39,8 +37,6 @@ void SeqSlamConfig::validate() const {
           "second_best_window_rows", "must be even and in [0, 1000000]");
   require(ratio_threshold > 0.0 && ratio_threshold <= 1.0, "ratio_threshold",
           "must be in (0, 1] (best / second best)");
-  require(exclusion == "none" || exclusion == "band" || exclusion == "past", "exclusion",
-          "'" + exclusion + "' is not one of: none, band, past");
   require(exclusion_margin_frames >= 0 && exclusion_margin_frames <= 1'000'000, "exclusion_margin_frames",
           "must be in [0, 1000000] frames");
 }
@@ -56,9 +52,8 @@ std::vector<int> SeqSlamConfig::moves() const {
 
 SeqSlamExclusion SeqSlamExclusion::from_config(const SeqSlamConfig& config) {
   const auto margin = static_cast<std::size_t>(config.exclusion_margin_frames);
-  if (config.exclusion == "band") return {Kind::kBand, margin};
-  if (config.exclusion == "past") return {Kind::kPast, margin};
-  return {Kind::kNone, 0};
+  if (config.exclusion == Kind::kNone) return {Kind::kNone, 0};
+  return {config.exclusion, margin};
 }
 
 }  // namespace loopgate

@@ -3,10 +3,30 @@
 #pragma once
 
 #include <cstddef>
-#include <string>
+#include <span>
 #include <vector>
 
+#include "core/enum_names.hpp"
+
 namespace loopgate {
+
+// seqslam.resize_method: "lanczos3" (MATLAB imresize, antialiased) or "area" (OpenCV INTER_AREA).
+enum class SeqSlamResize { kLanczos3, kArea };
+inline constexpr EnumName<SeqSlamResize> kSeqSlamResizeNames[] = {{SeqSlamResize::kLanczos3, "lanczos3"},
+                                                                  {SeqSlamResize::kArea, "area"}};
+constexpr std::span<const EnumName<SeqSlamResize>> enum_names(SeqSlamResize) {
+  return kSeqSlamResizeNames;
+}
+
+// seqslam.exclusion: which (reference, query) entries the search may use (see SeqSlamConfig::exclusion).
+enum class SeqSlamExclusionKind { kNone, kBand, kPast };
+inline constexpr EnumName<SeqSlamExclusionKind> kSeqSlamExclusionKindNames[] = {
+    {SeqSlamExclusionKind::kNone, "none"},
+    {SeqSlamExclusionKind::kBand, "band"},
+    {SeqSlamExclusionKind::kPast, "past"}};
+constexpr std::span<const EnumName<SeqSlamExclusionKind>> enum_names(SeqSlamExclusionKind) {
+  return kSeqSlamExclusionKindNames;
+}
 
 struct SeqSlamConfig {
   // Step 1: preprocessing (grey -> resize -> patch normalisation).
@@ -14,9 +34,9 @@ struct SeqSlamConfig {
   bool input_preprocessed = false;
   int image_width_px = 64;
   int image_height_px = 32;
-  std::string resize_method = "lanczos3";  // "lanczos3" (MATLAB imresize, antialiased) | "area"
-  int patch_size_px = 8;                   // non-overlapping blocks; 0 disables patch normalisation
-  double patch_mean_grey = 127.0;          // normalised block = mean_grey + round((p - mean) / std)
+  SeqSlamResize resize_method = SeqSlamResize::kLanczos3;  // lanczos3 | area (SeqSlamResize)
+  int patch_size_px = 8;           // non-overlapping blocks; 0 disables patch normalisation
+  double patch_mean_grey = 127.0;  // normalised block = mean_grey + round((p - mean) / std)
   // Step 3: local contrast enhancement over rows r - R/2 .. r + R/2 of the same column.
   int contrast_window_rows = 10;
   // Step 4: sequence search.
@@ -32,7 +52,7 @@ struct SeqSlamConfig {
   //           of query q spans query frames q - ds/2 .. q + ds/2, so its match is known ds/2 frames later).
   // Excluded entries are never computed, take no part in the contrast statistics, and score
   // +infinity in the search, so a sequence touching one cannot win.
-  std::string exclusion = "none";
+  SeqSlamExclusionKind exclusion = SeqSlamExclusionKind::kNone;
   int exclusion_margin_frames = 100;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is SeqSlamConfig or const
@@ -55,7 +75,7 @@ struct SeqSlamConfig {
     v("exclusion_margin_frames", self.exclusion_margin_frames);
   }
 
-  // Throws ConfigError naming the key (and the allowed values for choices).
+  // Throws ConfigError naming the key and its bounds (the words of the choices are checked on loading).
   void validate() const;
 
   // The integer moves (frames of reference per ds query frames) of the velocity search.
@@ -65,7 +85,7 @@ struct SeqSlamConfig {
 // The exclusion rule of a config, applied per entry (reference row r, query column q).
 class SeqSlamExclusion {
  public:
-  enum class Kind { kNone, kBand, kPast };
+  using Kind = SeqSlamExclusionKind;
 
   SeqSlamExclusion() = default;
   SeqSlamExclusion(Kind kind, std::size_t margin_frames) : kind_(kind), margin_(margin_frames) {}

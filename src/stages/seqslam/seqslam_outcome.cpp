@@ -28,8 +28,8 @@ FrameDetection seqslam_detection(const SeqSlamMatch& m, const SeqSlamConfig& con
       d.reason = fmt::format("within ds/2 = {} frames of an end of the run", half);
     } else {
       d.reason = fmt::format("every sequence{} touches the exclusion ({} {} frames)",
-                             context.gated ? " matching a candidate-area cell" : "", config.exclusion,
-                             config.exclusion_margin_frames);
+                             context.gated ? " matching a candidate-area cell" : "",
+                             enum_name(config.exclusion), config.exclusion_margin_frames);
     }
     return d;
   }

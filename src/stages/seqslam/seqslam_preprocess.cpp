@@ -168,7 +168,7 @@ std::vector<std::uint8_t> seqslam_preprocess(const cv::Mat& image, const SeqSlam
     small = grey;
   } else if (grey.cols == config.image_width_px && grey.rows == config.image_height_px) {
     small = grey.clone();
-  } else if (config.resize_method == "area") {
+  } else if (config.resize_method == SeqSlamResize::kArea) {
     cv::resize(grey, small, cv::Size(config.image_width_px, config.image_height_px), 0, 0, cv::INTER_AREA);
   } else {
     small = seqslam_resize_lanczos3(grey, config.image_width_px, config.image_height_px);

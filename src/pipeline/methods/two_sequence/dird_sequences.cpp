@@ -34,7 +34,7 @@ CodedSequence code_sequence(const std::vector<Descriptor>& descriptors,
   out.norms.assign(n, 0.0);
   if (described.empty()) return out;
   std::optional<CausalStandardizer> causal;
-  if (config.mode == "causal") {
+  if (config.mode == StandardizeMode::kCausal) {
     causal.emplace(observations_config(config));
     const auto every = static_cast<std::size_t>(config.observe_every);
     for (std::size_t k = 0; k < n; k += every) {
@@ -60,8 +60,8 @@ CodedSequence code_sequence(const std::vector<Descriptor>& descriptors,
 
 nlohmann::json standardize_json(const StandardizeConfig& standardize, const CodedSequence& reference,
                                 const CodedSequence& query) {
-  nlohmann::json out = {{"mode", standardize.mode},
-                        {"distance", standardize.distance},
+  nlohmann::json out = {{"mode", enum_name(standardize.mode)},
+                        {"distance", enum_name(standardize.distance)},
                         {"reference_statistics", reference.statistics},
                         {"query_statistics", query.statistics}};
   nlohmann::json notes = nlohmann::json::array();

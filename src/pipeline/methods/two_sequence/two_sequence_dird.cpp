@@ -91,7 +91,7 @@ class DirdTwoSequence final : public TwoSequenceMethod {
         {"detection", {{"nms_delay_frames", matcher.emission_delay()}}},
         {"stages_s", {{"similarity", similarity_s}, {"match", match_s}}},
         {"scale",
-         {{"mode", config_.scale.mode},
+         {{"mode", enum_name(config_.scale.mode)},
           {"mu", scale_.mu},
           {"sigma", scale_.sigma},
           {"cutoff_distance", scale_.cutoff_distance},

@@ -98,8 +98,8 @@ class DirdSeqSlamTwoSequence final : public TwoSequenceMethod {
     out.summary = {
         {"detection", {{"delay_frames", search.emission_delay()}}},
         {"dird_seqslam",
-         {{"normalization", dird_.normalization},
-          {"resize", dird_.resize},
+         {{"normalization", enum_name(dird_.normalization)},
+          {"resize", enum_name(dird_.resize)},
           {"velocities", config_.dird_seqslam.search.velocities()},
           {"sequence_length", search.sequence_length()}}},
         {"stages_s", {{"code", code_s}, {"distances", distance_s}, {"search", search_s}}},

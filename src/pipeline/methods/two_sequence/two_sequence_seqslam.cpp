@@ -35,12 +35,12 @@ void add_cells(const SeqSlamMatch* m, CsvRow& row) {
 class SeqSlamTwoSequence final : public TwoSequenceMethod {
  public:
   explicit SeqSlamTwoSequence(const PipelineConfig& config) : effective_(config) {
-    if (effective_.seqslam.exclusion != "none") {
+    if (effective_.seqslam.exclusion != SeqSlamExclusionKind::kNone) {
       spdlog::warn(
           "two-sequence mode: seqslam.exclusion '{}' ignored, using 'none' (reference and query are "
           "different runs, every pair may match)",
-          effective_.seqslam.exclusion);
-      effective_.seqslam.exclusion = "none";
+          enum_name(effective_.seqslam.exclusion));
+      effective_.seqslam.exclusion = SeqSlamExclusionKind::kNone;
     }
   }
 
