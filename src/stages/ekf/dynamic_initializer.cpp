@@ -1,8 +1,6 @@
 #include "stages/ekf/dynamic_initializer.hpp"
 
-#include <Eigen/Cholesky>
 #include <Eigen/Dense>
-#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -533,10 +531,8 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   Eigen::Matrix<double, 3, 9> J_vn;
   J_vn << Eigen::Matrix3d::Identity(), T_n * Eigen::Matrix3d::Identity(), at.J_beta_ba[n - 1];
   const Eigen::Matrix3d vel_cov_b0 = J_vn * al->cov.topLeftCorner<9, 9>() * J_vn.transpose();
-  // The certainty of the velocity (the scale) that decides: the pixel noise's (scaled by the residuals). The
-  // same with the pre-integration's own errors added is reported beside it; deciding on it refused a right
-  // start on the rendered KITTI drive in reverse (1.13 against a limit of 1.08 m/s) for a worse one a frame
-  // later, and refused none of the wrong starts measured (docs/ekf.md).
+  // The pixel noise's velocity sigma (scaled by the residuals) decides; the one with the pre-integration's
+  // errors added is only reported: deciding on it refused right starts, no wrong one (docs/ekf.md).
   const double speed_sigma = std::sqrt(std::max(0.0, vel_cov_b0.trace()));
   const double speed_sigma_imu =
       std::sqrt(std::max(0.0, (J_vn * al->cov_imu.topLeftCorner<9, 9>() * J_vn.transpose()).trace()));
@@ -545,8 +541,7 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   if (!(speed_sigma <= speed_limit)) {
     status_ =
         fmt("velocity sigma %.3f m/s > %.3f m/s (speed %.2f m/s; %.3f m/s with the IMU's pre-integration "
-            "errors): "
-            "too little excitation to fix the scale",
+            "errors): too little excitation to fix the scale",
             speed_sigma, speed_limit, v_n.norm(), speed_sigma_imu);
     return std::nullopt;
   }
@@ -589,15 +584,14 @@ std::optional<InitialState> DynamicInitializer::finish(const Attempt& at) {
   out.joint_cov = joint_start_covariance(*al, in, R_w, R_n, v_n, J_vn, config_);
   out.scale = translation_m;
   out.window_s = at.span_s;
-  out.detail = fmt(
-      "dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, %zu tracks (%zu dropped), "
-      "translation %.2f m, speed %.2f +- %.3f m/s (%.3f with the IMU's pre-integration errors), |g| %.3f "
-      "before the norm constraint, "
-      "reprojection RMS "
-      "%.2f px, gyro bias (%.4f %.4f %.4f) rad/s, accel bias (%.3f %.3f %.3f) m/s^2, accel std %.2f m/s^2",
-      n, at.span_s, at.best, at.vision_parallax, al->tracks_used, al->tracks_dropped, translation_m,
-      v_n.norm(), speed_sigma, speed_sigma_imu, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(),
-      bg_refined.z(), ba.x(), ba.y(), ba.z(), at.acc_std);
+  out.detail =
+      fmt("dynamic: %zu images over %.2f s, SfM pair 0-%zu parallax %.1f px, %zu tracks (%zu dropped), "
+          "translation %.2f m, speed %.2f +- %.3f m/s (%.3f with the IMU's pre-integration errors), |g| %.3f "
+          "before the norm constraint, reprojection RMS %.2f px, gyro bias (%.4f %.4f %.4f) rad/s, accel "
+          "bias (%.3f %.3f %.3f) m/s^2, accel std %.2f m/s^2",
+          n, at.span_s, at.best, at.vision_parallax, al->tracks_used, al->tracks_dropped, translation_m,
+          v_n.norm(), speed_sigma, speed_sigma_imu, al->g_norm_free, rms_px, bg_refined.x(), bg_refined.y(),
+          bg_refined.z(), ba.x(), ba.y(), ba.z(), at.acc_std);
   status_ = out.detail;
   return out;
 }
