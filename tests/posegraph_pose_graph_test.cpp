@@ -379,6 +379,88 @@ TEST(PoseGraph, OneTrueLoopIsKeptWhenTheOdometrysStepCovarianceIsOverconfident) 
   EXPECT_LT(rmse(scaled, d.truth), 0.5 * odometry_m);
 }
 
+// Loops that agree with the odometry better than its covariance predicts show an odometry more certain than
+// it claims: allowed below 1 (min_scale), the scale falls to about the true fraction; by default, with
+// fewer than min_loops loops, or when the loops show an overconfident odometry, it does not.
+TEST(PoseGraph, OdometryCovarianceScaleBelowOneOnlyFromEnoughLoopsAndWhenAsked) {
+  const double k = odometry_cov_scale_from_loops(innovations(0.1, 400, 0, 4), 3, 1.0, 1e-6);
+  EXPECT_GT(k, 0.1 / 1.3);
+  EXPECT_LT(k, 0.1 * 1.3);
+  // Innovations that are the edges' noise alone: down to the floor's order, where the odometry no longer
+  // counts.
+  EXPECT_LT(odometry_cov_scale_from_loops(innovations(0.0, 400, 0, 4), 3, 1.0, 1e-6), 0.05);
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(0.1, 400, 0, 4), 3, 1.0), 1.0);
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(0.1, 2, 0, 4), 3, 1.0, 1e-6), 1.0);
+  EXPECT_EQ(odometry_cov_scale_from_loops(innovations(9.0, 400, 0, 4), 3, 1.0, 1e-6), 1.0);
+}
+
+// A good odometry that claims to be uncertain (a conservative drift model, or the odometry edges' floors
+// summed over a long loop), nine loop edges within their sigma of the truth and a wrong one 0.6 m off (12
+// sigma): with the robust loss widened by the odometry's whole claimed covariance of T_j_i
+// (loop_loss_scale()), the soft odometry bends to the wrong edge until it looks like a true one, and it is
+// kept; widened by the fraction of that covariance the loops confirm (odometry_cov_scale_from_loops() below
+// 1, as the loop closer does), it is switched off and the trajectory stays near the truth.
+TEST(PoseGraph, AWrongEdgeDoesNotBendAGoodOdometryThatClaimsToBeUncertain) {
+  const std::size_t per_lap = 100, loops = 10, wrong = 3;
+  const Drive d = circle_drive(per_lap, 0.0);
+  PoseGraphConfig config;
+  config.odometry_sigma_rotation_rad_per_sqrt_m = 0.0;
+  config.odometry_sigma_rotation_floor_rad = 1e-4;
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> n01(0.0, 1.0);
+  const double edge_sigma_m = 0.05;
+  const PoseCov edge_cov = cov(edge_sigma_m, 0.003);
+  struct Loop {
+    std::size_t j, i;
+    Eigen::Isometry3d T_j_i;
+    PoseCov odometry_cov;
+  };
+  std::vector<Loop> edges;
+  std::vector<LoopInnovation> innovations_of_loops;
+  for (std::size_t l = 0; l < loops; ++l) {
+    const std::size_t j = 5 + l * (per_lap / loops), i = j + per_lap;
+    PoseCov claimed = PoseCov::Zero();
+    Eigen::Isometry3d T_j_f = Eigen::Isometry3d::Identity();
+    for (std::size_t f = j + 1; f <= i; ++f) {
+      const Eigen::Isometry3d step = d.odometry[f - 1].inverse() * d.odometry[f];
+      claimed = compose_pose_cov(T_j_f, claimed, step, config.model_cov(step));
+      T_j_f = T_j_f * step;
+    }
+    Eigen::Isometry3d T_j_i = d.truth[j].inverse() * d.truth[i];
+    const Eigen::Vector3d off = l == wrong ? Eigen::Vector3d(0.6, 0.0, 0.0)
+                                           : Eigen::Vector3d(n01(rng), n01(rng), n01(rng)) * edge_sigma_m;
+    T_j_i.translation() += off;
+    edges.push_back({j, i, T_j_i, claimed});
+    LoopInnovation innovation;
+    innovation.error.head<3>() = T_j_i.translation() - T_j_f.translation();
+    innovation.odometry_cov = claimed;
+    innovation.loop_cov = edge_cov;
+    innovations_of_loops.push_back(innovation);
+  }
+  const double fraction = odometry_cov_scale_from_loops(innovations_of_loops, 3, 1.0, 1e-6);
+  EXPECT_LT(fraction, 0.1) << "the premise: the loops show a far more certain odometry than it claims";
+  const auto solve = [&](double loss_fraction) {
+    PoseGraph graph(config);
+    for (const auto& T : d.odometry) graph.add_node(T);
+    for (std::size_t f = 1; f < d.odometry.size(); ++f) {
+      const Eigen::Isometry3d step = d.odometry[f - 1].inverse() * d.odometry[f];
+      graph.add_edge(f - 1, f, EdgeKind::kOdometry, step, config.model_cov(step));
+    }
+    for (const Loop& e : edges)
+      graph.add_edge(e.j, e.i, EdgeKind::kLoop, e.T_j_i, edge_cov,
+                     loop_loss_scale(config, loss_fraction * e.odometry_cov, edge_cov));
+    graph.optimize(true, 0);
+    return graph;
+  };
+  const PoseGraph whole = solve(1.0), confirmed = solve(fraction);
+  const std::size_t wrong_edge = d.odometry.size() - 1 + wrong;
+  ASSERT_EQ(whole.edges().at(wrong_edge).kind, EdgeKind::kLoop);
+  EXPECT_FALSE(whole.edges().at(wrong_edge).outlier) << "the premise: the wide loss keeps the wrong edge";
+  EXPECT_TRUE(confirmed.edges().at(wrong_edge).outlier) << "chi2 " << confirmed.edges().at(wrong_edge).chi2;
+  EXPECT_LT(rmse(confirmed, d.truth), 0.8 * rmse(whole, d.truth))
+      << "whole claimed covariance " << rmse(whole, d.truth) << " m, confirmed " << rmse(confirmed, d.truth);
+}
+
 // The loop's robust loss scale: the configured one when the odometry knows T_j_i exactly, growing with the
 // odometry's uncertainty in units of the edge's.
 TEST(PoseGraph, LoopLossScaleGrowsWithTheOdometrysUncertaintyOfTheLoop) {

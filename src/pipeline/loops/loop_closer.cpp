@@ -89,9 +89,10 @@ PoseCov LoopCloser::odometry_edge_cov(std::size_t a, std::size_t b, double scale
   return graph_config_.with_floors(scale * cov);
 }
 
-double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std::size_t span) const {
-  if (step_cov_.empty()) return 1.0;
-  if (graph_config_.odometry_cov_scale > 0) return graph_config_.odometry_cov_scale;
+LoopCloser::OdometryScales LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops,
+                                                          std::size_t span) const {
+  if (step_cov_.empty()) return {};
+  if (graph_config_.odometry_cov_scale > 0) return {graph_config_.odometry_cov_scale, 1.0};
   // Each recorded frame's covariance relative to the start of its chain of step covariances (a frame without
   // one starts a chain): the odometry's covariance of T_j_i is then step_pose_cov of j's and i's.
   std::vector<std::int64_t> chain(span, -1);
@@ -112,6 +113,7 @@ double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std:
     previous = k;
   }
   std::vector<LoopInnovation> innovations;
+  std::vector<std::size_t> loop_gaps;  // i - j
   for (const LoopResult& r : loops) {
     if (r.loop.query < first_ || r.loop.reference < first_) continue;
     const std::size_t i = r.loop.query - first_, j = r.loop.reference - first_;
@@ -124,6 +126,7 @@ double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std:
     innovation.loop_cov = r.result.cov;
     innovation.check_scale = odometry_check_scale(innovation.odometry_cov, sigma_m_[i], sigma_m_[j]);
     innovations.push_back(innovation);
+    loop_gaps.push_back(i - j);
   }
   const double scale = odometry_cov_scale_from_loops(innovations, 3, 1e6);
   if (innovations.size() < 3) {
@@ -131,7 +134,19 @@ double LoopCloser::odometry_cov_scale(const std::vector<LoopResult>& loops, std:
       spdlog::debug("posegraph: a loop's check scale {:.3g}, its NIS at scale 1 {:.3g}; scale {:.3g}",
                     n.check_scale, n.error.dot((n.odometry_cov + n.loop_cov).ldlt().solve(n.error)), scale);
   }
-  return scale;
+  // The loss sees the graph's covariance of T_j_i: the steps' scaled, plus the odometry edges' floors, one
+  // per node between j and i (relative_odometry_cov()). The fraction of it the loops confirm, at most 1, down
+  // to where it no longer counts beside the edges' (a numerical floor: the loss is then posegraph.loss_scale,
+  // as for an odometry that knows T_j_i exactly).
+  for (std::size_t n = 0; n < innovations.size(); ++n) {
+    const std::size_t gap = loop_gaps[n];
+    const double nodes = std::max(
+        1.0, std::floor(static_cast<double>(gap) / static_cast<double>(graph_config_.node_every_frames)));
+    innovations[n].odometry_cov =
+        scale * innovations[n].odometry_cov + nodes * graph_config_.with_floors(PoseCov::Zero());
+  }
+  constexpr double kMinLossScale = 1e-6;
+  return {scale, odometry_cov_scale_from_loops(innovations, 3, 1.0, kMinLossScale)};
 }
 
 std::optional<Eigen::Isometry3d> LoopCloser::pose_of(std::size_t frame) const {
@@ -242,7 +257,8 @@ double LoopCloser::solve(std::size_t last, bool final) {
     node_of[k] = static_cast<std::int64_t>(graph.add_node(*poses_[k]));
     frames.push_back(first_ + k);
   }
-  const double scale = odometry_cov_scale(loops, span);
+  const OdometryScales scales = odometry_cov_scale(loops, span);
+  const double scale = scales.graph;
   for (std::size_t n = 1; n < frames.size(); ++n) {
     const Eigen::Isometry3d T_a_b = graph.initial_pose(n - 1).inverse() * graph.initial_pose(n);
     graph.add_edge(n - 1, n, EdgeKind::kOdometry, T_a_b, odometry_edge_cov(frames[n - 1], frames[n], scale));
@@ -255,8 +271,10 @@ double LoopCloser::solve(std::size_t last, bool final) {
     const std::int64_t b = node_of[r.loop.query - first_];
     if (a < 0 || b < 0) continue;
     edge_of_loop.push_back({{r.loop.query, r.loop.reference}, graph.edges().size()});
-    // The robust loss as wide as the odometry's (scaled) uncertainty of T_j_i makes a true loop's residual.
-    const PoseCov odometry_ji = relative_odometry_cov(r.loop.reference, r.loop.query, scale);
+    // The robust loss as wide as the odometry's uncertainty of T_j_i that the loops confirm makes a true
+    // loop's residual.
+    const PoseCov odometry_ji =
+        scales.loss_fraction * relative_odometry_cov(r.loop.reference, r.loop.query, scale);
     graph.add_edge(static_cast<std::size_t>(a), static_cast<std::size_t>(b), EdgeKind::kLoop, r.result.T_j_i,
                    r.result.cov, loop_loss_scale(graph_config_, odometry_ji, r.result.cov));
   }
@@ -264,10 +282,10 @@ double LoopCloser::solve(std::size_t last, bool final) {
   const SolveReport report = graph.optimize(final, final ? 0.0 : graph_config_.max_solve_s);
   const double ms = ms_since(start);
   spdlog::debug(
-      "posegraph: {} nodes, {} loop edges ({} outliers), odometry covariance x {:.3g}, {} iterations, cost "
-      "{:.3g} -> {:.3g}, {:.1f} ms",
-      graph.node_count(), report.loop_edges, report.outliers, scale, report.iterations, report.initial_cost,
-      report.final_cost, ms);
+      "posegraph: {} nodes, {} loop edges ({} outliers), odometry covariance x {:.3g} (loss x {:.3g}), {} "
+      "iterations, cost {:.3g} -> {:.3g}, {:.1f} ms",
+      graph.node_count(), report.loop_edges, report.outliers, scale, scales.loss_fraction, report.iterations,
+      report.initial_cost, report.final_cost, ms);
   if (!final) {
     solve_ms_.push_back(ms);
     return ms;
@@ -275,6 +293,7 @@ double LoopCloser::solve(std::size_t last, bool final) {
   final_solve_ms_ = ms;
   final_report_ = report;
   final_odometry_cov_scale_ = scale;
+  final_loss_fraction_ = scales.loss_fraction;
   nodes_ = frames;
   final_edges_ = graph.edges();
   node_poses_.clear();

@@ -229,9 +229,20 @@ class LoopCloser {
   // The covariance of the odometry edge between the recorded frames a < b: the step covariances composed
   // times `scale`, or the model's when a frame between them has none (or posegraph.odometry_cov is model).
   PoseCov odometry_edge_cov(std::size_t a, std::size_t b, double scale) const;
-  // posegraph.odometry_cov_scale, or when it is 0 the scale the verified `loops` show
-  // (odometry_cov_scale_from_loops). Frames up to index `span` of poses_.
-  double odometry_cov_scale(const std::vector<LoopResult>& loops, std::size_t span) const;
+  // The factors for the odometry's covariances in a solve. `graph`, for the odometry edges:
+  // posegraph.odometry_cov_scale, or when it is 0 the scale the verified loops show
+  // (odometry_cov_scale_from_loops, never below 1). `loss_fraction` (at most 1), for the graph's covariance
+  // of T_j_i (relative_odometry_cov(), the floors included) that widens each loop edge's robust loss
+  // (loop_loss_scale()): from 3 loops on, the fraction of it at which the loops' median innovation is the
+  // chi-square median, when they agree better than it predicts. A true loop's residual is spread as the
+  // odometry's true covariance says, and an odometry (or its floors) more certain than it claims is not
+  // a drift for the loss to make room for.
+  struct OdometryScales {
+    double graph = 1.0;
+    double loss_fraction = 1.0;
+  };
+  // Frames up to index `span` of poses_.
+  OdometryScales odometry_cov_scale(const std::vector<LoopResult>& loops, std::size_t span) const;
 
   mutable std::mutex mutex_;
   std::condition_variable wake_;
@@ -259,6 +270,7 @@ class LoopCloser {
   SolveReport final_report_;
   std::string final_solve_error_;          // why the final solve failed (empty: it did not)
   double final_odometry_cov_scale_ = 1.0;  // the final solve's (posegraph.odometry_cov odometry)
+  double final_loss_fraction_ = 1.0;       // the final solve's OdometryScales::loss_fraction
   std::vector<std::size_t> nodes_;         // frames of the final graph's nodes
   std::vector<Eigen::Isometry3d> node_poses_;
   std::vector<PoseGraphEdge> final_edges_;  // the final graph's edges (node indices into nodes_)

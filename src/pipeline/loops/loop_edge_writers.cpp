@@ -234,6 +234,7 @@ nlohmann::json LoopCloser::summary() const {
           {"graph_nodes", nodes_.size()},
           {"odometry_cov", graph_config_.odometry_cov},
           {"odometry_cov_scale", final_odometry_cov_scale_},
+          {"loss_odometry_cov_fraction", final_loss_fraction_},
           {"verify", stats_json(verify_ms)},
           {"optimize_streaming", stats_json(solve_ms_)},
           {"end_of_stream",

@@ -97,10 +97,12 @@ Eigen::Matrix<double, 6, 6> PoseGraphConfig::with_floors(const Eigen::Matrix<dou
 }
 
 double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
-                                     double max_scale) {
+                                     double max_scale, double min_scale) {
   constexpr double kChi2MedianDof6 = 5.348120627447;
   if (loops.empty()) return 1.0;
+  if (!(std::isfinite(min_scale) && min_scale > 0.0 && min_scale < 1.0)) min_scale = 1.0;
   if (loops.size() < min_loops) {
+    min_scale = 1.0;
     double check = max_scale;
     for (const LoopInnovation& loop : loops)
       check = std::min(check, std::isfinite(loop.check_scale) ? loop.check_scale : 0.0);
@@ -118,10 +120,16 @@ double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, s
     if (nis.size() % 2 == 1) return *mid;
     return 0.5 * (*mid + *std::max_element(nis.begin(), mid));
   };
-  if (median_nis(1.0) <= kChi2MedianDof6) return 1.0;
-  if (median_nis(max_scale) > kChi2MedianDof6) return max_scale;
-  // The median NIS falls as k grows: bisection on log k.
   double lo = 0.0, hi = std::log(max_scale);
+  if (median_nis(1.0) <= kChi2MedianDof6) {
+    if (min_scale >= 1.0) return 1.0;
+    if (median_nis(min_scale) <= kChi2MedianDof6) return min_scale;
+    lo = std::log(min_scale);
+    hi = 0.0;
+  } else if (median_nis(max_scale) > kChi2MedianDof6) {
+    return max_scale;
+  }
+  // The median NIS falls as k grows: bisection on log k.
   for (int it = 0; it < 60; ++it) {
     const double mid = 0.5 * (lo + hi);
     (median_nis(std::exp(mid)) > kChi2MedianDof6 ? lo : hi) = mid;

@@ -93,8 +93,11 @@ struct LoopInnovation {
 // show is taken only as far as the odometry's own sigmas allow it: at most the smallest check_scale among
 // them (1 when one of them has none), the uncertainty the odometry check already granted each loop.
 // 1 without loops.
+// min_scale < 1 (in (0, 1]) also lets the loops scale the covariance down, to the k at which the median is
+// the chi-square median, when they agree better than the odometry predicts: an odometry more certain than it
+// claims (a conservative drift model). Scaled down only from min_loops loops on.
 double odometry_cov_scale_from_loops(const std::vector<LoopInnovation>& loops, std::size_t min_loops,
-                                     double max_scale);
+                                     double max_scale, double min_scale = 1.0);
 
 // LoopInnovation::check_scale: (sigma_i_m^2 - sigma_j_m^2) / trace of the position block of odometry_cov,
 // 0 when it is not a finite number > 0 (no sigmas, or the odometry learnt where it is between j and i).
