@@ -116,11 +116,13 @@ double loop_information_gain(const Eigen::Matrix<double, 6, 6>& odometry_cov,
 
 // The robust loss's scale for a loop edge (in the edge's whitened units): loss_scale times
 // sqrt(1 + tr(C_loop^-1 C_odometry) / 6). Before the solve a true loop's whitened squared residual is spread
-// as chi-square with 6 + tr(C_loop^-1 C_odometry) mean, C_odometry the odometry's covariance of T_j_i (as the
-// graph scales it): the odometry's drift seen through the edge's sigma. A loop that corrects a drift far
-// larger than its own sigma would otherwise start deep in the loss's flat tail, barely pull the graph and be
-// switched off as an outlier although the odometry check found it consistent. Equal to loss_scale when the
-// odometry knows T_j_i exactly.
+// as chi-square with 6 + tr(C_loop^-1 C_odometry) mean, C_odometry the odometry's true covariance of T_j_i:
+// the odometry's drift seen through the edge's sigma. A loop that corrects a drift far larger than its own
+// sigma would otherwise start deep in the loss's flat tail, barely pull the graph and be switched off as an
+// outlier although the odometry check found it consistent. Equal to loss_scale when the odometry knows T_j_i
+// exactly. The loop closer passes the graph's covariance of T_j_i times the fraction of it the loops confirm
+// (odometry_cov_scale_from_loops() with min_scale): a claim the loops do not confirm is no drift to make room
+// for.
 double loop_loss_scale(const PoseGraphConfig& config, const Eigen::Matrix<double, 6, 6>& odometry_cov,
                        const Eigen::Matrix<double, 6, 6>& loop_cov);
 
