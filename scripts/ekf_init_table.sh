@@ -7,7 +7,8 @@
 # odometry.source=ekf --rate max, once as configured, once with --set ekf.init_mode=ground_truth) and print
 # one markdown table (also written to OUT_DIR/table.md) with PASS/MISS per target: init within 2 s of data
 # on a static start and 5 s on a start in motion, >= 95% of frames tracked from the start, ATE auto / ATE
-# ground truth <= 1.25, rendered MH_05 ATE <= 0.30 m.
+# ground truth <= 1.25, rendered MH_05 ATE <= 0.30 m; beside the ratio (not deciding), the ground-truth
+# run's ATE over the frames the auto run tracked and the ratio over those frames.
 #
 # usage: scripts/ekf_init_table.sh [--quick] [--reuse-renders DIR] [--only REGEX] [--table-only] OUT_DIR
 #   --quick            the long variants shortened (MH_05 mid-flight 30 s, V1_01 rendered 600 frames, KITTI

@@ -188,6 +188,8 @@ bool pnp_ransac(const std::vector<Eigen::Vector3d>& p_c0, const std::vector<Eige
 namespace {
 
 using VecX = Eigen::Matrix<double, kAlignDim, 1>;
+// The other starts of the solve: the linear guess's velocity and scene scaled by 2^(k/2), k = -2..2 but 0.
+constexpr std::array<double, 4> kAlignScaleStarts{0.5, 0.70710678118654752, 1.4142135623730950, 2.0};
 using MatX = Eigen::Matrix<double, kAlignDim, kAlignDim>;
 using VecZ = Eigen::Matrix<double, kAlignDim - 1, 1>;
 using MatZ = Eigen::Matrix<double, kAlignDim - 1, kAlignDim - 1>;
@@ -250,6 +252,17 @@ class AlignProblem {
       *obs += in_.tracks[f].size();
     }
     return c * w0_ + prior_cost(x);
+  }
+
+  // The cost over every track given: the tracks without a position (dropped) count as outliers on each of
+  // their observations, so that solutions which keep different tracks compare.
+  double truncated_cost(const VecX& x, const TrackPoints& P) const {
+    std::size_t obs = 0;
+    double c = cost(x, P, false, nullptr, &obs);
+    for (std::size_t f = 0; f < in_.tracks.size(); ++f) {
+      if (!P[f]) c += w0_ * in_.outlier_xy * in_.outlier_xy * static_cast<double>(in_.tracks[f].size());
+    }
+    return c;
   }
 
   AlignStep linearise(const VecX& x, const TrackPoints& P) const {
@@ -427,7 +440,40 @@ std::optional<AlignOutput> align_known_rotations(const AlignInput& in, std::stri
   VecX x = VecX::Zero();
   x.head<9>() = x9;
   const AlignProblem problem(in);
-  if (!refine_alignment(problem, &x, &P, in.gravity_mps2, why)) return std::nullopt;
+  // The reprojection cost is not convex in the scale: from the linear guess the solve can stop in a
+  // minimum with the scene shrunk or stretched (on a car at nearly constant speed, 6.7 m/s where a lower
+  // minimum lies at 10 m/s). It is therefore also started with the guess's velocity and scene scaled by
+  // factors spread evenly in log scale over a factor of four, and the solution with the lowest cost over
+  // all the tracks given wins (a dropped track counts as an outlier on each of its observations, so a
+  // solution cannot win by dropping tracks).
+  const TrackPoints P_guess = P;
+  std::optional<double> best_cost;
+  std::string why_first;
+  for (std::size_t start = 0; start <= kAlignScaleStarts.size(); ++start) {
+    const double factor = start == 0 ? 1.0 : kAlignScaleStarts[start - 1];
+    VecX x_f = VecX::Zero();
+    x_f.head<9>() = x9;
+    x_f.segment<3>(0) *= factor;
+    TrackPoints P_f = P_guess;
+    for (std::optional<Eigen::Vector3d>& p : P_f) {
+      if (p) *p *= factor;
+    }
+    std::string why_f;
+    if (!refine_alignment(problem, &x_f, &P_f, in.gravity_mps2, &why_f)) {
+      if (start == 0) why_first = why_f;
+      continue;
+    }
+    const double cost_f = problem.truncated_cost(x_f, P_f);
+    if (!best_cost || cost_f < *best_cost) {
+      best_cost = cost_f;
+      x = x_f;
+      P = std::move(P_f);
+    }
+  }
+  if (!best_cost) {
+    *why = why_first;
+    return std::nullopt;
+  }
   std::size_t obs = 0;
   const double chi2 = problem.cost(x, P, true, &P, &obs);
   const AlignStep s = problem.linearise(x, P);
