@@ -39,6 +39,9 @@ const std::vector<Choice>& choices() {
       {"dird_seqslam", "resize", {"nearest", "area"}},
       {"dird_seqslam", "standardize", {"off", "batch", "causal"}},
       {"output", "progress", {"auto", "on", "off"}},
+      {"posegraph", "odometry_cov", {"model", "odometry"}},
+      {"posegraph", "loss", {"cauchy", "huber", "none"}},
+      {"posegraph", "sparse_library", {"eigen", "suite_sparse"}},
   };
   return table;
 }

@@ -34,7 +34,7 @@ LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std
   if (!active_) return;
   poses_.resize(last_ - first_);
   sigma_m_.assign(last_ - first_, 0.0);
-  if (graph_config_.odometry_cov == "odometry") {
+  if (graph_config_.odometry_cov == PoseGraphOdometryCov::kOdometry) {
     step_cov_.assign(last_ - first_, PoseCov::Zero());
     has_step_cov_.assign(last_ - first_, 0);
   }

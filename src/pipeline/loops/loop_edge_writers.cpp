@@ -232,7 +232,7 @@ nlohmann::json LoopCloser::summary() const {
           {"skipped_by_reason", counts.skipped},
           {"graph_outliers", outliers},
           {"graph_nodes", nodes_.size()},
-          {"odometry_cov", graph_config_.odometry_cov},
+          {"odometry_cov", std::string(enum_name(graph_config_.odometry_cov))},
           {"odometry_cov_scale", final_odometry_cov_scale_},
           {"loss_odometry_cov_fraction", final_loss_fraction_},
           {"verify", stats_json(verify_ms)},

@@ -15,7 +15,7 @@ OracleResult solve_loop_oracle(const OracleGraph& graph,
                                const Dataset& dataset, const OracleOptions& options) {
   PoseGraphConfig config = options.graph;
   if (!options.robust) {
-    config.loss = "none";
+    config.loss = PoseGraphLoss::kNone;
     config.outlier_chi2 = std::numeric_limits<double>::infinity();
   }
   PoseGraph solver(config);

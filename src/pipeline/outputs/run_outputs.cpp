@@ -40,7 +40,8 @@ RunOutputs::RunOutputs(const PipelineConfig& config, const std::filesystem::path
       profiler_({kStageNames.begin(), kStageNames.end()}, total_frames) {
   const Progress progress = config.output.progress;
   show_progress_ = progress == Progress::kOn || (progress == Progress::kAuto && ::isatty(STDERR_FILENO));
-  keep_step_cov_ = config.posegraph.enabled && config.posegraph.odometry_cov == "odometry" &&
+  keep_step_cov_ = config.posegraph.enabled &&
+                   config.posegraph.odometry_cov == PoseGraphOdometryCov::kOdometry &&
                    (config.verify.enabled || keep_step_cov);
   // At most one entry a frame: reserved, so that they do not keep up to twice their entries and copy them as
   // they grow (reserved pages not written take no memory).

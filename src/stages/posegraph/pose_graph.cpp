@@ -58,22 +58,15 @@ void PoseGraphConfig::validate() const {
     throw ConfigError("posegraph.odometry_sigma_rotation_rad_per_sqrt_m: must be a finite number >= 0");
   if (!positive(odometry_sigma_rotation_floor_rad))
     throw ConfigError("posegraph.odometry_sigma_rotation_floor_rad: must be a finite number > 0");
-  if (odometry_cov != "model" && odometry_cov != "odometry")
-    throw ConfigError("posegraph.odometry_cov: '" + odometry_cov + "' is not one of: model, odometry");
   if (!non_negative(odometry_cov_scale))
     throw ConfigError("posegraph.odometry_cov_scale: must be a finite number >= 0 (0: from the loops)");
-  if (loss != "cauchy" && loss != "huber" && loss != "none")
-    throw ConfigError("posegraph.loss: '" + loss + "' is not one of: cauchy, huber, none");
   if (!positive(loss_scale)) throw ConfigError("posegraph.loss_scale: must be a finite number > 0");
   if (!positive(outlier_chi2)) throw ConfigError("posegraph.outlier_chi2: must be a finite number > 0");
   if (max_iterations < 1) throw ConfigError("posegraph.max_iterations: must be >= 1");
-  if (sparse_library != "eigen" && sparse_library != "suite_sparse")
-    throw ConfigError("posegraph.sparse_library: '" + sparse_library +
-                      "' is not one of: eigen, suite_sparse");
-  if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(sparse_library == "eigen" ? ceres::EIGEN_SPARSE
-                                                                                  : ceres::SUITE_SPARSE))
-    throw ConfigError("posegraph.sparse_library: this build of Ceres has no " + sparse_library +
-                      " sparse Cholesky; use the other one");
+  if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(
+          sparse_library == PoseGraphSparseLibrary::kEigen ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE))
+    throw ConfigError("posegraph.sparse_library: this build of Ceres has no " +
+                      std::string(enum_name(sparse_library)) + " sparse Cholesky; use the other one");
   if (!non_negative(max_solve_s)) throw ConfigError("posegraph.max_solve_s: must be a finite number >= 0");
 }
 
@@ -217,8 +210,8 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   ceres::Problem problem(problem_options);
   ceres::EigenQuaternionManifold quaternion;
   const auto make_loss = [&](double scale) -> std::unique_ptr<ceres::LossFunction> {
-    if (config_.loss == "cauchy") return std::make_unique<ceres::CauchyLoss>(scale);
-    if (config_.loss == "huber") return std::make_unique<ceres::HuberLoss>(scale);
+    if (config_.loss == PoseGraphLoss::kCauchy) return std::make_unique<ceres::CauchyLoss>(scale);
+    if (config_.loss == PoseGraphLoss::kHuber) return std::make_unique<ceres::HuberLoss>(scale);
     return nullptr;
   };
   const std::unique_ptr<ceres::LossFunction> loss = make_loss(config_.loss_scale);
@@ -249,7 +242,7 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   options.sparse_linear_algebra_library_type =
-      config_.sparse_library == "eigen" ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE;
+      config_.sparse_library == PoseGraphSparseLibrary::kEigen ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE;
   options.max_num_iterations = config_.max_iterations;
   if (max_seconds > 0) options.max_solver_time_in_seconds = max_seconds;
   options.num_threads = 1;  // deterministic

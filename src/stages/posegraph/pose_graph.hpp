@@ -14,10 +14,35 @@
 #include <Eigen/Geometry>
 #include <array>
 #include <cstddef>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
+
 namespace loopgate {
+
+// posegraph.odometry_cov: the odometry edges' covariance (PoseGraphConfig::odometry_cov).
+enum class PoseGraphOdometryCov { kModel, kOdometry };
+inline constexpr EnumName<PoseGraphOdometryCov> kPoseGraphOdometryCovNames[] = {
+    {PoseGraphOdometryCov::kModel, "model"}, {PoseGraphOdometryCov::kOdometry, "odometry"}};
+constexpr std::span<const EnumName<PoseGraphOdometryCov>> enum_names(PoseGraphOdometryCov) {
+  return kPoseGraphOdometryCovNames;
+}
+// posegraph.loss: the loop edges' robust loss.
+enum class PoseGraphLoss { kCauchy, kHuber, kNone };
+inline constexpr EnumName<PoseGraphLoss> kPoseGraphLossNames[] = {
+    {PoseGraphLoss::kCauchy, "cauchy"}, {PoseGraphLoss::kHuber, "huber"}, {PoseGraphLoss::kNone, "none"}};
+constexpr std::span<const EnumName<PoseGraphLoss>> enum_names(PoseGraphLoss) {
+  return kPoseGraphLossNames;
+}
+// posegraph.sparse_library: the sparse Cholesky of Ceres' SPARSE_NORMAL_CHOLESKY.
+enum class PoseGraphSparseLibrary { kEigen, kSuiteSparse };
+inline constexpr EnumName<PoseGraphSparseLibrary> kPoseGraphSparseLibraryNames[] = {
+    {PoseGraphSparseLibrary::kEigen, "eigen"}, {PoseGraphSparseLibrary::kSuiteSparse, "suite_sparse"}};
+constexpr std::span<const EnumName<PoseGraphSparseLibrary>> enum_names(PoseGraphSparseLibrary) {
+  return kPoseGraphSparseLibraryNames;
+}
 
 struct PoseGraphConfig {
   bool enabled = true;
@@ -26,7 +51,7 @@ struct PoseGraphConfig {
   // (OdometryOutput::step_cov) composed from node to node, plus the floors below squared; an edge over a
   // frame whose source gave none (the first pose, after a loss) falls back to the model. "model": a fixed
   // model of edge length d metres, sigma = floor + per_sqrt_m * sqrt(d), position and rotation.
-  std::string odometry_cov = "odometry";
+  PoseGraphOdometryCov odometry_cov = PoseGraphOdometryCov::kOdometry;
   // odometry_cov odometry: the odometry's covariances times this; 0: from the verified loops
   // (odometry_cov_scale_from_loops), 1 when fewer than 3 loops are verified.
   double odometry_cov_scale = 0.0;
@@ -34,7 +59,7 @@ struct PoseGraphConfig {
   double odometry_sigma_position_floor_m = 0.005;
   double odometry_sigma_rotation_rad_per_sqrt_m = 0.002;
   double odometry_sigma_rotation_floor_rad = 0.0005;
-  std::string loss = "cauchy";   // cauchy | huber | none (loop edges only)
+  PoseGraphLoss loss = PoseGraphLoss::kCauchy;  // cauchy | huber | none (loop edges only)
   double loss_scale = 1.0;       // in whitened units (sigma); a loop edge's own: loop_loss_scale()
   double outlier_chi2 = 22.46;   // chi-square, 6 dof, 0.999
   int max_iterations = 50;       // per solve
@@ -42,7 +67,7 @@ struct PoseGraphConfig {
   bool optimize_on_loop = true;  // solve whenever verified loops arrived (off the frame's critical path)
   // The sparse Cholesky of Ceres' SPARSE_NORMAL_CHOLESKY: "eigen" (Eigen's SimplicialLDLT; a pose graph is
   // a chain with a few loops, whose factor has little fill-in) or "suite_sparse" (CHOLMOD, supernodal).
-  std::string sparse_library = "eigen";
+  PoseGraphSparseLibrary sparse_library = PoseGraphSparseLibrary::kEigen;
 
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
