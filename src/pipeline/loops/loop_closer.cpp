@@ -138,13 +138,8 @@ LoopCloser::OdometryScales LoopCloser::odometry_cov_scale(const std::vector<Loop
   // per node between j and i (relative_odometry_cov()). The fraction of it the loops confirm, at most 1, down
   // to where it no longer counts beside the edges' (a numerical floor: the loss is then posegraph.loss_scale,
   // as for an odometry that knows T_j_i exactly).
-  for (std::size_t n = 0; n < innovations.size(); ++n) {
-    const std::size_t gap = loop_gaps[n];
-    const double nodes = std::max(
-        1.0, std::floor(static_cast<double>(gap) / static_cast<double>(graph_config_.node_every_frames)));
-    innovations[n].odometry_cov =
-        scale * innovations[n].odometry_cov + nodes * graph_config_.with_floors(PoseCov::Zero());
-  }
+  for (std::size_t n = 0; n < innovations.size(); ++n)
+    innovations[n].odometry_cov = with_node_floors(innovations[n].odometry_cov, loop_gaps[n], scale);
   constexpr double kMinLossScale = 1e-6;
   return {scale, odometry_cov_scale_from_loops(innovations, 3, 1.0, kMinLossScale)};
 }

@@ -163,6 +163,9 @@ class LoopCloser {
   // floors per node between them; the model's (posegraph.odometry_cov model, or a frame without a step
   // covariance in between) otherwise.
   PoseCov relative_odometry_cov(std::size_t j, std::size_t i, double scale);
+  // The graph's covariance of T_j_i from the odometry's composed step covariance `cov` over `frames` frames:
+  // `cov` times `scale`, plus an edge's floors per node between j and i.
+  PoseCov with_node_floors(const PoseCov& cov, std::size_t frames, double scale) const;
   // What the skip rule weighs the loop (i, j) with, taken from the verified loops over most of the same
   // odometry (their chains from j' to i' and from j to i share at least half of their union): the scale of
   // the odometry's covariance, the largest of scale_now() and the scales those loops' innovations show, and

@@ -57,9 +57,13 @@ PoseCov LoopCloser::relative_odometry_cov(std::size_t j, std::size_t i, double s
   const std::size_t a = j - first_, b = i - first_;
   extend_chain(std::max(a, b) + 1);
   if (chain_id_[a] < 0 || chain_id_[a] != chain_id_[b]) return graph_config_.model_cov(T_j_i);
-  const PoseCov cov = step_pose_cov(chain_T_[a], chain_cov_[a], chain_T_[b], chain_cov_[b]);
-  const double nodes = std::max(1.0, std::floor(static_cast<double>(b > a ? b - a : a - b) /
-                                                static_cast<double>(graph_config_.node_every_frames)));
+  return with_node_floors(step_pose_cov(chain_T_[a], chain_cov_[a], chain_T_[b], chain_cov_[b]),
+                          b > a ? b - a : a - b, scale);
+}
+
+PoseCov LoopCloser::with_node_floors(const PoseCov& cov, std::size_t frames, double scale) const {
+  const double nodes = std::max(
+      1.0, std::floor(static_cast<double>(frames) / static_cast<double>(graph_config_.node_every_frames)));
   return scale * cov + nodes * graph_config_.with_floors(PoseCov::Zero());
 }
 

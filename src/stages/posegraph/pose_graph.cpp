@@ -17,6 +17,10 @@ namespace {
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
+ceres::SparseLinearAlgebraLibraryType ceres_library(PoseGraphSparseLibrary library) {
+  return library == PoseGraphSparseLibrary::kEigen ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE;
+}
+
 Eigen::Isometry3d to_isometry(const std::array<double, 7>& s) {
   Eigen::Isometry3d T = Eigen::Isometry3d::Identity();
   T.translation() = Eigen::Vector3d(s[0], s[1], s[2]);
@@ -63,8 +67,7 @@ void PoseGraphConfig::validate() const {
   if (!positive(loss_scale)) throw ConfigError("posegraph.loss_scale: must be a finite number > 0");
   if (!positive(outlier_chi2)) throw ConfigError("posegraph.outlier_chi2: must be a finite number > 0");
   if (max_iterations < 1) throw ConfigError("posegraph.max_iterations: must be >= 1");
-  if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(
-          sparse_library == PoseGraphSparseLibrary::kEigen ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE))
+  if (!ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres_library(sparse_library)))
     throw ConfigError("posegraph.sparse_library: this build of Ceres has no " +
                       std::string(enum_name(sparse_library)) + " sparse Cholesky; use the other one");
   if (!non_negative(max_solve_s)) throw ConfigError("posegraph.max_solve_s: must be a finite number >= 0");
@@ -241,8 +244,7 @@ SolveReport PoseGraph::solve_once(double max_seconds) {
   }
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  options.sparse_linear_algebra_library_type =
-      config_.sparse_library == PoseGraphSparseLibrary::kEigen ? ceres::EIGEN_SPARSE : ceres::SUITE_SPARSE;
+  options.sparse_linear_algebra_library_type = ceres_library(config_.sparse_library);
   options.max_num_iterations = config_.max_iterations;
   if (max_seconds > 0) options.max_solver_time_in_seconds = max_seconds;
   options.num_threads = 1;  // deterministic
