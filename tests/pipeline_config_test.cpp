@@ -272,5 +272,30 @@ TEST(PipelineConfig, PathsInAConfigAreRelativeToIt) {
             (dir / "elsewhere" / "data" / "absent").string());
 }
 
+// odometry.file is read only by odometry.source file: a config naming a trajectory that is absent here (a
+// file of data the user does not have) still runs with another source, and is refused with the file source.
+TEST(PipelineConfig, AnOdometryFileIsRequiredOnlyWhenItIsTheSource) {
+  const std::filesystem::path dir = testing::make_temp_dir("config-odometry-file");
+  std::ofstream(dir / "c.yaml") << "odometry:\n  source: file\n  file: absent/poses.txt\n";
+  std::string error;
+  try {
+    load_config<PipelineConfig>(dir / "c.yaml", {}, {}, ConfigPaths::kMustExist);
+  } catch (const ConfigError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(
+      error.find("odometry.file: 'absent/poses.txt' (" + (dir / "c.yaml").string() + ":3) names nothing"),
+      std::string::npos)
+      << error;
+  for (const char* source : {"ekf", "drift", "auto"}) {
+    SCOPED_TRACE(source);
+    const auto config = load_config<PipelineConfig>(
+        dir / "c.yaml", {std::string("odometry.source=") + source}, {}, ConfigPaths::kMustExist);
+    EXPECT_EQ(config.odometry.file, (dir / "absent" / "poses.txt").string());
+  }
+  std::ofstream(dir / "d.yaml") << "odometry:\n  file: absent/poses.txt\n";  // the default source, auto
+  EXPECT_NO_THROW(load_config<PipelineConfig>(dir / "d.yaml", {}, {}, ConfigPaths::kMustExist));
+}
+
 }  // namespace
 }  // namespace loopgate

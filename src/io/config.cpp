@@ -129,18 +129,36 @@ RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
   return raw;
 }
 
+const RawConfigValue* RawConfig::find(const std::string& name) const {
+  const std::size_t dot = name.find('.');
+  const auto section = sections_.find(name.substr(0, dot));
+  if (section == sections_.end()) return nullptr;
+  const auto value = section->second.find(name.substr(dot + 1));
+  return value == section->second.end() ? nullptr : &value->second;
+}
+
 void RawConfig::require_resolved_paths_exist() const {
+  // A path key that is read only when another key holds a given word need not exist otherwise: a config
+  // naming a trajectory file still runs with `--set odometry.source=ekf` where that file is absent.
+  struct ReadOnlyWhen {
+    const char* path_key;
+    const char* key;
+    const char* word;
+  };
+  static constexpr ReadOnlyWhen kReadOnlyWhen[] = {{"odometry.file", "odometry.source", "file"}};
   for (const std::string& name : config_path_keys()) {
-    const std::size_t dot = name.find('.');
-    const auto section = sections_.find(name.substr(0, dot));
-    if (section == sections_.end()) continue;
-    const auto value = section->second.find(name.substr(dot + 1));
-    if (value == section->second.end() || value->second.written.empty()) continue;
+    const RawConfigValue* value = find(name);
+    if (value == nullptr || value->written.empty()) continue;
+    const auto when = std::find_if(std::begin(kReadOnlyWhen), std::end(kReadOnlyWhen),
+                                   [&](const ReadOnlyWhen& w) { return name == w.path_key; });
+    if (when != std::end(kReadOnlyWhen)) {
+      const RawConfigValue* chooser = find(when->key);
+      if (chooser == nullptr || chooser->text != when->word) continue;
+    }
     std::error_code ec;
-    if (std::filesystem::exists(value->second.text, ec)) continue;
-    throw ConfigError(name + ": '" + value->second.written + "' (" + value->second.origin +
-                      ") names nothing: relative to the configuration file's folder it is " +
-                      value->second.text +
+    if (std::filesystem::exists(value->text, ec)) continue;
+    throw ConfigError(name + ": '" + value->written + "' (" + value->origin +
+                      ") names nothing: relative to the configuration file's folder it is " + value->text +
                       " (a path in a YAML config is relative to that file; give an absolute path, or pass "
                       "it with --set " +
                       name + "=PATH or --dataset, which are relative to the working directory)");

@@ -62,10 +62,13 @@ class RawConfig {
   const std::map<std::string, std::map<std::string, RawConfigValue>>& sections() const { return sections_; }
 
   // Throws ConfigError for a path key resolved beside its YAML file (RawConfigValue::written) that names
-  // nothing there: the key, the file and line, the value as written and the resolved path.
+  // nothing there: the key, the file and line, the value as written and the resolved path. A key read only
+  // when another holds a given word (odometry.file: odometry.source file) is checked only then.
   void require_resolved_paths_exist() const;
 
  private:
+  const RawConfigValue* find(const std::string& name) const;  // "section.key"; nullptr when absent
+
   std::map<std::string, std::map<std::string, RawConfigValue>> sections_;
 };
 
