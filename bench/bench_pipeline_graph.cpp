@@ -84,7 +84,7 @@ void BM_GraphDecodeAll(benchmark::State& state) {
   config.run.threads = static_cast<int>(state.range(0));
   config.run.decode = DecodePolicy::kAll;
   config.output.progress = Progress::kOff;
-  config.odometry.heading_axis = "z";
+  config.odometry.heading_axis = HeadingAxis::kZ;
   config.match.margin = 50;  // below the 120 frames: a run that cannot compare any pair fails
   const auto out = std::filesystem::temp_directory_path() / "loopgate-bench-pipeline";
   double wall_s = 0, cpu_s = 0, data_s = 0, frames = 0;

@@ -89,9 +89,9 @@ TEST(CoreGeometry, PlaneNormal) {
 
 TEST(CoreGeometry, PlanesAndAxes) {
   const Eigen::Vector3d p(1.5, -2.0, 3.25);
-  EXPECT_EQ(project_to_plane(p, "xz"), Eigen::Vector3d(1.5, 0.0, 3.25));
-  EXPECT_EQ(project_to_plane(p, "xy"), Eigen::Vector3d(1.5, -2.0, 0.0));
-  EXPECT_EQ(project_to_plane(p, "xyz"), p);
+  EXPECT_EQ(project_to_plane(p, CoordinatePlane::kXz), Eigen::Vector3d(1.5, 0.0, 3.25));
+  EXPECT_EQ(project_to_plane(p, CoordinatePlane::kXy), Eigen::Vector3d(1.5, -2.0, 0.0));
+  EXPECT_EQ(project_to_plane(p, CoordinatePlane::kXyz), p);
   EXPECT_EQ(horizontal_part(p, Eigen::Vector3d::UnitZ()), Eigen::Vector3d(1.5, -2.0, 0.0));
   EXPECT_EQ(horizontal_part(p, -Eigen::Vector3d::UnitY()), Eigen::Vector3d(1.5, 0.0, 3.25));
 
@@ -106,9 +106,10 @@ TEST(CoreGeometry, PlanesAndAxes) {
   EXPECT_EQ(dominant_axis(Eigen::Vector3d(2.0, -2.0, 2.0)), 0);  // the first one on ties
   EXPECT_EQ(nearest_signed_axis(Eigen::Vector3d(0.1, -9.8, 0.3)), -Eigen::Vector3d::UnitY());
   EXPECT_EQ(nearest_signed_axis(Eigen::Vector3d(0.2, 0.1, 9.8)), Eigen::Vector3d::UnitZ());
-  EXPECT_STREQ(axis_name(0), "x");
-  EXPECT_STREQ(axis_name(1), "y");
-  EXPECT_STREQ(axis_name(2), "z");
+  EXPECT_EQ(enum_name(static_cast<WorldAxis>(dominant_axis(Eigen::Vector3d(0.1, -9.8, 0.3)))), "y");
+  EXPECT_EQ(axis_vector(WorldAxis::kX), Eigen::Vector3d::UnitX());
+  EXPECT_EQ(axis_vector(WorldAxis::kZ), Eigen::Vector3d::UnitZ());
+  EXPECT_EQ(project_to_plane(p, CoordinatePlane::kYz), Eigen::Vector3d(0.0, -2.0, 3.25));
 }
 
 // The exact bits of each helper on fixed inputs, as produced by the copies these helpers replaced

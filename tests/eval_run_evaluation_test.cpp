@@ -22,7 +22,7 @@ GroundTruthConfig truth_config() {
   GroundTruthConfig c;
   c.radius_m = 0.5;
   c.gap_frames = 20;
-  c.plane = "xyz";
+  c.plane = CoordinatePlane::kXyz;
   c.accept_radius_m = 1.5;
   return c;
 }
@@ -33,7 +33,7 @@ TEST(RunEvaluation, SequenceTruthLoopsAndPrecisionRecall) {
   input.truth = truth_config();
   input.loops = {{80, 19, 5.0}, {81, 18, 4.0}, {90, 40, 3.0}};  // two true, one false (50 m off)
   input.ranked = input.loops;
-  input.score_order = "higher_is_better";
+  input.score_order = ScoreOrder::kHigherIsBetter;
   const SequenceEvaluation e = evaluate_sequence(input);
   // frames 60..99 revisit 39..0 (gap >= 20: frame 60 vs 39 is 21 apart)
   EXPECT_EQ(e.json["truth"]["positives"], 40);
@@ -50,7 +50,7 @@ TEST(RunEvaluation, FramesWithoutTruthAreNeverPositive) {
   input.p_w = out_and_back();
   for (std::size_t k = 90; k < 100; ++k) input.p_w[k].setConstant(std::numeric_limits<double>::quiet_NaN());
   input.truth = truth_config();
-  input.score_order = "higher_is_better";
+  input.score_order = ScoreOrder::kHigherIsBetter;
   EXPECT_EQ(evaluate_sequence(input).json["truth"]["positives"], 30);
 }
 
@@ -82,7 +82,7 @@ TEST(RunEvaluation, PairsAreTheTruthWhenGiven) {
   input.pairs_truth = {{"pairs_file", "gt.csv"}, {"pairs", 4}};
   input.loops = {{80, 19, 5.0}, {81, 17, 4.0}, {85, 70, 3.0}};  // (81, 17) is 1 m off but not listed
   input.ranked = input.loops;
-  input.score_order = "higher_is_better";
+  input.score_order = ScoreOrder::kHigherIsBetter;
   const SequenceEvaluation e = evaluate_sequence(input);
   EXPECT_EQ(e.json["truth"]["pairs_file"], "gt.csv");
   EXPECT_FALSE(e.json["truth"].contains("radius_m"));
@@ -104,7 +104,7 @@ TEST(RunEvaluation, AlignedSequences) {
   EXPECT_TRUE(s.aligned(20, 8));   // query frame 20, reference frame 18
   EXPECT_FALSE(s.aligned(20, 7));  // reference frame 17
   EXPECT_EQ(s.pairs().front(), (std::pair<std::size_t, std::size_t>{8, 0}));
-  const nlohmann::json e = evaluate_aligned(s, {{20, 8, 0.5}}, {{20, 8, 0.5}}, "lower_is_better");
+  const nlohmann::json e = evaluate_aligned(s, {{20, 8, 0.5}}, {{20, 8, 0.5}}, ScoreOrder::kLowerIsBetter);
   EXPECT_EQ(e["truth"]["aligned_tolerance_frames"], 2);
   EXPECT_EQ(e["loop_truth"]["loops_true"], 1);
 }

@@ -42,6 +42,9 @@ const std::vector<Choice>& choices() {
       {"posegraph", "odometry_cov", {"model", "odometry"}},
       {"posegraph", "loss", {"cauchy", "huber", "none"}},
       {"posegraph", "sparse_library", {"eigen", "suite_sparse"}},
+      {"odometry", "source", {"drift", "file", "ekf", "none", "auto"}},
+      {"odometry", "heading_axis", {"auto", "x", "y", "z"}},
+      {"odometry", "ekf_up_axis", {"auto", "x", "-x", "y", "-y", "z", "-z"}},
   };
   return table;
 }

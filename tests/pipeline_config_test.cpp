@@ -48,10 +48,10 @@ TEST(PipelineConfig, ShippedConfigsLoad) {
     EXPECT_EQ(config.run.threads, 2);
   }
   const auto thumbs = load_config<PipelineConfig>(config_file("kitti00-thumbs"));
-  EXPECT_EQ(thumbs.odometry.source, "drift");
-  EXPECT_EQ(thumbs.odometry.heading_axis, "y");
+  EXPECT_EQ(thumbs.odometry.source, OdometrySourceKind::kDrift);
+  EXPECT_EQ(thumbs.odometry.heading_axis, HeadingAxis::kY);
   const auto mh05 = load_config<PipelineConfig>(config_file("euroc-mh05"));
-  EXPECT_EQ(mh05.odometry.source, "file");
+  EXPECT_EQ(mh05.odometry.source, OdometrySourceKind::kFile);
   EXPECT_DOUBLE_EQ(mh05.odometry.file_sigma2_b_m2_per_m, 0.002);
 }
 
@@ -179,7 +179,7 @@ TEST(PipelineConfig, NoOdometryOnlyWithFullMode) {
                       "drift|file|ekf|none|auto"),
             std::string::npos);
   const auto shipped = load_config<PipelineConfig>(config_file("rtabmap-samples"));
-  EXPECT_EQ(shipped.odometry.source, "none");
+  EXPECT_EQ(shipped.odometry.source, OdometrySourceKind::kNone);
   EXPECT_EQ(shipped.run.mode, RunMode::kFull);
   EXPECT_FALSE(shipped.eval.truth_pairs_file.empty());
 }

@@ -157,7 +157,8 @@ inline PipelineConfig revisit_config(Detector method, RunMode mode, int threads 
   config.run.mode = mode;
   config.run.threads = threads;
   config.output.progress = Progress::kOff;
-  config.odometry.source = "drift";  // ground truth + a random-walk drift, sigma growing with distance
+  config.odometry.source =
+      OdometrySourceKind::kDrift;  // ground truth + a random-walk drift, sigma growing with distance
   config.odometry.drift_position_sigma_m_per_sqrt_m = 0.001;
   config.odometry.drift_heading_sigma_rad_per_sqrt_m = 0.00005;
   config.odometry.drift_scale_sigma_per_sqrt_m = 0.0001;

@@ -219,7 +219,7 @@ TEST(PipelineGraph, AnInputThatIsAnOutputIsRefused) {
   }
   const std::string before = read_file(out / "trajectory.tum");
   PipelineConfig config = base_config();
-  config.odometry.source = "file";
+  config.odometry.source = OdometrySourceKind::kFile;
   config.odometry.file = (out / "trajectory.tum").string();
   try {
     run_pipeline(config, dataset, out);

@@ -427,7 +427,7 @@ TEST(PipelineTwoSequence, AlignedEvaluationByHand) {
   EXPECT_FALSE(sequences.aligned(3, 5));
   const std::vector<Detection> ranked = {{0, 0, 0.1}, {1, 3, 0.2}, {2, 5, 0.35}, {2, 2, 0.3}, {3, 5, 0.4}};
   const std::vector<Detection> loops = {{0, 0, 0.1}, {1, 3, 0.2}};
-  const nlohmann::json lower = evaluate_aligned(sequences, loops, ranked, "lower_is_better");
+  const nlohmann::json lower = evaluate_aligned(sequences, loops, ranked, ScoreOrder::kLowerIsBetter);
   EXPECT_TRUE(lower["available"].get<bool>());
   EXPECT_EQ(lower["truth"]["aligned_tolerance_frames"].get<int>(), 1);
   EXPECT_EQ(lower["truth"]["positives"].get<std::size_t>(), 6u);
@@ -462,7 +462,7 @@ TEST(PipelineTwoSequence, AlignedEvaluationByHand) {
 
   // Higher is better: q2's best is now 0.35 -> r5 (false); order 0.4 false, 0.35 false, 0.2 false,
   // 0.1 true.
-  const nlohmann::json higher = evaluate_aligned(sequences, loops, ranked, "higher_is_better");
+  const nlohmann::json higher = evaluate_aligned(sequences, loops, ranked, ScoreOrder::kHigherIsBetter);
   const nlohmann::json& hpr = higher["precision_recall"];
   ASSERT_EQ(hpr["curve"].size(), 4u);
   EXPECT_DOUBLE_EQ(hpr["curve"][0]["precision"].get<double>(), 0.0);

@@ -311,7 +311,7 @@ int compare_command(const CompareOptions& options) {
   }
   // No poses (odometry.source none, or auto on a dataset without any): the gated methods need the pose gate;
   // by default they are left out, asked for by name they are an error.
-  if (resolve_odometry_source(base.odometry, base.ekf, *dataset) == "none") {
+  if (resolve_odometry_source(base.odometry, base.ekf, *dataset) == OdometrySourceKind::kNone) {
     std::vector<std::string> full;
     for (const std::string& method : methods) {
       if (find_method(method).mode != RunMode::kGated) {
@@ -320,12 +320,12 @@ int compare_command(const CompareOptions& options) {
         throw ConfigError("--methods: '" + method +
                           "' runs inside the pose gate's candidate areas, and this run has no poses "
                           "(odometry.source " +
-                          base.odometry.source + " for " + base.run.dataset +
+                          std::string(enum_name(base.odometry.source)) + " for " + base.run.dataset +
                           "): choose full methods (full, seqslam, std-full, dird-seqslam)");
       }
     }
     spdlog::info("compare: no poses (odometry.source {} for {}): the full methods only ({})",
-                 base.odometry.source, base.run.dataset, fmt::format("{}", fmt::join(full, ", ")));
+                 enum_name(base.odometry.source), base.run.dataset, fmt::format("{}", fmt::join(full, ", ")));
     methods = full;
   }
 

@@ -51,10 +51,13 @@ Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions) {
   return normal;
 }
 
-Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, std::string_view plane) {
-  if (plane == "xz") return {p.x(), 0.0, p.z()};
-  if (plane == "xy") return {p.x(), p.y(), 0.0};
-  if (plane == "yz") return {0.0, p.y(), p.z()};
+Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, CoordinatePlane plane) {
+  switch (plane) {
+    case CoordinatePlane::kXz: return {p.x(), 0.0, p.z()};
+    case CoordinatePlane::kXy: return {p.x(), p.y(), 0.0};
+    case CoordinatePlane::kYz: return {0.0, p.y(), p.z()};
+    case CoordinatePlane::kXyz: break;
+  }
   return p;
 }
 
@@ -68,6 +71,10 @@ Eigen::Vector3d axis_vector(std::string_view name) {
   throw std::invalid_argument("axis_vector: '" + std::string(name) + "' is not one of x, y, z, -x, -y, -z");
 }
 
+Eigen::Vector3d axis_vector(WorldAxis axis) {
+  return Eigen::Vector3d::Unit(static_cast<Eigen::Index>(axis));
+}
+
 int dominant_axis(const Eigen::Vector3d& v) {
   Eigen::Index axis = 2;
   v.cwiseAbs().maxCoeff(&axis);
@@ -79,10 +86,6 @@ Eigen::Vector3d nearest_signed_axis(const Eigen::Vector3d& v) {
   Eigen::Vector3d unit = Eigen::Vector3d::Zero();
   unit[axis] = v[axis] > 0.0 ? 1.0 : -1.0;
   return unit;
-}
-
-const char* axis_name(int axis) {
-  return axis == 0 ? "x" : axis == 1 ? "y" : "z";
 }
 
 }  // namespace loopgate

@@ -7,9 +7,11 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <cmath>
+#include <span>
 #include <string_view>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "core/types.hpp"
 
 namespace loopgate {
@@ -64,9 +66,19 @@ Eigen::Isometry3d interpolate_pose(const StampedPose& a, const StampedPose& b, T
 // that its largest component is positive. Throws std::invalid_argument with fewer than 3 positions.
 Eigen::Vector3d plane_normal(const std::vector<Eigen::Vector3d>& positions);
 
-// p projected onto a coordinate plane by name: "xz" zeroes y (KITTI camera-frame ground plane), "xy"
-// zeroes z, "yz" zeroes x; any other name ("xyz") returns p.
-Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, std::string_view plane);
+// A coordinate plane of the world, or the whole space (xyz).
+enum class CoordinatePlane { kXz, kXy, kYz, kXyz };
+inline constexpr EnumName<CoordinatePlane> kCoordinatePlaneNames[] = {{CoordinatePlane::kXz, "xz"},
+                                                                      {CoordinatePlane::kXy, "xy"},
+                                                                      {CoordinatePlane::kYz, "yz"},
+                                                                      {CoordinatePlane::kXyz, "xyz"}};
+constexpr std::span<const EnumName<CoordinatePlane>> enum_names(CoordinatePlane) {
+  return kCoordinatePlaneNames;
+}
+
+// p projected onto a coordinate plane: xz zeroes y (KITTI camera-frame ground plane), xy zeroes z, yz zeroes
+// x; xyz returns p.
+Eigen::Vector3d project_to_plane(const Eigen::Vector3d& p, CoordinatePlane plane);
 
 // v without its component along the unit vector up_w: its projection onto the horizontal plane.
 inline Eigen::Vector3d horizontal_part(const Eigen::Vector3d& v, const Eigen::Vector3d& up_w) {
@@ -77,6 +89,15 @@ inline Eigen::Vector3d horizontal_part(const Eigen::Vector3d& v, const Eigen::Ve
 // std::invalid_argument for any other name.
 Eigen::Vector3d axis_vector(std::string_view name);
 
+// A world axis, in the order of dominant_axis()'s indices.
+enum class WorldAxis { kX, kY, kZ };
+inline constexpr EnumName<WorldAxis> kWorldAxisNames[] = {
+    {WorldAxis::kX, "x"}, {WorldAxis::kY, "y"}, {WorldAxis::kZ, "z"}};
+constexpr std::span<const EnumName<WorldAxis>> enum_names(WorldAxis) {
+  return kWorldAxisNames;
+}
+Eigen::Vector3d axis_vector(WorldAxis axis);
+
 // Index (0 = x, 1 = y, 2 = z) of the world axis nearest the direction of v: its largest |component|,
 // the first one on ties.
 int dominant_axis(const Eigen::Vector3d& v);
@@ -84,8 +105,5 @@ int dominant_axis(const Eigen::Vector3d& v);
 // The signed world axis nearest the direction of v: +-unit vector of dominant_axis(v), '-' when that
 // component is not positive.
 Eigen::Vector3d nearest_signed_axis(const Eigen::Vector3d& v);
-
-// "x", "y" or "z" for 0, 1, 2.
-const char* axis_name(int axis);
 
 }  // namespace loopgate

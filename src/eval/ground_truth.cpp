@@ -38,9 +38,6 @@ CellKey cell_of(const Eigen::Vector3d& p, double cell_m) {
 void GroundTruthConfig::validate() const {
   if (!(radius_m > 0.0)) throw ConfigError("ground_truth.radius_m: must be > 0");
   if (gap_frames < 1) throw ConfigError("ground_truth.gap_frames: must be >= 1");
-  if (plane != "xz" && plane != "xy" && plane != "yz" && plane != "xyz") {
-    throw ConfigError("ground_truth.plane: '" + plane + "' is not one of: xz, xy, yz, xyz");
-  }
   if (!std::isfinite(accept_radius_m)) throw ConfigError("ground_truth.accept_radius_m: must be finite");
   revisit.validate("ground_truth.min_travel_m");
 }

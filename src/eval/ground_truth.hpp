@@ -8,14 +8,16 @@
 #include <utility>
 #include <vector>
 
+#include "core/geometry.hpp"
 #include "core/revisit_rule.hpp"
 
 namespace loopgate {
 
 struct GroundTruthConfig {
-  double radius_m = 2.0;         // r_true: query i is positive if some j <= i - gap lies within it
-  int gap_frames = 20;           // minimum frame gap of a true loop
-  std::string plane = "xz";      // distances in: "xz" (KITTI camera frame), "xy", or "xyz" (3-D, EuRoC)
+  double radius_m = 2.0;  // r_true: query i is positive if some j <= i - gap lies within it
+  int gap_frames = 20;    // minimum frame gap of a true loop
+  // Distances in: xz (KITTI camera frame), xy, yz, or xyz (3-D, EuRoC).
+  CoordinatePlane plane = CoordinatePlane::kXz;
   double accept_radius_m = 0.0;  // r_accept for scoring a detection; <= 0 means r_true
   // A revisit needs travel in between: a pair (query, reference) is a loop only when the ground-truth path
   // between them (3-D, summed over consecutive frames) is at least this long. Hovering or standing still

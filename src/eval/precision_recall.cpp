@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <map>
 
-#include "core/error.hpp"
-
 namespace loopgate {
 
 namespace {
@@ -12,13 +10,6 @@ constexpr double kPrecision100 = 1.0;
 constexpr double kPrecision99 = 0.99;
 constexpr double kPrecision95 = 0.95;
 }  // namespace
-
-void PrConfig::validate() const {
-  if (score_order != "lower_is_better" && score_order != "higher_is_better") {
-    throw ConfigError("pr.score_order: '" + score_order +
-                      "' is not one of: lower_is_better, higher_is_better");
-  }
-}
 
 std::vector<Detection> best_detection_per_query(const std::vector<Detection>& detections,
                                                 bool lower_is_better) {
@@ -48,7 +39,6 @@ std::vector<Detection> judged_detections(const std::vector<Detection>& detection
 
 PrResult evaluate_precision_recall(const std::vector<Detection>& detections,
                                    const LoopGroundTruth& ground_truth, const PrConfig& config) {
-  config.validate();
   const bool lower = config.lower_is_better();
   const std::vector<Detection> judged = judged_detections(detections, ground_truth);
   std::vector<Detection> best = best_detection_per_query(judged, lower);

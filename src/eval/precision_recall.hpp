@@ -3,12 +3,22 @@
 #pragma once
 
 #include <cstddef>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "eval/ground_truth.hpp"
 
 namespace loopgate {
+
+// Which way a detection's score is better: lower (SeqSLAM ratio, descriptor distance) or higher (similarity).
+enum class ScoreOrder { kLowerIsBetter, kHigherIsBetter };
+inline constexpr EnumName<ScoreOrder> kScoreOrderNames[] = {
+    {ScoreOrder::kLowerIsBetter, "lower_is_better"}, {ScoreOrder::kHigherIsBetter, "higher_is_better"}};
+constexpr std::span<const EnumName<ScoreOrder>> enum_names(ScoreOrder) {
+  return kScoreOrderNames;
+}
 
 // A loop detection: query (current) frame matched to reference (earlier) frame with a score.
 struct Detection {
@@ -18,16 +28,14 @@ struct Detection {
 };
 
 struct PrConfig {
-  // "lower_is_better" (SeqSLAM ratio, descriptor distance) or "higher_is_better" (similarity).
-  std::string score_order = "lower_is_better";
+  ScoreOrder score_order = ScoreOrder::kLowerIsBetter;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is PrConfig or const PrConfig).
   template <class Self, class V>
   static void fields(Self& self, V&& v) {
     v("score_order", self.score_order);
   }
-  void validate() const;  // throws ConfigError naming the key and the allowed values
-  bool lower_is_better() const { return score_order == "lower_is_better"; }
+  bool lower_is_better() const { return score_order == ScoreOrder::kLowerIsBetter; }
 };
 
 // One operating point: every query whose best detection scores at least as well as `threshold`

@@ -6,10 +6,9 @@
 namespace loopgate {
 
 nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
-                                    const LoopGroundTruth& truth, const std::string& score_order) {
+                                    const LoopGroundTruth& truth, ScoreOrder score_order) {
   PrConfig pr_config;
   pr_config.score_order = score_order;
-  pr_config.validate();
   const PrResult pr = evaluate_precision_recall(ranked, truth, pr_config);
   // Loops at the same place without travel (hovering, a stop) are neither true nor false: counted apart.
   const std::vector<Detection> judged = judged_detections(loops, truth);
@@ -40,7 +39,7 @@ nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const s
             {"query_best_loop_true", best_true},
             {"query_best_loop_false", best.size() - best_true}}},
           {"precision_recall",
-           {{"score_order", pr_config.score_order},
+           {{"score_order", std::string(enum_name(pr_config.score_order))},
             {"positives", pr.positives},
             {"queries_with_detection", pr.queries_with_detection},
             {"not_judged_without_travel", pr.not_judged},
@@ -66,7 +65,7 @@ SequenceEvaluation evaluate_sequence(const SequenceEvaluationInput& input) {
                 {"truth",
                  {{"radius_m", input.truth.radius_m},
                   {"gap_frames", input.truth.gap_frames},
-                  {"plane", input.truth.plane},
+                  {"plane", std::string(enum_name(input.truth.plane))},
                   {"accept_radius_m", input.truth.effective_accept_radius_m()},
                   {"min_travel_m", input.truth.revisit.min_travel_m},
                   {"positives", out.truth.positive_count()}}}};
@@ -129,7 +128,7 @@ std::vector<std::pair<std::size_t, std::size_t>> AlignedSequences::pairs() const
 }
 
 nlohmann::json evaluate_aligned(const AlignedSequences& sequences, const std::vector<Detection>& loops,
-                                const std::vector<Detection>& ranked, const std::string& score_order) {
+                                const std::vector<Detection>& ranked, ScoreOrder score_order) {
   const LoopGroundTruth truth = LoopGroundTruth::from_pairs(
       std::max(sequences.query_count, sequences.reference_count), sequences.pairs());
   nlohmann::json out = {

@@ -29,7 +29,7 @@ namespace loopgate {
 // same place without travel (LoopGroundTruth::is_same_place_without_travel) are not judged: loops = true +
 // false + without_travel, and the PR sweep and R@1 run over the judged ones only.
 nlohmann::json loop_evaluation_json(const std::vector<Detection>& loops, const std::vector<Detection>& ranked,
-                                    const LoopGroundTruth& truth, const std::string& score_order);
+                                    const LoopGroundTruth& truth, ScoreOrder score_order);
 
 // A single-sequence run against ground-truth positions, or against listed (query, reference) pairs. Indices
 // are within the run's frame range.
@@ -42,7 +42,7 @@ struct SequenceEvaluationInput {
   nlohmann::json pairs_truth;    // with pairs: the "truth" block's description (file, pairs read, pairs used)
   std::vector<Detection> loops;  // reported loop closures
   std::vector<Detection> ranked;  // what the PR sweep runs over
-  std::string score_order;        // "higher_is_better" | "lower_is_better"
+  ScoreOrder score_order = ScoreOrder::kHigherIsBetter;
 };
 
 struct SequenceEvaluation {
@@ -82,6 +82,6 @@ struct AlignedSequences {
 // The evaluation block of a two-sequence run, in the shape of the single-sequence runs:
 // {"available": true, "truth": {"aligned_tolerance_frames", "positives"}} + the loop_evaluation_json fields.
 nlohmann::json evaluate_aligned(const AlignedSequences& sequences, const std::vector<Detection>& loops,
-                                const std::vector<Detection>& ranked, const std::string& score_order);
+                                const std::vector<Detection>& ranked, ScoreOrder score_order);
 
 }  // namespace loopgate

@@ -27,17 +27,7 @@ Eigen::Vector3d mean_of(const std::vector<Eigen::Vector3d>& p) {
 }  // namespace
 
 void AteConfig::validate() const {
-  if (alignment != "se3" && alignment != "posyaw" && alignment != "none") {
-    throw ConfigError("ate.alignment: '" + alignment + "' is not one of: se3, posyaw, none");
-  }
-  if (up_axis != "x" && up_axis != "y" && up_axis != "z") {
-    throw ConfigError("ate.up_axis: '" + up_axis + "' is not one of: x, y, z");
-  }
   if (max_dt_ns < 0) throw ConfigError("ate.max_dt_ns: must be >= 0");
-}
-
-Eigen::Vector3d AteConfig::up() const {
-  return axis_vector(up_axis);
 }
 
 Eigen::Isometry3d align_se3(const std::vector<Eigen::Vector3d>& p_est,
@@ -84,9 +74,9 @@ AteResult compute_ate(const std::vector<Eigen::Vector3d>& p_est, const std::vect
   config.validate();
   check_pairs(p_est, p_gt);
   AteResult result;
-  if (config.alignment == "se3") {
+  if (config.alignment == AteAlignment::kSe3) {
     result.T_gt_est = align_se3(p_est, p_gt);
-  } else if (config.alignment == "posyaw") {
+  } else if (config.alignment == AteAlignment::kPosyaw) {
     result.T_gt_est = align_position_yaw(p_est, p_gt, config.up());
   }
   double sum2 = 0.0, sum = 0.0;

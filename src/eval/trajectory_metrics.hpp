@@ -5,20 +5,31 @@
 #include <Eigen/Geometry>
 #include <cstddef>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "core/enum_names.hpp"
+#include "core/geometry.hpp"
 #include "core/types.hpp"
 
 namespace loopgate {
 
+// How an estimated trajectory is aligned to the ground truth before the error is taken:
+// se3: rotation + translation minimising the squared error (Umeyama, no scale);
+// posyaw: translation + rotation about the gravity axis only (VIO: roll and pitch are observable);
+// none: compared as given.
+enum class AteAlignment { kSe3, kPosyaw, kNone };
+inline constexpr EnumName<AteAlignment> kAteAlignmentNames[] = {
+    {AteAlignment::kSe3, "se3"}, {AteAlignment::kPosyaw, "posyaw"}, {AteAlignment::kNone, "none"}};
+constexpr std::span<const EnumName<AteAlignment>> enum_names(AteAlignment) {
+  return kAteAlignmentNames;
+}
+
 struct AteConfig {
-  // "se3": rotation + translation minimising the squared error (Umeyama, no scale);
-  // "posyaw": translation + rotation about the gravity axis only (VIO: roll/pitch are observable);
-  // "none": compare as given.
-  std::string alignment = "se3";
-  std::string up_axis = "z";  // gravity axis for "posyaw": "x", "y" (KITTI camera frame) or "z" (EuRoC)
+  AteAlignment alignment = AteAlignment::kSe3;
+  WorldAxis up_axis = WorldAxis::kZ;    // gravity axis for posyaw: x, y (KITTI camera frame) or z (EuRoC)
   std::int64_t max_dt_ns = 10'000'000;  // timestamp association tolerance (associate_by_time)
 
   // The keys, in order, for loading, printing and the JSON echo (Self is AteConfig or const AteConfig).
@@ -29,8 +40,7 @@ struct AteConfig {
     v("max_dt_ns", self.max_dt_ns);
   }
   void validate() const;  // throws ConfigError naming the key and allowed values
-  // Unit vector of up_axis (std::invalid_argument unless x, y or z: validate() first).
-  Eigen::Vector3d up() const;
+  Eigen::Vector3d up() const { return axis_vector(up_axis); }  // unit vector of up_axis
 };
 
 struct AteResult {

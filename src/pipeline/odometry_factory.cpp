@@ -29,25 +29,25 @@ std::optional<Eigen::Vector3d> world_up_axis_from_imu(const Dataset& dataset) {
   return nearest_signed_axis(sum_w);
 }
 
-std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
-                                    const Dataset& dataset) {
-  if (config.source != "auto") return config.source;
+OdometrySourceKind resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                           const Dataset& dataset) {
+  if (config.source != OdometrySourceKind::kAuto) return config.source;
   const bool ekf_inputs = dataset.has_images() && dataset.has_imu() && dataset.camera().has_value() &&
                           dataset.imu_calibration().has_value();
   const bool ekf_init = ekf.init_mode != EkfInitMode::kGroundTruth || dataset.has_ground_truth();
-  if (ekf_inputs && ekf_init) return "ekf";
-  return dataset.has_ground_truth() ? "drift" : "none";
+  if (ekf_inputs && ekf_init) return OdometrySourceKind::kEkf;
+  return dataset.has_ground_truth() ? OdometrySourceKind::kDrift : OdometrySourceKind::kNone;
 }
 
 std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& ekf, const Dataset& dataset) {
-  const std::string source = resolve_odometry_source(config, ekf, dataset);
+  const OdometrySourceKind source = resolve_odometry_source(config, ekf, dataset);
   const auto seconds = [](Timestamp t) { return fmt::format("{:.3f}", ns_to_s(t)); };
   const std::string frames =
       dataset.frame_count() == 0
           ? std::string("no frames")
           : fmt::format("{} frames at t = {} .. {} s", dataset.frame_count(), seconds(dataset.frame_t_ns(0)),
                         seconds(dataset.frame_t_ns(dataset.frame_count() - 1)));
-  if (source == "file") {
+  if (source == OdometrySourceKind::kFile) {
     std::string covers = "no readable poses";
     try {
       const auto poses = read_trajectory_file(config.file, config.file_format, dataset.source_times()).poses;
@@ -62,7 +62,7 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
         "unit?)",
         config.file, config.file_max_gap_s, covers, frames);
   }
-  if (source == "ekf") {
+  if (source == OdometrySourceKind::kEkf) {
     return fmt::format(
         "the ekf to start ({}) within ekf.max_init_s = {} s and track the images and IMU of {} ({})",
         ekf.init_mode == EkfInitMode::kGroundTruth ? "from ground truth at a frame time"
@@ -71,7 +71,7 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
                                                    : "still or moving",
         ekf.max_init_s, dataset.root().string(), frames);
   }
-  if (source == "drift") {
+  if (source == OdometrySourceKind::kDrift) {
     std::string truth = "none";
     if (!dataset.ground_truth().empty()) {
       truth = "t = " + seconds(dataset.ground_truth().front().t_ns) + " .. " +
@@ -80,14 +80,14 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
     return fmt::format("ground truth of {} at the frame times (its ground truth covers {}; the dataset's {})",
                        dataset.root().string(), truth, frames);
   }
-  if (source == "none") return "no poses (odometry.source none: appearance only)";
-  return "poses from odometry.source " + source;
+  if (source == OdometrySourceKind::kNone) return "no poses (odometry.source none: appearance only)";
+  return "poses from odometry.source " + std::string(enum_name(source));
 }
 
 void require_poses_if_needed(const PipelineConfig& config, const Dataset& dataset) {
-  if (resolve_odometry_source(config.odometry, config.ekf, dataset) != "none") return;
+  if (resolve_odometry_source(config.odometry, config.ekf, dataset) != OdometrySourceKind::kNone) return;
   const std::string why =
-      config.odometry.source == "none"
+      config.odometry.source == OdometrySourceKind::kNone
           ? std::string("odometry.source is none (appearance only)")
           : "odometry.source auto found no odometry for dataset " + dataset.root().string() +
                 " (no ground truth for drift; no IMU, calibration and images for the ekf)";
@@ -133,8 +133,8 @@ std::unique_ptr<OdometrySource> make_ekf_source(const OdometryConfig& config, co
   // Started from the sensors, the filter's world is its own (gravity-aligned, +z up, yaw 0 at the start):
   // only a start from ground truth takes the ground truth's world, and so its up axis.
   Eigen::Vector3d up_w = Eigen::Vector3d::UnitZ();
-  if (config.ekf_up_axis != "auto") {
-    up_w = axis_vector(config.ekf_up_axis);
+  if (config.ekf_up_axis != UpAxis::kAuto) {
+    up_w = axis_vector(enum_name(config.ekf_up_axis));
   } else if (from_truth) {
     up_w = world_up_axis_from_imu(dataset).value_or(Eigen::Vector3d::UnitZ());
   }
@@ -152,14 +152,15 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
 std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
                                                      const Dataset& dataset) {
   config.validate();
-  const std::string source = resolve_odometry_source(config, ekf, dataset);
-  if (config.source == "auto") spdlog::info("odometry: source auto -> {}", source);
-  if (source == "ekf") return make_ekf_source(config, ekf, dataset);
-  if (source == "none") {
+  const OdometrySourceKind source = resolve_odometry_source(config, ekf, dataset);
+  if (config.source == OdometrySourceKind::kAuto)
+    spdlog::info("odometry: source auto -> {}", enum_name(source));
+  if (source == OdometrySourceKind::kEkf) return make_ekf_source(config, ekf, dataset);
+  if (source == OdometrySourceKind::kNone) {
     spdlog::info("odometry: none (appearance only): frames carry no pose");
     return std::make_unique<NoOdometry>();
   }
-  if (source == "file") {
+  if (source == OdometrySourceKind::kFile) {
     TrajectoryFile trajectory = read_trajectory_file(config.file, config.file_format, dataset.source_times());
     std::vector<StampedPose>& poses = trajectory.poses;
     if (poses.empty()) throw DataError(config.file, "no poses in the trajectory file");
@@ -189,8 +190,8 @@ std::unique_ptr<OdometrySource> make_odometry_source(const OdometryConfig& confi
         " has none (use source: file with a trajectory, or none for an appearance-only run.mode full)");
   }
   Eigen::Vector3d axis_w = Eigen::Vector3d::UnitZ();
-  if (config.heading_axis != "auto") axis_w = axis_vector(config.heading_axis);
-  if (config.heading_axis == "auto") {
+  if (config.heading_axis != HeadingAxis::kAuto) axis_w = axis_vector(enum_name(config.heading_axis));
+  if (config.heading_axis == HeadingAxis::kAuto) {
     std::vector<Eigen::Vector3d> positions;
     for (std::size_t i = 0; i < dataset.frame_count(); ++i) {
       if (auto T_w_b = dataset.ground_truth_T_w_b(i)) positions.push_back(T_w_b->translation());

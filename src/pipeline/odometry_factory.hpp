@@ -37,9 +37,9 @@ std::string odometry_expectation(const OdometryConfig& config, const EkfConfig& 
 // the source resolves to none for `dataset`, saying why and what to use instead.
 void require_poses_if_needed(const PipelineConfig& config, const Dataset& dataset);
 
-// The source `config.source` resolves to for `dataset`: "auto" becomes "ekf" or "drift" (see
+// The source `config.source` resolves to for `dataset`: auto becomes ekf, drift or none (see
 // stages/odometry/odometry_source.hpp).
-std::string resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
-                                    const Dataset& dataset);
+OdometrySourceKind resolve_odometry_source(const OdometryConfig& config, const EkfConfig& ekf,
+                                           const Dataset& dataset);
 
 }  // namespace loopgate

@@ -108,7 +108,7 @@ void RunConfig::validate() const {
 }
 
 void PipelineConfig::validate_odometry_none() const {
-  if (odometry.source != "none") return;
+  if (odometry.source != OdometrySourceKind::kNone) return;
   if (run.mode == RunMode::kGated) {
     throw ConfigError(
         "run.mode: 'gated' needs poses for the pose gate, and odometry.source is none (appearance only): use "

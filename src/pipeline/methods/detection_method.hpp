@@ -43,7 +43,7 @@ struct FrameVerdict {
 
 // What the run's evaluation needs from a method.
 struct MethodEvaluation {
-  std::string score_order = "higher_is_better";
+  ScoreOrder score_order = ScoreOrder::kHigherIsBetter;
   // The detections the PR sweep runs over, dataset frame indices; empty optional: the loops themselves.
   std::optional<std::vector<Detection>> ranked;
   // Gated methods: whether a candidate-area cell holds (query seq, reference seq).

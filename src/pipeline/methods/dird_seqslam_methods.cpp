@@ -145,7 +145,7 @@ nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatc
 
 MethodEvaluation method_evaluation(const ContrastMatching& matching) {
   MethodEvaluation e;
-  e.score_order = "higher_is_better";
+  e.score_order = ScoreOrder::kHigherIsBetter;
   e.ranked = matching.ranked();
   return e;
 }

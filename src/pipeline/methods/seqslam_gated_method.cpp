@@ -193,7 +193,7 @@ class SeqSlamGated final : public DetectionMethod {
   // SeqSLAM.
   MethodEvaluation evaluation() const override {
     MethodEvaluation e;
-    e.score_order = "lower_is_better";
+    e.score_order = ScoreOrder::kLowerIsBetter;
     e.ranked = ranked_;
     e.covers = [this](std::int64_t i, std::int64_t j) { return cells_.covers(i, j); };
     return e;

@@ -77,7 +77,7 @@ class SeqSlamMethod final : public DetectionMethod {
   // The PR sweep runs over every query's match, accepted or not: the ratio is the threshold.
   MethodEvaluation evaluation() const override {
     MethodEvaluation e;
-    e.score_order = "lower_is_better";
+    e.score_order = ScoreOrder::kLowerIsBetter;
     e.ranked = ranked_;
     return e;
   }

@@ -46,7 +46,8 @@ void refuse_previous_outputs(const std::filesystem::path& out_dir, const std::ve
 void refuse_outputs_over_inputs(const PipelineConfig& config, const std::filesystem::path& out_dir,
                                 const std::vector<std::filesystem::path>& extra_inputs) {
   std::vector<NamedPath> inputs;
-  if (config.odometry.source == "file") inputs.push_back({"odometry.file", config.odometry.file});
+  if (config.odometry.source == OdometrySourceKind::kFile)
+    inputs.push_back({"odometry.file", config.odometry.file});
   if (!config.eval.truth_pairs_file.empty())  // a previous run's truth_loops.csv is a pairs file
     inputs.push_back({"eval.truth_pairs_file", config.eval.truth_pairs_file});
   for (const auto& input : extra_inputs) inputs.push_back({"an input of this command", input});

@@ -25,9 +25,9 @@ std::vector<std::vector<double>> matrix_rows(const Eigen::Isometry3d& T) {
 // The gravity axis of the world: from the IMU and the ground truth when there is an IMU (z for EuRoC,
 // y for KITTI camera-frame worlds), else the world axis nearest the normal of the best-fit plane of the
 // ground-truth positions (real KITTI).
-std::string gravity_axis(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_gt) {
+WorldAxis gravity_axis(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_gt) {
   const auto up_w = world_up_axis_from_imu(dataset);
-  return axis_name(dominant_axis(up_w ? *up_w : plane_normal(p_gt)));
+  return static_cast<WorldAxis>(dominant_axis(up_w ? *up_w : plane_normal(p_gt)));
 }
 }  // namespace
 
@@ -47,9 +47,9 @@ nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_
             {"why", std::to_string(p_est.size()) + " tracking poses inside the ground-truth time span"}};
   }
   AteConfig posyaw;
-  posyaw.alignment = "posyaw";
+  posyaw.alignment = AteAlignment::kPosyaw;
   AteConfig se3;
-  se3.alignment = "se3";
+  se3.alignment = AteAlignment::kSe3;
   AteResult ate;
   AteResult ate_se3;
   try {
@@ -77,7 +77,7 @@ nlohmann::json trajectory_accuracy_json(const std::vector<StampedPose>& tracked_
   return {{"available", true},
           {"poses", "odometry poses with status tracking"},
           {"alignment", "posyaw"},
-          {"up_axis", posyaw.up_axis},
+          {"up_axis", std::string(enum_name(posyaw.up_axis))},
           {"pairs", ate.count},
           {"rmse_m", ate.rmse_m},
           {"mean_m", ate.mean_m},

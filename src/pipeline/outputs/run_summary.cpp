@@ -38,7 +38,7 @@ std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset
   return pairs;
 }
 
-std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w) {
+CoordinatePlane horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w) {
   std::optional<Eigen::Vector3d> up_w = world_up_axis_from_imu(dataset);
   if (!up_w && dataset.layout() == "kitti") up_w = Eigen::Vector3d(0.0, -1.0, 0.0);
   if (!up_w) {
@@ -47,12 +47,23 @@ std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Ve
       if (p.allFinite()) finite.push_back(p);
     if (finite.size() >= 3) up_w = plane_normal(finite);
   }
-  if (!up_w) return "xy";
+  if (!up_w) return CoordinatePlane::kXy;
   const int axis = dominant_axis(*up_w);
-  return axis == 0 ? "yz" : axis == 1 ? "xz" : "xy";
+  return axis == 0 ? CoordinatePlane::kYz : axis == 1 ? CoordinatePlane::kXz : CoordinatePlane::kXy;
 }
 
 namespace {
+
+// The ground truth's plane of eval.plane: auto is x-z for the KITTI layout (its camera frame), 3-D otherwise.
+CoordinatePlane truth_plane(TruthPlane plane, const Dataset& dataset) {
+  switch (plane) {
+    case TruthPlane::kXz: return CoordinatePlane::kXz;
+    case TruthPlane::kXy: return CoordinatePlane::kXy;
+    case TruthPlane::kXyz: return CoordinatePlane::kXyz;
+    case TruthPlane::kAuto: break;
+  }
+  return dataset.layout() == "kitti" ? CoordinatePlane::kXz : CoordinatePlane::kXyz;
+}
 
 // Truth from a file of pairs (eval.truth_pairs_file): frame numbers (as frames.csv shows them) -> indices
 // within the `n` evaluated frames from `first`; pairs with a frame outside them (another --frames range, a
@@ -111,15 +122,15 @@ void add_truth_pairs(const RunParts& parts, std::size_t first, std::size_t n,
 // before eval.min_travel_m took out the revisits without travel (hovering, standing still).
 void add_truth_rule_counts(const Dataset& dataset, const SequenceEvaluationInput& input,
                            nlohmann::json& truth_json) {
-  const auto positives = [&](const std::string& plane, double min_travel_m) {
+  const auto positives = [&](CoordinatePlane plane, double min_travel_m) {
     GroundTruthConfig truth = input.truth;
     truth.plane = plane;
     truth.revisit.min_travel_m = min_travel_m;
     return LoopGroundTruth::from_positions(input.p_w, truth).positive_count();
   };
-  const std::string horizontal = horizontal_plane(dataset, input.p_w);
-  truth_json["positives_3d"] = positives("xyz", input.truth.revisit.min_travel_m);
-  truth_json["horizontal_plane"] = horizontal;
+  const CoordinatePlane horizontal = horizontal_plane(dataset, input.p_w);
+  truth_json["positives_3d"] = positives(CoordinatePlane::kXyz, input.truth.revisit.min_travel_m);
+  truth_json["horizontal_plane"] = std::string(enum_name(horizontal));
   truth_json["positives_horizontal"] = positives(horizontal, input.truth.revisit.min_travel_m);
   truth_json["positives_without_min_travel"] = positives(input.truth.plane, 0.0);
 }
@@ -171,9 +182,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   const EvalConfig& eval = parts.config.eval;
   input.truth.radius_m = eval.truth_radius_m;
   input.truth.gap_frames = eval.truth_gap_frames;
-  input.truth.plane = eval.plane != TruthPlane::kAuto ? std::string(enum_name(eval.plane))
-                      : dataset.layout() == "kitti"   ? "xz"
-                                                      : "xyz";
+  input.truth.plane = truth_plane(eval.plane, dataset);
   input.truth.accept_radius_m = eval.effective_accept_radius_m();
   input.truth.revisit = eval.revisit;
   const MethodEvaluation method = parts.method.evaluation();

@@ -51,7 +51,7 @@ struct RunParts {
 // The dataset world's ground plane ("xy", "xz" or "yz"): normal to its up axis, from the IMU and the ground
 // truth when it has an IMU, -y for KITTI's camera world, else the axis nearest the normal of the positions'
 // best-fit plane; "xy" when nothing tells.
-std::string horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w);
+CoordinatePlane horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w);
 
 // eval.truth_pairs_file read and checked against the dataset's frame numbers (DataError naming the file and
 // line), before the run starts; nullopt when the key is empty.

@@ -164,7 +164,7 @@ nlohmann::json write_two_sequence_outputs(const TwoSequenceMethod& method, const
   summary.update({
       {"mode", "two-sequence"},
       {"method", method.name()},
-      {"score_order", method.score_order()},
+      {"score_order", std::string(enum_name(method.score_order()))},
       {"config", method.config_json()},
       {"images_decoded", described},
       {"descriptors_computed", described},  // SeqSLAM: preprocessed images

@@ -14,9 +14,6 @@ void require_non_negative(const std::string& key, double value, double hi = 1e3)
 }  // namespace
 
 void OdometryConfig::validate() const {
-  require_one_of("odometry.source", source, {"drift", "file", "ekf", "none", "auto"});
-  require_one_of("odometry.heading_axis", heading_axis, {"auto", "x", "y", "z"});
-  require_one_of("odometry.ekf_up_axis", ekf_up_axis, {"auto", "x", "-x", "y", "-y", "z", "-z"});
   require_non_negative("drift_position_sigma_m_per_sqrt_m", drift_position_sigma_m_per_sqrt_m);
   require_non_negative("drift_heading_sigma_rad_per_sqrt_m", drift_heading_sigma_rad_per_sqrt_m);
   require_non_negative("drift_scale_sigma_per_sqrt_m", drift_scale_sigma_per_sqrt_m);
@@ -28,7 +25,7 @@ void OdometryConfig::validate() const {
   require_non_negative("file_rot_sigma2_b_rad2_per_m", file_rot_sigma2_b_rad2_per_m);
   require(file_max_gap_s > 0 && file_max_gap_s <= 3600, "odometry.file_max_gap_s", "in (0, 3600] s",
           std::to_string(file_max_gap_s));
-  if (source == "file")
+  if (source == OdometrySourceKind::kFile)
     require(!file.empty(), "odometry.file", "a trajectory path (TUM, KITTI or EuRoC) when source is file",
             "''");
 }

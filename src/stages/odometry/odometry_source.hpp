@@ -18,9 +18,11 @@
 #include <cstdint>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "core/pose_covariance.hpp"
 #include "core/trajectory_format.hpp"
 #include "core/types.hpp"
@@ -32,8 +34,35 @@ class Mat;
 
 namespace loopgate {
 
+// odometry.source (see above).
+enum class OdometrySourceKind { kDrift, kFile, kEkf, kNone, kAuto };
+inline constexpr EnumName<OdometrySourceKind> kOdometrySourceKindNames[] = {
+    {OdometrySourceKind::kDrift, "drift"},
+    {OdometrySourceKind::kFile, "file"},
+    {OdometrySourceKind::kEkf, "ekf"},
+    {OdometrySourceKind::kNone, "none"},
+    {OdometrySourceKind::kAuto, "auto"}};
+constexpr std::span<const EnumName<OdometrySourceKind>> enum_names(OdometrySourceKind) {
+  return kOdometrySourceKindNames;
+}
+// odometry.heading_axis: a world axis, or auto.
+enum class HeadingAxis { kAuto, kX, kY, kZ };
+inline constexpr EnumName<HeadingAxis> kHeadingAxisNames[] = {
+    {HeadingAxis::kAuto, "auto"}, {HeadingAxis::kX, "x"}, {HeadingAxis::kY, "y"}, {HeadingAxis::kZ, "z"}};
+constexpr std::span<const EnumName<HeadingAxis>> enum_names(HeadingAxis) {
+  return kHeadingAxisNames;
+}
+// odometry.ekf_up_axis: a signed world axis, or auto.
+enum class UpAxis { kAuto, kX, kMinusX, kY, kMinusY, kZ, kMinusZ };
+inline constexpr EnumName<UpAxis> kUpAxisNames[] = {
+    {UpAxis::kAuto, "auto"}, {UpAxis::kX, "x"}, {UpAxis::kMinusX, "-x"}, {UpAxis::kY, "y"},
+    {UpAxis::kMinusY, "-y"}, {UpAxis::kZ, "z"}, {UpAxis::kMinusZ, "-z"}};
+constexpr std::span<const EnumName<UpAxis>> enum_names(UpAxis) {
+  return kUpAxisNames;
+}
+
 struct OdometryConfig {
-  std::string source = "auto";  // drift | file | ekf | none | auto (see above)
+  OdometrySourceKind source = OdometrySourceKind::kAuto;  // drift | file | ekf | none | auto (see above)
   std::int64_t seed = 1;
   // drift: random walks driven by the distance travelled (per sqrt of metres).
   double drift_position_sigma_m_per_sqrt_m = 0.005;
@@ -41,7 +70,7 @@ struct OdometryConfig {
   double drift_scale_sigma_per_sqrt_m = 0.0005;
   // Axis of the heading drift in the world frame: x | y | z | auto (normal of the best-fit plane of the
   // ground-truth positions, e.g. -y for KITTI camera frames, z for EuRoC).
-  std::string heading_axis = "auto";
+  HeadingAxis heading_axis = HeadingAxis::kAuto;
   double initial_sigma_m = 0.01;     // floor added to the position variances
   double initial_sigma_rad = 0.001;  // floor added to the rotation variances
   // file: a trajectory (relative paths are relative to the working directory) in `file_format`: auto (told
@@ -59,7 +88,7 @@ struct OdometryConfig {
   // auto: with ekf.init_mode ground_truth the world axis nearest the mean specific force of the IMU rotated
   // into the world by the ground truth (z for EuRoC, -y for KITTI camera-frame worlds); started from the
   // sensors the filter's own gravity-aligned world, z.
-  std::string ekf_up_axis = "auto";
+  UpAxis ekf_up_axis = UpAxis::kAuto;
 
   // The keys, in order, for loading, printing and the JSON echo (Self is OdometryConfig or const
   // OdometryConfig).

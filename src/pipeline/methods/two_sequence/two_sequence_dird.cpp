@@ -40,7 +40,7 @@ class DirdTwoSequence final : public TwoSequenceMethod {
       : config_(config), sequences_(config.dird), similarity_(config.dird) {}
 
   const char* name() const override { return "dird"; }
-  const char* score_order() const override { return "higher_is_better"; }
+  ScoreOrder score_order() const override { return ScoreOrder::kHigherIsBetter; }
   nlohmann::json config_json() const override { return config_to_json(config_); }
   void begin(std::size_t reference_count, std::size_t query_count) override {
     sequences_.begin(reference_count, query_count);

@@ -89,7 +89,7 @@ class TwoSequenceMethod {
 
   // summary.json "method" and "score_order", and the effective configuration it echoes.
   virtual const char* name() const = 0;
-  virtual const char* score_order() const = 0;
+  virtual ScoreOrder score_order() const = 0;
   virtual nlohmann::json config_json() const = 0;
   // The describe step's word on trace.json and in stages_s: "describe" or "preprocess".
   virtual const char* describe_step() const { return "describe"; }

@@ -45,7 +45,7 @@ class SeqSlamTwoSequence final : public TwoSequenceMethod {
   }
 
   const char* name() const override { return "seqslam"; }
-  const char* score_order() const override { return "lower_is_better"; }
+  ScoreOrder score_order() const override { return ScoreOrder::kLowerIsBetter; }
   nlohmann::json config_json() const override { return config_to_json(effective_); }
   const char* describe_step() const override { return "preprocess"; }
   std::string error_note() const override { return " (took part as an all-zero image)"; }
