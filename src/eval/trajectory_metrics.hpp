@@ -39,7 +39,7 @@ struct AteConfig {
     v("up_axis", self.up_axis);
     v("max_dt_ns", self.max_dt_ns);
   }
-  void validate() const;  // throws ConfigError naming the key and allowed values
+  void validate() const;                                       // throws ConfigError for a negative max_dt_ns
   Eigen::Vector3d up() const { return axis_vector(up_axis); }  // unit vector of up_axis
 };
 

@@ -100,6 +100,19 @@ const std::vector<std::string>& config_path_keys() {
   return keys;
 }
 
+namespace {
+// The value of "section.key" in `sections` (const or not); nullptr when absent.
+template <class Sections>
+auto* find_value(Sections& sections, const std::string& name) {
+  const std::size_t dot = name.find('.');
+  const auto section = sections.find(name.substr(0, dot));
+  decltype(&section->second.begin()->second) none = nullptr;
+  if (section == sections.end()) return none;
+  const auto value = section->second.find(name.substr(dot + 1));
+  return value == section->second.end() ? none : &value->second;
+}
+}  // namespace
+
 RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
   std::error_code ec;
   if (!std::filesystem::exists(file, ec)) throw ConfigError(file.string() + ": configuration file not found");
@@ -116,25 +129,18 @@ RawConfig RawConfig::from_yaml_file(const std::filesystem::path& file) {
   // Paths in a YAML file are relative to the file's folder, so a config works from any working directory.
   const std::filesystem::path folder = std::filesystem::absolute(file, ec).parent_path();
   for (const std::string& name : config_path_keys()) {
-    const std::size_t dot = name.find('.');
-    const auto section = raw.sections_.find(name.substr(0, dot));
-    if (section == raw.sections_.end()) continue;
-    const auto value = section->second.find(name.substr(dot + 1));
-    if (value == section->second.end() || value->second.text.empty()) continue;
-    const std::filesystem::path written(value->second.text);
+    RawConfigValue* value = find_value(raw.sections_, name);
+    if (value == nullptr || value->text.empty()) continue;
+    const std::filesystem::path written(value->text);
     if (written.is_absolute()) continue;
-    value->second.written = value->second.text;
-    value->second.text = (folder / written).lexically_normal().string();
+    value->written = value->text;
+    value->text = (folder / written).lexically_normal().string();
   }
   return raw;
 }
 
 const RawConfigValue* RawConfig::find(const std::string& name) const {
-  const std::size_t dot = name.find('.');
-  const auto section = sections_.find(name.substr(0, dot));
-  if (section == sections_.end()) return nullptr;
-  const auto value = section->second.find(name.substr(dot + 1));
-  return value == section->second.end() ? nullptr : &value->second;
+  return find_value(sections_, name);
 }
 
 void RawConfig::require_resolved_paths_exist() const {
