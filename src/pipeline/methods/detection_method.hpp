@@ -43,7 +43,6 @@ struct FrameVerdict {
 
 // What the run's evaluation needs from a method.
 struct MethodEvaluation {
-  ScoreOrder score_order = ScoreOrder::kHigherIsBetter;
   // The detections the PR sweep runs over, dataset frame indices; empty optional: the loops themselves.
   std::optional<std::vector<Detection>> ranked;
   // Gated methods: whether a candidate-area cell holds (query seq, reference seq).
@@ -72,6 +71,9 @@ class DetectionMethod {
   virtual bool detects() const { return true; }
   // describe() needs the pixels of every frame, decoded by the decode node.
   virtual bool needs_every_image() const { return false; }
+  // Whether a higher score means a better match (similarities) or a lower one (SeqSLAM's ratio):
+  // summary.json "score_order" and the PR sweep's threshold direction.
+  virtual ScoreOrder score_order() const { return ScoreOrder::kHigherIsBetter; }
 
   virtual void gate(FrameRecord& /*r*/) {}
   virtual void describe(FrameRecord& /*r*/) {}
@@ -90,7 +92,7 @@ class DetectionMethod {
 
   // Files of its own (gated: candidate_areas.csv, candidate_cells.csv, descriptors.csv), after finish().
   virtual void write_files(const std::filesystem::path& /*out_dir*/) const {}
-  // Its fields of summary.json: score_order, descriptors_computed, similarities_computed, candidate_areas,
+  // Its fields of summary.json: descriptors_computed, similarities_computed, candidate_areas,
   // gate, detection.nms_delay_frames, ... (merged over the run's).
   virtual nlohmann::json summary() const { return nlohmann::json::object(); }
   virtual MethodEvaluation evaluation() const { return {}; }

@@ -136,7 +136,6 @@ nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatc
                               const ViewpointDistances& viewpoint) {
   nlohmann::json out = matching.summary();
   out.update(viewpoint.summary());
-  out["score_order"] = "higher_is_better";
   out["descriptors_computed"] = distances.descriptors_computed();
   out["similarities_computed"] = distances.distances_computed();
   out.update(distances.summary());
@@ -145,7 +144,6 @@ nlohmann::json method_summary(const DirdDistances& distances, const ContrastMatc
 
 MethodEvaluation method_evaluation(const ContrastMatching& matching) {
   MethodEvaluation e;
-  e.score_order = ScoreOrder::kHigherIsBetter;
   e.ranked = matching.ranked();
   return e;
 }

@@ -171,10 +171,10 @@ class SeqSlamGated final : public DetectionMethod {
     });
   }
 
+  ScoreOrder score_order() const override { return ScoreOrder::kLowerIsBetter; }
   // descriptors_computed: frames preprocessed; similarities_computed: difference-matrix entries computed.
   nlohmann::json summary() const override {
-    nlohmann::json out = {{"score_order", "lower_is_better"},
-                          {"descriptors_computed", descriptors_computed_.load()},
+    nlohmann::json out = {{"descriptors_computed", descriptors_computed_.load()},
                           {"similarities_computed", search_.difference_entries()},
                           {"seqslam_gated",
                            {{"frames_requested", frames_requested_},
@@ -193,7 +193,6 @@ class SeqSlamGated final : public DetectionMethod {
   // SeqSLAM.
   MethodEvaluation evaluation() const override {
     MethodEvaluation e;
-    e.score_order = ScoreOrder::kLowerIsBetter;
     e.ranked = ranked_;
     e.covers = [this](std::int64_t i, std::int64_t j) { return cells_.covers(i, j); };
     return e;

@@ -69,15 +69,14 @@ class SeqSlamMethod final : public DetectionMethod {
                         seqslam_detection(matches_.at(seq), context_.config.seqslam, c)};
   }
 
+  ScoreOrder score_order() const override { return ScoreOrder::kLowerIsBetter; }
   nlohmann::json summary() const override {
-    return {{"score_order", "lower_is_better"},
-            {"descriptors_computed", descriptors_computed_.load()},
+    return {{"descriptors_computed", descriptors_computed_.load()},
             {"similarities_computed", differences_computed_}};  // difference-matrix entries
   }
   // The PR sweep runs over every query's match, accepted or not: the ratio is the threshold.
   MethodEvaluation evaluation() const override {
     MethodEvaluation e;
-    e.score_order = ScoreOrder::kLowerIsBetter;
     e.ranked = ranked_;
     return e;
   }

@@ -194,7 +194,7 @@ nlohmann::json evaluate_run(const RunParts& parts, const std::filesystem::path& 
   };
   input.loops = within_range(parts.loops.loops());
   input.ranked = method.ranked ? within_range(*method.ranked) : input.loops;
-  input.score_order = method.score_order;
+  input.score_order = parts.method.score_order();
   SequenceEvaluation evaluation = evaluate_sequence(input);
   if (!input.pairs) add_truth_rule_counts(dataset, input, evaluation.json["truth"]);
   CsvWriter truth_loops(out_dir / "truth_loops.csv", {"i", "j"});
@@ -261,7 +261,7 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
         {"odometry_lost", c.odometry_lost}}},
       {"mode", parts.method.mode()},
       {"method", parts.method.name()},
-      {"score_order", "higher_is_better"},
+      {"score_order", std::string(enum_name(parts.method.score_order()))},
       {"end_of_stream_ms", parts.end_of_stream_ms},
       {"images_decoded", c.decoded + reads},
       {"images_read_for_description", reads},
