@@ -40,13 +40,13 @@ LoopCloser::LoopCloser(const PipelineConfig& config, const Dataset& dataset, std
   }
   pending_by_frame_.assign(last_ - first_, 0);
   if (!dataset.has_images()) {
-    unusable_ = "geometry: the dataset has no images";
+    unusable_ = VerifyNote{VerifyReason::kImageMissing, "geometry: the dataset has no images"};
   } else if (const auto camera = dataset.camera()) {
     unusable_ = verifier_.unusable_reason(cv::Size(camera->width_px, camera->height_px));
   } else {
     unusable_ = verifier_.unusable_reason(cv::Size(0, 0));
   }
-  if (!unusable_.empty()) spdlog::warn("verify: loops are not verified: {}", unusable_);
+  if (unusable_) spdlog::warn("verify: loops are not verified: {}", unusable_->text);
   worker_ = std::thread([this] { work(); });
 }
 

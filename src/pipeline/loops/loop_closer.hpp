@@ -104,7 +104,7 @@ class LoopCloser {
   // trajectory_accuracy_corrected (of `tracked` corrected) and loop_closure (summary()).
   nlohmann::json summary_fields(const std::vector<StampedPose>& tracked) const;
   std::string profile_line() const;
-  // The loops verification rejected and those it skipped, counted by verify_reason_key() (sorted by key).
+  // The loops verification rejected and those it skipped, counted by their VerifyReason key (sorted).
   struct ReasonCounts {
     std::map<std::string, std::size_t> rejected, skipped;
   };
@@ -130,7 +130,7 @@ class LoopCloser {
   struct VerifyJob {
     std::optional<std::size_t> neighbour;  // j's neighbour (verify.neighbour_offset_frames)
     std::shared_ptr<const OrbFeatures> i, j, n;
-    std::string reason;  // not empty: nothing to run
+    std::optional<VerifyNote> reason;  // set: nothing to run
   };
   std::optional<std::size_t> neighbour_of(const Detection& loop) const;
   // `prefetch`: the three frames' missing features detected at once first (prefetch_features).
@@ -156,8 +156,8 @@ class LoopCloser {
   // Whether `later` lies within verify.skip_after_verified_frames (or _rejected_) of `earlier`, in both i and
   // j, `earlier` having been verified (or rejected).
   bool in_skip_window(const Detection& earlier, bool verified, const Detection& later) const;
-  // Why (i, j) is not verified given the loops verified before it (empty: verify it). Worker only.
-  std::string skip_reason(const Detection& loop);
+  // Why (i, j) is not verified given the loops verified before it (nullopt: verify it). Worker only.
+  std::optional<VerifyNote> skip_reason(const Detection& loop);
   // The odometry's covariance of T_j_i as the pose graph would see it (worker only): the step covariances
   // from j to i composed (the prefix chain below), times the graph's scale (scale_now()), plus an edge's
   // floors per node between them; the model's (posegraph.odometry_cov model, or a frame without a step
@@ -222,7 +222,7 @@ class LoopCloser {
   VerifyConfig verify_config_;
   PoseGraphConfig graph_config_;
   GeometricVerifier verifier_;
-  std::string unusable_;  // the reason no loop can be verified (empty: they can)
+  std::optional<VerifyNote> unusable_;  // the reason no loop can be verified (nullopt: they can)
   std::vector<std::optional<Eigen::Isometry3d>> poses_;  // by frame - first, written once each
   std::vector<double> sigma_m_;                          // by frame - first: the pose's position sigma
   // By frame - first (posegraph.odometry_cov odometry only): the step covariance from the previous recorded

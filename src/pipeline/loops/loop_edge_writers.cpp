@@ -28,7 +28,7 @@ LoopCloser::ReasonCounts LoopCloser::reason_counts() const {
   ReasonCounts counts;
   for (const LoopResult& r : results_) {
     if (r.result.verified) continue;
-    ++(r.skipped ? counts.skipped : counts.rejected)[verify_reason_key(r.result.reason)];
+    ++(r.skipped ? counts.skipped : counts.rejected)[std::string(enum_name(r.result.key))];
   }
   return counts;
 }
@@ -222,7 +222,7 @@ nlohmann::json LoopCloser::summary() const {
   }
   const ReasonCounts counts = reason_counts();
   return {{"enabled", active_},
-          {"unusable_reason", unusable_},
+          {"unusable_reason", unusable_ ? unusable_->text : std::string()},
           {"loops", results_.size()},
           {"verified", verified},
           {"verified_by_tracking", tracked},

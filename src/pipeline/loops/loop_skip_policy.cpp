@@ -104,7 +104,7 @@ void LoopCloser::add_innovation(const LoopResult& r) {
       {r.loop.query, r.loop.reference, odometry_cov_scale_from_loops({innovation}, 1, 1e6), r.result.cov});
 }
 
-std::string LoopCloser::skip_reason(const Detection& loop) {
+std::optional<VerifyNote> LoopCloser::skip_reason(const Detection& loop) {
   // A loop the odometry already knows (standing still, hovering, the frames just before a query): an edge as
   // certain as the last one verified over the same odometry would shrink the odometry's own uncertainty of
   // T_j_i, scaled by what the verified loops showed, by less than verify.min_information_gain. Such an edge
@@ -131,11 +131,12 @@ std::string LoopCloser::skip_reason(const Detection& loop) {
           std::max(0.0, Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(odometry.topLeftCorner<3, 3>())
                             .eigenvalues()
                             .maxCoeff()));
-      return fmt::format(
-          "skipped: information gain {:.2f} < {} (the odometry's sigma from j to i {:.3f} m, a loop edge's "
-          "{:.3f} m)",
-          gain, verify_config_.min_information_gain, sigma_m,
-          std::sqrt(edge.topLeftCorner<3, 3>().diagonal().maxCoeff()));
+      return VerifyNote{VerifyReason::kSmallInformationGain,
+                        fmt::format("skipped: information gain {:.2f} < {} (the odometry's sigma from j to i "
+                                    "{:.3f} m, a loop edge's "
+                                    "{:.3f} m)",
+                                    gain, verify_config_.min_information_gain, sigma_m,
+                                    std::sqrt(edge.topLeftCorner<3, 3>().diagonal().maxCoeff()))};
     }
   }
   int tried_for_query = 0;
@@ -144,12 +145,15 @@ std::string LoopCloser::skip_reason(const Detection& loop) {
     if (r.skipped) continue;
     if (r.loop.query == loop.query) ++tried_for_query;
     if (in_skip_window(r.loop, r.result.verified, loop))
-      return fmt::format("skipped: near ({}, {}) {}", r.loop.query, r.loop.reference,
-                         r.result.verified ? "verified" : "rejected");
+      return VerifyNote{VerifyReason::kSkipWindow,
+                        fmt::format("skipped: near ({}, {}) {}", r.loop.query, r.loop.reference,
+                                    r.result.verified ? "verified" : "rejected")};
   }
   if (verify_config_.max_per_query > 0 && tried_for_query >= verify_config_.max_per_query)
-    return fmt::format("skipped: {} loop(s) of frame {} already verified", tried_for_query, loop.query);
-  return {};
+    return VerifyNote{
+        VerifyReason::kMaxPerQuery,
+        fmt::format("skipped: {} loop(s) of frame {} already verified", tried_for_query, loop.query)};
+  return std::nullopt;
 }
 
 bool LoopCloser::would_skip(const Detection& earlier, bool verified, const Detection& later) const {

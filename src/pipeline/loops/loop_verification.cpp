@@ -73,13 +73,15 @@ std::optional<std::size_t> LoopCloser::neighbour_of(const Detection& loop) const
 
 LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool prefetch) {
   VerifyJob job;
-  if (!unusable_.empty()) {
+  if (unusable_) {
     job.reason = unusable_;
     return job;
   }
   const std::optional<std::size_t> neighbour = neighbour_of(loop);
   if (!neighbour || !pose_of(*neighbour) || !pose_of(loop.reference)) {
-    job.reason = fmt::format("geometry: no odometry pose for frame {} or its neighbour", loop.reference);
+    job.reason =
+        VerifyNote{VerifyReason::kNoOdometryPose,
+                   fmt::format("geometry: no odometry pose for frame {} or its neighbour", loop.reference)};
     return job;
   }
   job.neighbour = *neighbour;
@@ -90,17 +92,18 @@ LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool prefetch) 
     job.j = features_of(loop.reference);
     job.n = features_of(*neighbour);
     if (job.i->image_size.empty() || job.j->image_size.empty() || job.n->image_size.empty())
-      job.reason = "geometry: image missing";
-  } catch (const std::exception& e) {
-    job.reason = std::string("geometry: ") + e.what();
+      job.reason = VerifyNote{VerifyReason::kImageMissing, "geometry: image missing"};
+  } catch (const std::exception& e) {  // an image that cannot be read
+    job.reason = VerifyNote{VerifyReason::kImageMissing, std::string("geometry: ") + e.what()};
   }
   return job;
 }
 
 VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const {
   VerifyResult result;
-  if (!job.reason.empty()) {
-    result.reason = job.reason;
+  if (job.reason) {
+    result.key = job.reason->key;
+    result.reason = job.reason->text;
     return result;
   }
   try {
@@ -119,6 +122,7 @@ VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const 
                               T_w_bi ? &*T_w_bi : nullptr, odometry_check);
   } catch (const std::exception& e) {
     result = VerifyResult{};
+    result.key = VerifyReason::kOther;
     result.reason = std::string("geometry: ") + e.what();
   }
   return result;
@@ -129,16 +133,17 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draini
   out.loop = loop;
   const std::size_t index = results_.size();  // this loop's submission index
   const auto ahead = verified_ahead_.find(index);
-  if (unusable_.empty()) {
-    if (std::string why = skip_reason(loop); !why.empty()) {
+  if (!unusable_) {
+    if (std::optional<VerifyNote> why = skip_reason(loop)) {
       // A loop verify_ahead() chose on a wrong guess: one loop after the other would not have verified it.
       if (ahead != verified_ahead_.end()) verified_ahead_.erase(ahead);
-      out.result.reason = std::move(why);
+      out.result.key = why->key;
+      out.result.reason = std::move(why->text);
       out.skipped = true;
       return out;
     }
   }
-  if (draining && unusable_.empty()) ++drain_verified_;
+  if (draining && !unusable_) ++drain_verified_;
   if (ahead != verified_ahead_.end()) {
     out = std::move(ahead->second);
     verified_ahead_.erase(ahead);
@@ -154,7 +159,7 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draini
 }
 
 void LoopCloser::verify_ahead() {
-  if (drain_threads_ < 2 || !unusable_.empty()) return;
+  if (drain_threads_ < 2 || unusable_) return;
   const std::size_t first_index = results_.size();  // the submission index of the queue's front
   if (verified_ahead_.contains(first_index)) return;
   std::vector<Detection> next;
@@ -163,7 +168,7 @@ void LoopCloser::verify_ahead() {
     const std::size_t look = std::min(queue_.size(), kVerifyAheadLoops);
     next.assign(queue_.begin(), queue_.begin() + static_cast<std::ptrdiff_t>(look));
   }
-  if (next.size() < 2 || !skip_reason(next[0]).empty()) return;
+  if (next.size() < 2 || skip_reason(next[0])) return;
   // Which of the next loops are verified (not skipped) depends on the outcomes of those before them. An
   // outcome not known yet is guessed to be the last one known (a revisit gives runs of verified loops and
   // runs of rejected ones); the loops verified along that guess are verified at once. A wrong guess costs
@@ -179,7 +184,7 @@ void LoopCloser::verify_ahead() {
   std::vector<std::size_t> chosen;
   const std::size_t most = kVerifyAheadPerThread * static_cast<std::size_t>(drain_threads_);
   for (std::size_t k = 0; k < next.size() && chosen.size() < most; ++k) {
-    if (!skip_reason(next[k]).empty()) continue;  // skipped whatever the loops before it give
+    if (skip_reason(next[k])) continue;  // skipped whatever the loops before it give
     if (std::any_of(before.begin(), before.end(),
                     [&](const auto& b) { return would_skip(next[b.first], b.second, next[k]); }))
       continue;

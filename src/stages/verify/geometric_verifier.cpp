@@ -106,28 +106,6 @@ std::vector<int> ratio_match_hamming(const cv::Mat& query, const cv::Mat& train,
   return out;
 }
 
-std::string verify_reason_key(const std::string& reason) {
-  const auto has = [&reason](const char* text) { return reason.find(text) != std::string::npos; };
-  const auto starts = [&reason](const char* text) { return reason.rfind(text, 0) == 0; };
-  if (reason == "verified") return "verified";
-  if (starts("verified by tracking")) return "verified_by_tracking";
-  if (starts("skipped: information gain")) return "small_information_gain";
-  if (starts("skipped: near")) return "skip_window";
-  if (starts("skipped:") && has("already verified")) return "max_per_query";
-  if (has("; tracked:")) return "illumination";  // the tracking fallback ran (an illumination change)
-  if (has("no camera calibration")) return "no_calibration";
-  if (has("image too small")) return "image_too_small";
-  if (has("has no images") || has("image missing")) return "image_missing";
-  if (has("no odometry pose")) return "no_odometry_pose";
-  if (has("baseline")) return "short_baseline";
-  if (has("matches with 3-D points")) return "too_few_features";
-  if (has("inliers <")) return "too_few_inliers";
-  if (has("PnP")) return "pnp_failed";
-  if (has("relative translation")) return "translation_too_large";
-  if (has("from the odometry's frame i")) return "odometry_disagreement";
-  return "other";
-}
-
 void VerifyConfig::validate() const {
   if (features < 50) throw ConfigError("verify.features: must be >= 50");
   if (orb_patch_px < 5) throw ConfigError("verify.orb_patch_px: must be >= 5");
@@ -196,13 +174,14 @@ GeometricVerifier::GeometricVerifier(const VerifyConfig& config,
   if (camera) camera_.emplace(*camera);
 }
 
-std::string GeometricVerifier::unusable_reason(const cv::Size& image_size) const {
-  if (!camera_) return "geometry: no camera calibration";
+std::optional<VerifyNote> GeometricVerifier::unusable_reason(const cv::Size& image_size) const {
+  if (!camera_) return VerifyNote{VerifyReason::kNoCalibration, "geometry: no camera calibration"};
   if (image_size.width < config_.min_image_px || image_size.height < config_.min_image_px) {
-    return fmt::format("geometry: image too small for features ({}x{} < {} px)", image_size.width,
-                       image_size.height, config_.min_image_px);
+    return VerifyNote{VerifyReason::kImageTooSmall,
+                      fmt::format("geometry: image too small for features ({}x{} < {} px)", image_size.width,
+                                  image_size.height, config_.min_image_px)};
   }
-  return {};
+  return std::nullopt;
 }
 
 OrbFeatures GeometricVerifier::detect(const cv::Mat& image) const {
@@ -224,11 +203,13 @@ VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& 
                                        const VerifyFrame& n) const {
   VerifyResult result;
   if (i.image.empty() || j.image.empty() || n.image.empty()) {
+    result.key = VerifyReason::kImageMissing;
     result.reason = "geometry: image missing";
     return result;
   }
-  if (std::string why = unusable_reason(j.image.size()); !why.empty()) {
-    result.reason = why;
+  if (std::optional<VerifyNote> why = unusable_reason(j.image.size())) {
+    result.key = why->key;
+    result.reason = std::move(why->text);
     return result;
   }
   return verify(detect(i.image), detect(j.image), j.T_w_b, detect(n.image), n.T_w_b);
@@ -239,8 +220,9 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
                                        const Eigen::Isometry3d& T_w_bn, const Eigen::Isometry3d* T_w_bi,
                                        const Veto& veto) const {
   VerifyResult result;
-  if (std::string why = unusable_reason(fj.image_size); !why.empty()) {
-    result.reason = why;
+  if (std::optional<VerifyNote> why = unusable_reason(fj.image_size)) {
+    result.key = why->key;
+    result.reason = std::move(why->text);
     return result;
   }
   const CameraModel& camera = *camera_;
@@ -250,6 +232,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
   const Eigen::Isometry3d T_cn_cj = T_w_cn.inverse() * T_w_cj;
   const double baseline_m = T_cn_cj.translation().norm();
   if (!(baseline_m >= config_.min_baseline_m)) {
+    result.key = VerifyReason::kShortBaseline;
     result.reason = fmt::format("geometry: baseline {:.3f} m < {} m between j and its neighbour", baseline_m,
                                 config_.min_baseline_m);
     return result;
@@ -295,6 +278,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
   }
   result.matches = static_cast<int>(object.size());
   if (result.matches < config_.min_inliers) {
+    result.key = VerifyReason::kTooFewFeatures;
     result.reason = fmt::format("geometry: {} matches with 3-D points < {} ({} points triangulated)",
                                 result.matches, config_.min_inliers, result.points);
   } else {
@@ -305,6 +289,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
     std::string why = veto(r);
     if (why.empty()) return false;
     r.verified = false;
+    r.key = VerifyReason::kOdometryDisagreement;
     r.reason = std::move(why);
     return true;
   };
@@ -329,11 +314,13 @@ void GeometricVerifier::solve_pose(const std::vector<cv::Point3d>& object,
                             config_.ransac_iterations, static_cast<float>(threshold), 0.99, inliers,
                             cv::SOLVEPNP_AP3P);
   } catch (const cv::Exception& e) {
+    result.key = VerifyReason::kPnpFailed;
     result.reason = std::string("geometry: PnP failed: ") + e.what();
     return;
   }
   result.inliers = static_cast<int>(inliers.size());
   if (!ok || result.inliers < config_.min_inliers) {
+    result.key = VerifyReason::kTooFewInliers;
     result.reason = fmt::format("geometry: {} inliers < {}", result.inliers, config_.min_inliers);
     return;
   }
@@ -356,12 +343,14 @@ void GeometricVerifier::solve_pose(const std::vector<cv::Point3d>& object,
   T_ci_cj.linear() = R;
   T_ci_cj.translation() = t;
   if (!T_ci_cj.matrix().allFinite()) {
+    result.key = VerifyReason::kPnpFailed;
     result.reason = "geometry: PnP gave a non-finite pose";
     return;
   }
   result.T_j_i = T_b_c * T_ci_cj.inverse() * T_b_c.inverse();
   const double distance_m = result.T_j_i.translation().norm();
   if (distance_m > config_.max_translation_m) {
+    result.key = VerifyReason::kTranslationTooLarge;
     result.reason =
         fmt::format("geometry: relative translation {:.1f} m > {} m", distance_m, config_.max_translation_m);
     return;
@@ -372,6 +361,7 @@ void GeometricVerifier::solve_pose(const std::vector<cv::Point3d>& object,
   result.cov.bottomRightCorner<3, 3>().diagonal().setConstant(
       std::pow(config_.sigma_rotation_rad * shrink, 2));
   result.verified = true;
+  result.key = VerifyReason::kVerified;
   result.reason = "verified";
 }
 

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/camera_model.hpp"
+#include "core/enum_names.hpp"
 #include "core/types.hpp"
 
 namespace loopgate {
@@ -102,8 +103,64 @@ struct VerifyConfig {
   void validate() const;
 };
 
+// Why a loop was or was not verified, under a stable key (summary.json's loop_closure.rejected_by_reason and
+// skipped_by_reason): verified, verified_by_tracking; rejected: no_calibration, image_too_small (the images
+// are below verify.min_image_px), image_missing (missing or unreadable), no_odometry_pose, short_baseline (j
+// and its neighbour too close to triangulate), too_few_features (too few matches with triangulated points at
+// this image resolution), too_few_inliers, pnp_failed, translation_too_large, odometry_disagreement,
+// illumination (ORB did not verify it and the tracking fallback across a change of illumination did not
+// either); skipped: small_information_gain, skip_window, max_per_query; other (an unexpected exception).
+enum class VerifyReason {
+  kVerified,
+  kVerifiedByTracking,
+  kNoCalibration,
+  kImageTooSmall,
+  kImageMissing,
+  kNoOdometryPose,
+  kShortBaseline,
+  kTooFewFeatures,
+  kTooFewInliers,
+  kPnpFailed,
+  kTranslationTooLarge,
+  kOdometryDisagreement,
+  kIllumination,
+  kSmallInformationGain,
+  kSkipWindow,
+  kMaxPerQuery,
+  kOther,
+};
+inline constexpr EnumName<VerifyReason> kVerifyReasonNames[] = {
+    {VerifyReason::kVerified, "verified"},
+    {VerifyReason::kVerifiedByTracking, "verified_by_tracking"},
+    {VerifyReason::kNoCalibration, "no_calibration"},
+    {VerifyReason::kImageTooSmall, "image_too_small"},
+    {VerifyReason::kImageMissing, "image_missing"},
+    {VerifyReason::kNoOdometryPose, "no_odometry_pose"},
+    {VerifyReason::kShortBaseline, "short_baseline"},
+    {VerifyReason::kTooFewFeatures, "too_few_features"},
+    {VerifyReason::kTooFewInliers, "too_few_inliers"},
+    {VerifyReason::kPnpFailed, "pnp_failed"},
+    {VerifyReason::kTranslationTooLarge, "translation_too_large"},
+    {VerifyReason::kOdometryDisagreement, "odometry_disagreement"},
+    {VerifyReason::kIllumination, "illumination"},
+    {VerifyReason::kSmallInformationGain, "small_information_gain"},
+    {VerifyReason::kSkipWindow, "skip_window"},
+    {VerifyReason::kMaxPerQuery, "max_per_query"},
+    {VerifyReason::kOther, "other"},
+};
+constexpr std::span<const EnumName<VerifyReason>> enum_names(VerifyReason) {
+  return kVerifyReasonNames;
+}
+
+// A reason with its numbers, for loops_verified.csv and the log ("geometry: 12 inliers < 25"), and its key.
+struct VerifyNote {
+  VerifyReason key = VerifyReason::kOther;
+  std::string text;
+};
+
 struct VerifyResult {
   bool verified = false;
+  VerifyReason key = VerifyReason::kOther;  // the reason's key
   std::string reason;    // why not ("geometry: 12 inliers < 25"), or "verified" / "verified by tracking"
   bool tracked = false;  // verified by the tracking fallback (ORB's matches did not verify it)
   int matches = 0;       // i-to-j matches with a triangulated point
@@ -127,15 +184,6 @@ struct VerifyResult {
 std::string odometry_disagreement(const Eigen::Isometry3d& T_w_bi, const Eigen::Isometry3d& T_w_bj,
                                   const VerifyResult& loop, double sigma_i_m, double sigma_j_m,
                                   double chi2_bound);
-
-// A stable key for the reason a loop was or was not verified (VerifyResult::reason, and the loop closer's
-// "skipped: ..." reasons), for counting them: verified, verified_by_tracking; rejected: no_calibration,
-// image_too_small (the images are below verify.min_image_px), image_missing, no_odometry_pose,
-// short_baseline (j and its neighbour too close to triangulate), too_few_features (too few matches with
-// triangulated points at this image resolution), too_few_inliers, pnp_failed, translation_too_large,
-// odometry_disagreement, illumination (ORB did not verify it and the tracking fallback across a change of
-// illumination did not either); skipped: small_information_gain, skip_window, max_per_query; other.
-std::string verify_reason_key(const std::string& reason);
 
 // What the verifier needs of one frame: its grey image and its odometry pose.
 struct VerifyFrame {
@@ -178,8 +226,8 @@ class GeometricVerifier {
   // input: the result says why it is not verified.
   VerifyResult verify(const VerifyFrame& i, const VerifyFrame& j, const VerifyFrame& n) const;
 
-  // A check of a pose the images verified (the odometry's: odometry_disagreement()): a reason to reject it,
-  // or empty.
+  // The odometry's check of a pose the images verified (odometry_disagreement()): a reason to reject it
+  // (key odometry_disagreement), or empty.
   using Veto = std::function<std::string(const VerifyResult&)>;
 
   // The same from features detected beforehand (detect()): i's features, j's and n's with their poses.
@@ -195,8 +243,8 @@ class GeometricVerifier {
   // ORB features of a grey image (none without a calibration or for an empty image).
   OrbFeatures detect(const cv::Mat& image) const;
 
-  // A reason when no loop can be verified at all (no calibration, images too small), else empty.
-  std::string unusable_reason(const cv::Size& image_size) const;
+  // The reason when no loop can be verified at all (no calibration, images too small), else nullopt.
+  std::optional<VerifyNote> unusable_reason(const cv::Size& image_size) const;
 
   const VerifyConfig& config() const { return config_; }
 

@@ -171,6 +171,7 @@ VerifyResult GeometricVerifier::track_fallback(
     }
     notes += start.label + note;
   }
+  result.key = VerifyReason::kIllumination;  // the tracking ran and did not verify it
   result.reason += notes;
   return result;
 }
@@ -213,6 +214,7 @@ VerifyResult GeometricVerifier::track_from_j_and_n(const TrackSources& s, const 
     return tracked;
   }
   tracked.tracked = true;
+  tracked.key = VerifyReason::kVerifiedByTracking;
   tracked.reason =
       fmt::format("verified by tracking ({}; from j's neighbour {:.2f} m apart)", by_j.note, apart_m);
   return tracked;
