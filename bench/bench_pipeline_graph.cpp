@@ -40,7 +40,7 @@ class PngMemoryDataset : public Dataset {
       pngs_.push_back(std::move(png));
     }
   }
-  std::string layout() const override { return "memory"; }
+  DatasetLayout layout() const override { return DatasetLayout::kMemory; }
   const std::filesystem::path& root() const override { return root_; }
   std::size_t frame_count() const override { return kFrames; }
   Timestamp frame_t_ns(std::size_t frame) const override {

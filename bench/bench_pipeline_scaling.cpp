@@ -142,7 +142,7 @@ class ScalingDataset : public Dataset {
  public:
   ScalingDataset(const ScalingOptions& o) : options_(o), route_(o), root_("/synthetic/scaling") {}
 
-  std::string layout() const override { return "synthetic"; }
+  DatasetLayout layout() const override { return DatasetLayout::kMemory; }
   const fs::path& root() const override { return root_; }
   std::size_t frame_count() const override { return options_.frames; }
   Timestamp frame_t_ns(std::size_t frame) const override {

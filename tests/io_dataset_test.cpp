@@ -26,20 +26,20 @@ TEST(IoDataset, DetectsLayouts) {
   const fs::path root = testing::make_temp_dir("io-detect");
   // EuRoC: mav0/cam0/data.csv.
   write_euroc_camera_csv(root / "euroc/mav0/cam0/data.csv", {{100, "100.png"}, {200, "200.png"}});
-  EXPECT_EQ(open_dataset(root / "euroc")->layout(), "euroc");
-  EXPECT_EQ(open_dataset(root / "euroc/mav0")->layout(), "euroc");
+  EXPECT_EQ(open_dataset(root / "euroc")->layout(), DatasetLayout::kEuroc);
+  EXPECT_EQ(open_dataset(root / "euroc/mav0")->layout(), DatasetLayout::kEuroc);
   // KITTI: image_0/ + times.txt.
   write_kitti_times(root / "kitti/times.txt", {0, 100000000});
   fs::create_directories(root / "kitti/image_0");
   cv::imwrite((root / "kitti/image_0/000000.png").string(), cv::Mat(4, 4, CV_8UC1, cv::Scalar(1.0)));
-  EXPECT_EQ(open_dataset(root / "kitti")->layout(), "kitti");
+  EXPECT_EQ(open_dataset(root / "kitti")->layout(), DatasetLayout::kKitti);
   // Folder: images (a times.txt next to images still means a folder).
   fs::create_directories(root / "folder");
   cv::imwrite((root / "folder/x.png").string(), cv::Mat(4, 4, CV_8UC1, cv::Scalar(1.0)));
-  EXPECT_EQ(open_dataset(root / "folder")->layout(), "folder");
+  EXPECT_EQ(open_dataset(root / "folder")->layout(), DatasetLayout::kFolder);
   write_file(root / "folder/times.txt", "0.5\n");
   const auto folder = open_dataset(root / "folder");
-  EXPECT_EQ(folder->layout(), "folder");
+  EXPECT_EQ(folder->layout(), DatasetLayout::kFolder);
   EXPECT_EQ(folder->frame_t_ns(0), 500'000'000);
 }
 

@@ -106,7 +106,7 @@ TEST(IoEuroc, GeneratedDatasetReadsEverything) {
   make_euroc(dir);
   for (const fs::path& root : {dir, dir / "mav0"}) {
     const auto d = open_euroc(root);
-    EXPECT_EQ(d->layout(), "euroc");
+    EXPECT_EQ(d->layout(), DatasetLayout::kEuroc);
     EXPECT_EQ(d->root(), root);
     ASSERT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
     EXPECT_EQ(d->frame_t_ns(3), kT0 + 3 * kFramePeriod);
@@ -155,7 +155,7 @@ TEST(IoEuroc, ImagesAbsentStillWorks) {
   const fs::path dir = testing::make_temp_dir("io-euroc-noimg");
   make_euroc(dir, false);
   const auto d = open_dataset(dir);
-  EXPECT_EQ(d->layout(), "euroc");
+  EXPECT_EQ(d->layout(), DatasetLayout::kEuroc);
   EXPECT_FALSE(d->has_images());
   EXPECT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
   EXPECT_TRUE(d->has_imu());
@@ -356,7 +356,7 @@ TEST(IoEuroc, GroundTruthSensorExtrinsicIsApplied) {
 TEST(IoEuroc, RealMh05WithoutImages) {
   LOOPGATE_REQUIRE_SHARED_DATA("euroc/MH_05_difficult/mav0");
   const auto d = open_dataset(testing::shared_data_dir() / "euroc/MH_05_difficult");
-  EXPECT_EQ(d->layout(), "euroc");
+  EXPECT_EQ(d->layout(), DatasetLayout::kEuroc);
   EXPECT_EQ(d->frame_count(), 2273u);
   EXPECT_EQ(d->frame_t_ns(0), 1403638518077829376);
   EXPECT_FALSE(d->has_images());

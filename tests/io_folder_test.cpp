@@ -36,7 +36,7 @@ TEST(IoFolder, NaturalOrderMixedFormatsAndRate) {
   OpenOptions options;
   options.folder_rate_hz = 4.0;
   const auto d = open_dataset(dir, options);
-  EXPECT_EQ(d->layout(), "folder");
+  EXPECT_EQ(d->layout(), DatasetLayout::kFolder);
   ASSERT_EQ(d->frame_count(), 4u);
   const std::vector<std::string> names = {"img1.png", "img2.pgm", "img3.jpg", "img10.png"};
   const std::vector<int> values = {1, 2, 3, 10};
@@ -63,7 +63,7 @@ TEST(IoFolder, TimesFileAndColour) {
   }
   write_file(dir / "times.txt", "10.5\n10.75\n11.0\n");
   const auto d = open_dataset(dir);
-  EXPECT_EQ(d->layout(), "folder");
+  EXPECT_EQ(d->layout(), DatasetLayout::kFolder);
   ASSERT_EQ(d->frame_count(), 3u);
   EXPECT_EQ(d->frame_t_ns(0), 10'500'000'000);
   EXPECT_EQ(d->frame_t_ns(2), 11'000'000'000);
@@ -95,7 +95,7 @@ TEST(IoFolder, NanosecondFileNamesAreTheFrameTimes) {
   OpenOptions options;
   options.folder_rate_hz = 4.0;  // not used: the names give the times
   const auto d = open_dataset(dir, options);
-  EXPECT_EQ(d->layout(), "folder");
+  EXPECT_EQ(d->layout(), DatasetLayout::kFolder);
   ASSERT_EQ(d->frame_count(), times.size());
   for (std::size_t i = 0; i < times.size(); ++i) {
     EXPECT_EQ(d->frame_t_ns(i), times[i]);
@@ -183,7 +183,7 @@ TEST(IoFolder, DamagedImagesAndEmptyFolder) {
 TEST(IoFolder, RealNordland) {
   LOOPGATE_REQUIRE_SHARED_DATA("nordland-64x32/summer");
   const auto d = open_dataset(testing::shared_data_dir() / "nordland-64x32/summer");
-  EXPECT_EQ(d->layout(), "folder");
+  EXPECT_EQ(d->layout(), DatasetLayout::kFolder);
   ASSERT_EQ(d->frame_count(), 3576u);
   EXPECT_EQ(d->image_path(0).filename().string(), "images-00010.png");
   EXPECT_EQ(d->image_path(3575).filename().string(), "images-35760.png");

@@ -83,7 +83,7 @@ TEST(IoKitti, GeneratedSequence) {
   const fs::path dir = testing::make_temp_dir("io-kitti") / "05";
   make_kitti(dir, dir / "image_0", all_frames(), dir / "poses.txt");
   const auto d = open_dataset(dir);
-  EXPECT_EQ(d->layout(), "kitti");
+  EXPECT_EQ(d->layout(), DatasetLayout::kKitti);
   ASSERT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
   EXPECT_TRUE(d->has_images());
   EXPECT_FALSE(d->has_imu());
@@ -141,7 +141,7 @@ TEST(IoKitti, SubsetFolderTakesMetadataFromParent) {
   const fs::path seq = testing::make_temp_dir("io-kitti-subset") / "00";
   make_kitti(seq, seq / "frames/image_0", {0, 4, 9}, seq / "poses.txt");
   const auto d = open_dataset(seq / "frames");
-  EXPECT_EQ(d->layout(), "kitti");
+  EXPECT_EQ(d->layout(), DatasetLayout::kKitti);
   ASSERT_EQ(d->frame_count(), 3u);
   const std::vector<int> expected = {0, 4, 9};
   for (std::size_t i = 0; i < 3; ++i) {
@@ -159,7 +159,7 @@ TEST(IoKitti, SubsetFolderTakesMetadataFromParent) {
   EXPECT_EQ(d->camera()->width_px, kWidth);
   // The parent alone (no images) is a KITTI dataset with timestamps and poses only.
   const auto meta = open_dataset(seq);
-  EXPECT_EQ(meta->layout(), "kitti");
+  EXPECT_EQ(meta->layout(), DatasetLayout::kKitti);
   EXPECT_EQ(meta->frame_count(), static_cast<std::size_t>(kFrames));
   EXPECT_FALSE(meta->has_images());
   EXPECT_THROW(meta->load_image(0), DataError);
@@ -262,7 +262,7 @@ TEST(IoKitti, ColourCameras) {
     OpenOptions options;
     options.camera_index = camera;
     const auto d = open_dataset(seq, options);  // found as KITTI by image_2/ and image_3/ alone
-    EXPECT_EQ(d->layout(), "kitti");
+    EXPECT_EQ(d->layout(), DatasetLayout::kKitti);
     ASSERT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
     EXPECT_EQ(d->image_path(4).parent_path().filename(), "image_" + std::to_string(camera));
     const cv::Mat grey = d->load_image(4);
@@ -368,7 +368,7 @@ TEST(IoKitti, PoseColumnCountErrorsNameFileAndLine) {
 TEST(IoKitti, RealThumbs) {
   LOOPGATE_REQUIRE_SHARED_DATA("kitti/00/thumbs/image_0");
   const auto d = open_dataset(testing::shared_data_dir() / "kitti/00/thumbs");
-  EXPECT_EQ(d->layout(), "kitti");
+  EXPECT_EQ(d->layout(), DatasetLayout::kKitti);
   ASSERT_EQ(d->frame_count(), 4540u);
   EXPECT_TRUE(d->has_images());
   EXPECT_EQ(d->frame_t_ns(1), 103735900);

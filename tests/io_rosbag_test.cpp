@@ -113,7 +113,7 @@ TEST(IoRosbag, FramesByHeaderStampImuAndRandomAccess) {
   LOOPGATE_REQUIRE_ROSBAG();
   const fs::path bag = write_euroc_bag(testing::make_temp_dir("rosbag-euroc"), 8);
   const auto d = open_dataset(bag, strict());
-  EXPECT_EQ(d->layout(), "rosbag");
+  EXPECT_EQ(d->layout(), DatasetLayout::kRosbag);
   EXPECT_EQ(d->root(), bag);
   ASSERT_EQ(d->frame_count(), 8u);
   ASSERT_TRUE(d->has_images());

@@ -90,7 +90,7 @@ TEST(IoTumVi, MocapGroundTruthAndKalibrCalibration) {
   make_tumvi(dir);
   for (const fs::path& root : {dir, dir / "mav0"}) {  // the tree or its mav0: dso/ is found beside mav0
     const auto d = open_dataset(root);
-    EXPECT_EQ(d->layout(), "euroc");
+    EXPECT_EQ(d->layout(), DatasetLayout::kEuroc);
     ASSERT_EQ(d->frame_count(), static_cast<std::size_t>(kFrames));
     ASSERT_TRUE(d->has_ground_truth());
     EXPECT_EQ(d->ground_truth().front().t_ns, kT0);

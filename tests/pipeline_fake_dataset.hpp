@@ -48,7 +48,7 @@ class FakeDataset : public Dataset {
   int decode_delay_ms = 0;
   bool images = true;  // false: a dataset without images (trajectory and IMU only)
 
-  std::string layout() const override { return "fake"; }
+  DatasetLayout layout() const override { return DatasetLayout::kMemory; }
   const std::filesystem::path& root() const override { return root_; }
   std::size_t frame_count() const override { return times_.size(); }
   Timestamp frame_t_ns(std::size_t frame) const override { return times_.at(frame); }

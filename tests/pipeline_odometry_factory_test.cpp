@@ -210,7 +210,7 @@ TEST(PipelineOdometryFactory, AutoOnAnImageFolderIsNoOdometry) {
     cv::imwrite((dir / ("img" + std::to_string(i) + ".png")).string(),
                 cv::Mat(16, 32, CV_8UC1, cv::Scalar(i)));
   const auto dataset = open_dataset(dir);
-  ASSERT_EQ(dataset->layout(), "folder");
+  ASSERT_EQ(dataset->layout(), DatasetLayout::kFolder);
   EXPECT_EQ(resolve_odometry_source(source("auto"), EkfConfig{}, *dataset), OdometrySourceKind::kNone);
   const auto none = make_odometry_source(source("auto"), EkfConfig{}, *dataset);
   EXPECT_STREQ(none->name(), "none");

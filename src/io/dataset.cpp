@@ -157,8 +157,9 @@ std::vector<std::filesystem::path> list_image_files(const std::filesystem::path&
 void log_summary(const LoadedDataset& d) {
   spdlog::info(
       "{} dataset {}: {} frames{}, {} IMU samples, {} ground-truth poses, camera calibration {}{}",
-      d.layout_name, d.root_dir.string(), d.frames.size(), d.images_present ? "" : " (images absent)",
-      d.imu.size(), d.gt.size(), d.camera_calibration ? "yes" : "no",
+      enum_name(d.layout_kind), d.root_dir.string(), d.frames.size(),
+      d.images_present ? "" : " (images absent)", d.imu.size(), d.gt.size(),
+      d.camera_calibration ? "yes" : "no",
       d.problems.empty() ? std::string() : ", " + std::to_string(d.problems.size()) + " problems skipped");
   if (!d.images_present && !d.frames.empty()) {
     spdlog::info(

@@ -12,9 +12,22 @@
 #include <string>
 #include <vector>
 
+#include "core/enum_names.hpp"
 #include "core/types.hpp"
 
 namespace loopgate {
+
+// Which reader opened a dataset (summary.json's dataset.layout); memory: frames made in memory by a test or a
+// benchmark.
+enum class DatasetLayout { kEuroc, kKitti, kFolder, kRosbag, kMemory };
+inline constexpr EnumName<DatasetLayout> kDatasetLayoutNames[] = {{DatasetLayout::kEuroc, "euroc"},
+                                                                  {DatasetLayout::kKitti, "kitti"},
+                                                                  {DatasetLayout::kFolder, "folder"},
+                                                                  {DatasetLayout::kRosbag, "rosbag"},
+                                                                  {DatasetLayout::kMemory, "memory"}};
+constexpr std::span<const EnumName<DatasetLayout>> enum_names(DatasetLayout) {
+  return kDatasetLayoutNames;
+}
 
 // A problem found in the input that did not stop the dataset from opening (lenient mode):
 // which file, which line (0 if none), and what was wrong.
@@ -52,7 +65,7 @@ class Dataset {
  public:
   virtual ~Dataset() = default;
 
-  virtual std::string layout() const = 0;  // "euroc", "kitti", "folder" or "rosbag"
+  virtual DatasetLayout layout() const = 0;
   virtual const std::filesystem::path& root() const = 0;
 
   virtual std::size_t frame_count() const = 0;

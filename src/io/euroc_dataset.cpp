@@ -209,7 +209,7 @@ std::unique_ptr<Dataset> open_euroc(const fs::path& dir, const OpenOptions& opti
   }
 
   auto d = std::make_unique<io_detail::LoadedDataset>();
-  d->layout_name = "euroc";
+  d->layout_kind = DatasetLayout::kEuroc;
   d->root_dir = dir;
   io_detail::IssueLog log(options.strict, &d->problems);
 

@@ -86,7 +86,7 @@ std::unique_ptr<Dataset> open_image_folder(const std::filesystem::path& dir, con
   if (!fs::is_directory(dir, ec)) throw DataError(dir, "image folder not found");
 
   auto d = std::make_unique<io_detail::LoadedDataset>();
-  d->layout_name = "folder";
+  d->layout_kind = DatasetLayout::kFolder;
   d->root_dir = dir;
   io_detail::IssueLog log(options.strict, &d->problems);
 

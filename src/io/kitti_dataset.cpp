@@ -233,7 +233,7 @@ std::unique_ptr<Dataset> open_kitti(const fs::path& dir, const OpenOptions& opti
   const bool subset = place.subset;
 
   auto d = std::make_unique<io_detail::LoadedDataset>();
-  d->layout_name = "kitti";
+  d->layout_kind = DatasetLayout::kKitti;
   d->root_dir = dir;
   io_detail::IssueLog log(options.strict, &d->problems);
 

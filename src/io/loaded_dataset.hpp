@@ -24,7 +24,7 @@ struct FrameEntry {
 class LoadedDataset final : public Dataset {
  public:
   // Filled by the layout readers, then finish() is called once.
-  std::string layout_name;
+  DatasetLayout layout_kind = DatasetLayout::kFolder;
   std::filesystem::path root_dir;
   std::vector<FrameEntry> frames;
   bool images_present = false;
@@ -49,7 +49,7 @@ class LoadedDataset final : public Dataset {
   // when the calibration has none. Also notes whether IMU samples are time-sorted.
   void finish();
 
-  std::string layout() const override { return layout_name; }
+  DatasetLayout layout() const override { return layout_kind; }
   const std::filesystem::path& root() const override { return root_dir; }
   std::size_t frame_count() const override { return frames.size(); }
   Timestamp frame_t_ns(std::size_t frame) const override { return frames.at(frame).t_ns; }

@@ -292,7 +292,7 @@ std::unique_ptr<Dataset> open_rosbag(const fs::path& bag_file, const OpenOptions
   require_regular_file(bag_file);
 
   auto d = std::make_unique<io_detail::LoadedDataset>();
-  d->layout_name = "rosbag";
+  d->layout_kind = DatasetLayout::kRosbag;
   d->root_dir = bag_file;
   io_detail::IssueLog log(options.strict, &d->problems);
 

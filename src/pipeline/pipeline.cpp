@@ -111,7 +111,7 @@ RunResult PipelineRun::run() {
   const int threads = config_.run.threads;
   spdlog::info("run: {} frames [{}, {}) of {} ({}), rate {}, {} worker threads, at most {} in flight",
                range_.second - range_.first, range_.first, range_.second, dataset_.root().string(),
-               dataset_.layout(), config_.run.rate, threads, config_.run.max_in_flight);
+               enum_name(dataset_.layout()), config_.run.rate, threads, config_.run.max_in_flight);
   // `threads` workers run the nodes; the calling thread produces outside the arena and joins it to drain.
   tbb::global_control parallelism(tbb::global_control::max_allowed_parallelism,
                                   static_cast<std::size_t>(threads) + 1);

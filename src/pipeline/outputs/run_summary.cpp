@@ -40,7 +40,7 @@ std::optional<TruthPairs> load_truth_pairs(const EvalConfig& eval, const Dataset
 
 CoordinatePlane horizontal_plane(const Dataset& dataset, const std::vector<Eigen::Vector3d>& p_w) {
   std::optional<Eigen::Vector3d> up_w = world_up_axis_from_imu(dataset);
-  if (!up_w && dataset.layout() == "kitti") up_w = Eigen::Vector3d(0.0, -1.0, 0.0);
+  if (!up_w && dataset.layout() == DatasetLayout::kKitti) up_w = Eigen::Vector3d(0.0, -1.0, 0.0);
   if (!up_w) {
     std::vector<Eigen::Vector3d> finite;
     for (const Eigen::Vector3d& p : p_w)
@@ -62,7 +62,7 @@ CoordinatePlane truth_plane(TruthPlane plane, const Dataset& dataset) {
     case TruthPlane::kXyz: return CoordinatePlane::kXyz;
     case TruthPlane::kAuto: break;
   }
-  return dataset.layout() == "kitti" ? CoordinatePlane::kXz : CoordinatePlane::kXyz;
+  return dataset.layout() == DatasetLayout::kKitti ? CoordinatePlane::kXz : CoordinatePlane::kXyz;
 }
 
 // Truth from a file of pairs (eval.truth_pairs_file): frame numbers (as frames.csv shows them) -> indices
@@ -230,7 +230,7 @@ nlohmann::json make_run_summary(const RunParts& parts, const RunResult& result, 
       {"config", std::move(config_json)},
       {"dataset",
        {{"root", dataset.root().string()},
-        {"layout", dataset.layout()},
+        {"layout", std::string(enum_name(dataset.layout()))},
         {"frame_count", dataset.frame_count()},
         {"first_frame", parts.first_frame},
         {"last_frame", parts.last_frame},
