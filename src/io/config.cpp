@@ -94,9 +94,28 @@ RawConfig parse_yaml(const std::string& text, const std::string& origin) {
 
 }  // namespace
 
+namespace {
+// The keys whose values are paths, and for the one read only when another key holds a given word, that key
+// and word: a config naming a trajectory file still runs with `--set odometry.source=ekf` where that file is
+// absent.
+struct PathKey {
+  const char* name;
+  const char* read_when_key = nullptr;
+  const char* read_when_word = nullptr;
+};
+constexpr PathKey kPathKeys[] = {{"run.dataset"},
+                                 {"odometry.file", "odometry.source", "file"},
+                                 {"dataset.bag_asl_dir"},
+                                 {"dataset.calibration"},
+                                 {"eval.truth_pairs_file"}};
+}  // namespace
+
 const std::vector<std::string>& config_path_keys() {
-  static const std::vector<std::string> keys = {"run.dataset", "odometry.file", "dataset.bag_asl_dir",
-                                                "dataset.calibration", "eval.truth_pairs_file"};
+  static const std::vector<std::string> keys = [] {
+    std::vector<std::string> out;
+    for (const PathKey& k : kPathKeys) out.emplace_back(k.name);
+    return out;
+  }();
   return keys;
 }
 
@@ -144,22 +163,13 @@ const RawConfigValue* RawConfig::find(const std::string& name) const {
 }
 
 void RawConfig::require_resolved_paths_exist() const {
-  // A path key that is read only when another key holds a given word need not exist otherwise: a config
-  // naming a trajectory file still runs with `--set odometry.source=ekf` where that file is absent.
-  struct ReadOnlyWhen {
-    const char* path_key;
-    const char* key;
-    const char* word;
-  };
-  static constexpr ReadOnlyWhen kReadOnlyWhen[] = {{"odometry.file", "odometry.source", "file"}};
-  for (const std::string& name : config_path_keys()) {
+  for (const PathKey& key : kPathKeys) {
+    const std::string name = key.name;
     const RawConfigValue* value = find(name);
     if (value == nullptr || value->written.empty()) continue;
-    const auto when = std::find_if(std::begin(kReadOnlyWhen), std::end(kReadOnlyWhen),
-                                   [&](const ReadOnlyWhen& w) { return name == w.path_key; });
-    if (when != std::end(kReadOnlyWhen)) {
-      const RawConfigValue* chooser = find(when->key);
-      if (chooser == nullptr || chooser->text != when->word) continue;
+    if (key.read_when_key != nullptr) {  // read only when another key holds a given word
+      const RawConfigValue* chooser = find(key.read_when_key);
+      if (chooser == nullptr || chooser->text != key.read_when_word) continue;
     }
     std::error_code ec;
     if (std::filesystem::exists(value->text, ec)) continue;

@@ -36,8 +36,7 @@ class DirdSeqSlamTwoSequence final : public TwoSequenceMethod {
     // row, so it refuses the setting rather than running without it.
     if (config.dird_seqslam.viewpoint.enabled()) {
       throw ConfigError(
-          "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance works inside a single-sequence run "
-          "only; "
+          "dird_seqslam.viewpoint_lateral_m: the viewpoint tolerance works in a single-sequence run only; "
           "a two-sequence run (--reference/--query) does not apply it: set it to 0");
     }
   }
