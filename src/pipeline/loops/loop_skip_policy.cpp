@@ -132,9 +132,8 @@ std::optional<VerifyNote> LoopCloser::skip_reason(const Detection& loop) {
                             .eigenvalues()
                             .maxCoeff()));
       return VerifyNote{VerifyReason::kSmallInformationGain,
-                        fmt::format("skipped: information gain {:.2f} < {} (the odometry's sigma from j to i "
-                                    "{:.3f} m, a loop edge's "
-                                    "{:.3f} m)",
+                        fmt::format("skipped: information gain {:.2f} < {} (the odometry's sigma from j "
+                                    "to i {:.3f} m, a loop edge's {:.3f} m)",
                                     gain, verify_config_.min_information_gain, sigma_m,
                                     std::sqrt(edge.topLeftCorner<3, 3>().diagonal().maxCoeff()))};
     }

@@ -102,8 +102,7 @@ LoopCloser::VerifyJob LoopCloser::prepare(const Detection& loop, bool prefetch) 
 VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const {
   VerifyResult result;
   if (job.reason) {
-    result.key = job.reason->key;
-    result.reason = job.reason->text;
+    result.reject(*job.reason);
     return result;
   }
   try {
@@ -122,8 +121,7 @@ VerifyResult LoopCloser::run(const Detection& loop, const VerifyJob& job) const 
                               T_w_bi ? &*T_w_bi : nullptr, odometry_check);
   } catch (const std::exception& e) {
     result = VerifyResult{};
-    result.key = VerifyReason::kOther;
-    result.reason = std::string("geometry: ") + e.what();
+    result.reject({VerifyReason::kOther, std::string("geometry: ") + e.what()});
   }
   return result;
 }
@@ -137,8 +135,7 @@ LoopCloser::LoopResult LoopCloser::verify_one(const Detection& loop, bool draini
     if (std::optional<VerifyNote> why = skip_reason(loop)) {
       // A loop verify_ahead() chose on a wrong guess: one loop after the other would not have verified it.
       if (ahead != verified_ahead_.end()) verified_ahead_.erase(ahead);
-      out.result.key = why->key;
-      out.result.reason = std::move(why->text);
+      out.result.reject(std::move(*why));
       out.skipped = true;
       return out;
     }

@@ -208,8 +208,7 @@ VerifyResult GeometricVerifier::verify(const VerifyFrame& i, const VerifyFrame& 
     return result;
   }
   if (std::optional<VerifyNote> why = unusable_reason(j.image.size())) {
-    result.key = why->key;
-    result.reason = std::move(why->text);
+    result.reject(std::move(*why));
     return result;
   }
   return verify(detect(i.image), detect(j.image), j.T_w_b, detect(n.image), n.T_w_b);
@@ -221,8 +220,7 @@ VerifyResult GeometricVerifier::verify(const OrbFeatures& fi, const OrbFeatures&
                                        const Veto& veto) const {
   VerifyResult result;
   if (std::optional<VerifyNote> why = unusable_reason(fj.image_size)) {
-    result.key = why->key;
-    result.reason = std::move(why->text);
+    result.reject(std::move(*why));
     return result;
   }
   const CameraModel& camera = *camera_;

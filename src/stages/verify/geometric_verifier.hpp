@@ -15,6 +15,7 @@
 #include <opencv2/core/mat.hpp>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/camera_model.hpp"
@@ -168,6 +169,13 @@ struct VerifyResult {
   int inliers = 0;
   Eigen::Isometry3d T_j_i = Eigen::Isometry3d::Identity();                    // body i in body j
   Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Identity();  // (position, rotation)
+
+  // Not verified, for this reason.
+  void reject(VerifyNote note) {
+    verified = false;
+    key = note.key;
+    reason = std::move(note.text);
+  }
 };
 
 // A verified loop against the odometry: where the loop puts frame i (T_w_bj T_j_i) and where the odometry
